@@ -1,0 +1,1 @@
+"""Command-line sub-command groups (each module exposes ``register(subparsers)``)."""

@@ -1,0 +1,210 @@
+"""``rpc`` command group: ``info``, ``project`` and ``localize`` with RPC files.
+
+Image coordinates in and out are 0-based with integer = pixel centre, whatever the file's own
+convention (see ``docs/conventions.md`` and the format table in ``docs/rpc.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from explorer.rpc import RationalFunctionModel, read_rpc
+
+__all__ = ["cmd_info", "cmd_localize", "cmd_project", "register"]
+
+_CONVENTIONS = {
+    "rpc00b_txt": "0-based, integer = pixel centre (RPC00B); read as is",
+    "dg_rpb": "0-based, integer = pixel centre (RPC00B); read as is",
+    "dg_xml": "0-based, integer = pixel centre (RPC00B); read as is",
+    "ossim_geom": "0-based, integer = pixel centre; read as is",
+    "gdal_vrt": "0-based, integer = pixel centre (GDAL RPC metadata); read as is",
+    "raster_rpc": "0-based, integer = pixel centre (GDAL RPC metadata); read as is",
+    "dimap_v2": "1-based in the file; converted to 0-based centre (offsets - 1)",
+    "dimap_v1.4": "1-based in the file; converted to 0-based centre (offsets - 1)",
+}
+
+
+def _read_csv(path: str, columns: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows:
+        raise ValueError(f"{path}: no data rows")
+    missing = [c for c in columns if c not in rows[0]]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {', '.join(missing)}")
+    arrays = {c: np.array([float(r[c]) for r in rows]) for c in columns}
+    return rows, arrays
+
+
+def _write_csv(
+    rows: list[dict[str, Any]], fieldnames: Sequence[str], out: str | None
+) -> None:
+    handle: TextIO
+    if out is None:
+        handle = sys.stdout
+        writer = csv.DictWriter(handle, fieldnames=list(fieldnames))
+        writer.writeheader()
+        writer.writerows(rows)
+        return
+    with open(out, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(fieldnames))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _fmt(value: float) -> str:
+    return repr(float(value))
+
+
+def describe(model: RationalFunctionModel) -> str:
+    """Multi-line human-readable summary of a model."""
+    d = model.domain
+    lines = [
+        f"file: {model.source_path}",
+        f"format: {model.source_format}",
+        f"pixel convention: {_CONVENTIONS.get(model.source_format, '0-based pixel centre')}",
+        f"inverse (image->ground) coefficients: {'yes' if model.inverse is not None else 'no'}",
+        f"image size (rows, cols): {model.image_size if model.image_size else 'unknown'}",
+        "offsets / scales:",
+        f"  row     {model.row_offset!r} / {model.row_scale!r}",
+        f"  col     {model.col_offset!r} / {model.col_scale!r}",
+        f"  lon     {model.lon_offset!r} / {model.lon_scale!r}",
+        f"  lat     {model.lat_offset!r} / {model.lat_scale!r}",
+        f"  height  {model.height_offset!r} / {model.height_scale!r}",
+        "validity domain:",
+        f"  lon    [{d.lon_min}, {d.lon_max}] deg",
+        f"  lat    [{d.lat_min}, {d.lat_max}] deg",
+        f"  height [{d.h_min}, {d.h_max}] m",
+        f"  row    [{d.row_min}, {d.row_max}]",
+        f"  col    [{d.col_min}, {d.col_max}]",
+    ]
+    if "raster_size" in model.metadata:
+        lines.append(f"raster size of the file (rows, cols): {model.metadata['raster_size']}")
+    return "\n".join(lines)
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """``rpc info FILE``: print format, convention, offsets/scales and validity domain."""
+    print(describe(read_rpc(args.file)))
+    return 0
+
+
+def cmd_project(args: argparse.Namespace) -> int:
+    """``rpc project FILE``: ground (lon, lat, h) to image (row, col), 0-based pixel centre."""
+    model = read_rpc(args.file)
+    if args.points:
+        rows, arrays = _read_csv(args.points, ("lon", "lat", "h"))
+        row, col = model.projection(arrays["lon"], arrays["lat"], arrays["h"])
+        out_rows = [
+            {**r, "row": _fmt(rr), "col": _fmt(cc)} for r, rr, cc in zip(rows, row, col,
+                                                                          strict=True)
+        ]
+        _write_csv(out_rows, [*rows[0].keys(), "row", "col"], args.out)
+        return 0
+    if args.lon is None or args.lat is None:
+        print("rpc project: give --lon and --lat (and --h), or --points", file=sys.stderr)
+        return 2
+    row, col = model.projection(args.lon, args.lat, args.h)
+    print(f"row={_fmt(row)} col={_fmt(col)}")
+    return 0
+
+
+def _load_dem(args: argparse.Namespace) -> Any:
+    from explorer.terrain_io import EllipsoidalDEM, Geoid, read_geotiff_dem, read_hgt
+
+    path = Path(args.dem)
+    dem = read_hgt(path) if path.suffix.lower() == ".hgt" else read_geotiff_dem(path)
+    orthometric = args.dem_orthometric or dem.vertical_reference == "egm96"
+    return EllipsoidalDEM(dem, Geoid.egm96()) if orthometric else dem
+
+
+def cmd_localize(args: argparse.Namespace) -> int:
+    """``rpc localize FILE``: image (row, col) to ground at a height or on a DEM."""
+    model = read_rpc(args.file)
+    dem = _load_dem(args) if args.dem else None
+    if args.points:
+        rows, arrays = _read_csv(args.points, ("row", "col") if dem is not None else
+                                 ("row", "col", "h"))
+    else:
+        if args.row is None or args.col is None:
+            print("rpc localize: give --row and --col, or --points", file=sys.stderr)
+            return 2
+        if dem is None and args.h is None:
+            print("rpc localize: give --h or --dem", file=sys.stderr)
+            return 2
+        rows = []
+        arrays = {"row": np.array([args.row]), "col": np.array([args.col])}
+        if dem is None:
+            arrays["h"] = np.array([args.h])
+    if dem is not None:
+        lon, lat, h, ok = model.localization_on_dem(arrays["row"], arrays["col"], dem)
+    else:
+        h = arrays["h"]
+        lon, lat, ok = model.localization(arrays["row"], arrays["col"], h)
+    n_failed = int((~ok).sum())
+    if args.points:
+        out_rows = []
+        for i, record in enumerate(rows):
+            extra = {"lon": _fmt(lon[i]), "lat": _fmt(lat[i]), "converged": bool(ok[i])}
+            if dem is not None:
+                extra["h"] = _fmt(h[i])
+            out_rows.append({**record, **extra})
+        fields = [*rows[0].keys()]
+        fields += [f for f in ("h", "lon", "lat", "converged") if f not in fields and
+                   (f != "h" or dem is not None)]
+        _write_csv(out_rows, fields, args.out)
+    else:
+        print(f"lon={_fmt(lon[0])} lat={_fmt(lat[0])} h={_fmt(np.ravel(h)[0])} "
+              f"converged={bool(ok[0])}")
+    if n_failed:
+        print(f"warning: {n_failed} point(s) did not converge (lon/lat NaN)", file=sys.stderr)
+    return 0 if n_failed == 0 else 1
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``rpc`` command group (``info``, ``project``, ``localize``) to ``subparsers``.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers()``. Each leaf parser sets ``func`` to its handler
+        ``(args) -> int``.
+    """
+    rpc = subparsers.add_parser(
+        "rpc", help="RPC files: info, projection, localisation (0-based pixel centre)"
+    )
+    sub = rpc.add_subparsers(dest="rpc_command", required=True)
+
+    info = sub.add_parser("info", help="format, convention, offsets/scales, validity domain")
+    info.add_argument("file", help="RPC file (any supported format)")
+    info.set_defaults(func=cmd_info)
+
+    project = sub.add_parser("project", help="ground (lon, lat, h) -> image (row, col)")
+    project.add_argument("file")
+    project.add_argument("--lon", type=float, help="degrees")
+    project.add_argument("--lat", type=float, help="degrees")
+    project.add_argument("--h", type=float, default=0.0, help="metres above the ellipsoid")
+    project.add_argument("--points", help="CSV with columns lon,lat,h")
+    project.add_argument("--out", help="output CSV (default: stdout); adds row,col")
+    project.set_defaults(func=cmd_project)
+
+    localize = sub.add_parser("localize", help="image (row, col) -> ground (lon, lat)")
+    localize.add_argument("file")
+    localize.add_argument("--row", type=float)
+    localize.add_argument("--col", type=float)
+    localize.add_argument("--h", type=float, help="metres above the ellipsoid")
+    localize.add_argument("--dem", help="GeoTIFF or SRTM .hgt DEM to intersect")
+    localize.add_argument(
+        "--dem-orthometric", action="store_true",
+        help="DEM heights are above the EGM96 geoid (added N); .hgt files always are",
+    )  # fmt: skip
+    localize.add_argument("--points", help="CSV with columns row,col[,h]")
+    localize.add_argument("--out", help="output CSV (default: stdout); adds lon,lat,converged")
+    localize.set_defaults(func=cmd_localize)

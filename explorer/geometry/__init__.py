@@ -1,0 +1,2 @@
+"""Geometry of the rigorous pushbroom model: frames, rotations, interior and exterior
+orientation, collinearity, terrain.  Conventions: ``docs/conventions.md``."""

@@ -1,0 +1,182 @@
+"""The best-scanline method interface and registry.
+
+Every method is a class registered by name (``@register``), constructed on a
+:class:`~explorer.scene.Scene`, optionally ``fit`` on SCOPs, then asked
+``ground_to_image(ground)`` for the scanline (fractional row), the column, a
+validity mask and the number of collinearity evaluations spent.  The bench, CLI,
+explorer and notebooks only use :func:`available` / :func:`create`.
+Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from explorer.errors import NotFittedError, as_points
+from explorer.points import PointSet
+from explorer.scene import Scene
+
+_REGISTRY: dict[str, type[BestScanlineMethod]] = {}
+
+
+@dataclass
+class ScanlineResult:
+    """Output of :meth:`BestScanlineMethod.ground_to_image`.
+
+    Attributes
+    ----------
+    row : ndarray, shape (N,)
+        Best scanline as a fractional row (0-based, pixel centre); NaN where unknown.
+    col : ndarray, shape (N,)
+        Column at that scanline; NaN where unknown.
+    converged : ndarray of bool, shape (N,)
+        The method's own success flag (iteration converged / model applicable).
+    inside : ndarray of bool, shape (N,)
+        (row, col) lies on the image (pixel edges included).
+    ce_evaluations : ndarray of int, shape (N,)
+        Collinearity evaluations spent on each point (0 for purely learned methods).
+    trace : list of ndarray (N,), optional
+        Candidate rows visited per iteration, when requested (for the explorer).
+    """
+
+    row: np.ndarray
+    col: np.ndarray
+    converged: np.ndarray
+    inside: np.ndarray
+    ce_evaluations: np.ndarray
+    trace: list[np.ndarray] | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Converged and inside the image: the points whose (row, col) may be used."""
+        return self.converged & self.inside
+
+    def __len__(self) -> int:
+        return int(self.row.shape[0])
+
+
+class BestScanlineMethod(ABC):
+    """Base class of all ground -> image (best scanline) methods.
+
+    Subclasses set ``name`` (registry key), ``label`` (the paper's name),
+    ``reference`` (citation), ``family`` ("search", "learned", "generalized"),
+    ``needs_fit`` and implement :meth:`_locate`.
+
+    Parameters
+    ----------
+    scene : Scene
+    **params
+        Method-specific parameters (documented per class).
+    """
+
+    name: ClassVar[str] = ""
+    label: ClassVar[str] = ""
+    reference: ClassVar[str] = ""
+    family: ClassVar[str] = "search"
+    needs_fit: ClassVar[bool] = False
+    exactness: ClassVar[str] = "exact"  # "exact", "pixel" or "approximate"
+
+    def __init__(self, scene: Scene, **params) -> None:
+        self.scene = scene
+        self.params = params
+        self._fitted = not self.needs_fit
+        self.fit_info: dict = {}
+
+    # ------------------------------------------------------------------ API
+    def fit(self, control: PointSet) -> BestScanlineMethod:
+        """Train on SCOPs (no-op for search methods).  Returns self."""
+        if self.needs_fit:
+            if len(control) == 0:
+                raise ValueError(f"{self.name}: no control points to fit")
+            self._fit(control)
+        self._fitted = True
+        return self
+
+    def ground_to_image(self, ground: np.ndarray, *, trace: bool = False) -> ScanlineResult:
+        """Best scanline and column of ground points.
+
+        Parameters
+        ----------
+        ground : ndarray, shape (N, 3)
+            Local ENU metres.
+        trace : bool
+            Record the rows visited per iteration (small N only).
+
+        Returns
+        -------
+        ScanlineResult
+        """
+        if not self._fitted:
+            raise NotFittedError(f"method {self.name!r} must be fit on control points before use")
+        ground = as_points(ground)
+        res = self._locate(ground, trace=trace)
+        res.inside = res.inside & self.scene.inside_image(res.row, res.col)
+        bad = ~np.isfinite(res.row) | ~np.isfinite(res.col)
+        res.inside &= ~bad
+        return res
+
+    # ------------------------------------------------------------- helpers
+    def _fit(self, control: PointSet) -> None:  # pragma: no cover - overridden by learned methods
+        raise NotImplementedError
+
+    @abstractmethod
+    def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
+        """Compute the result for validated ground points (N, 3)."""
+
+    def _result(
+        self,
+        ground: np.ndarray,
+        row: np.ndarray,
+        converged: np.ndarray,
+        ce_evaluations: np.ndarray,
+        *,
+        col: np.ndarray | None = None,
+        trace: list[np.ndarray] | None = None,
+        info: dict | None = None,
+    ) -> ScanlineResult:
+        """Assemble a result; the column comes from the collinearity at ``row`` unless given
+        (that costs one more collinearity evaluation per point, counted here)."""
+        ce = np.asarray(ce_evaluations, dtype=np.int64).copy()
+        if col is None:
+            col = np.full(row.shape, np.nan)
+            ok = np.isfinite(row)
+            col[ok] = self.scene.column_at_row(ground[ok], row[ok])
+            ce += 1
+        inside = self.scene.inside_image(row, col)
+        return ScanlineResult(row, col, np.asarray(converged, bool), inside, ce, trace, info or {})
+
+
+def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:
+    """Class decorator adding a method to the registry under ``cls.name``."""
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} has no name")
+    if cls.name in _REGISTRY and _REGISTRY[cls.name] is not cls:
+        raise ValueError(f"method name {cls.name!r} registered twice")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def registry() -> dict[str, type[BestScanlineMethod]]:
+    """Name -> class of every registered method (after discovering all method modules)."""
+    from explorer.methods import discover
+
+    discover()
+    return dict(_REGISTRY)
+
+
+def available(family: str | None = None) -> list[str]:
+    """Registered method names, optionally of one family."""
+    return [n for n, c in registry().items() if family is None or c.family == family]
+
+
+def create(name: str, scene: Scene, **params) -> BestScanlineMethod:
+    """Instantiate a registered method by name."""
+    reg = registry()
+    if name not in reg:
+        raise KeyError(f"unknown method {name!r}; available: {', '.join(sorted(reg))}")
+    return reg[name](scene, **params)

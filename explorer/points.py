@@ -1,0 +1,187 @@
+"""Simulated control points (SCOPs) and check points (SCPs), as in the papers.
+
+A regular grid in image space is mapped to the ground through the rigorous model
+(mean-height plane, DEM, or several height layers for 3D grids).  Each point
+carries its image row/column, ground coordinates and exact scanline time.
+Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from explorer.errors import InputError
+from explorer.geometry.terrain import FlatTerrain
+from explorer.scene import Scene
+
+
+@dataclass
+class PointSet:
+    """Points with known image and ground coordinates.
+
+    Attributes
+    ----------
+    row, col : ndarray, shape (N,)
+        Exact image coordinates (0-based, pixel centre).
+    ground : ndarray, shape (N, 3)
+        Local ENU metres.
+    time : ndarray, shape (N,)
+        Exact scanline time, seconds.
+    grid_shape : tuple of int
+        (rows, cols, layers) of the generating grid.
+    """
+
+    row: np.ndarray
+    col: np.ndarray
+    ground: np.ndarray
+    time: np.ndarray
+    grid_shape: tuple[int, int, int] = (0, 0, 1)
+
+    def __len__(self) -> int:
+        return int(self.row.shape[0])
+
+    @property
+    def n(self) -> int:
+        return len(self)
+
+    def subset(self, index: np.ndarray) -> PointSet:
+        """Points selected by an integer or boolean index."""
+        return PointSet(self.row[index], self.col[index], self.ground[index], self.time[index], self.grid_shape)
+
+    def split(self, fraction: float, seed: int) -> tuple[PointSet, PointSet]:
+        """Seeded random split into (first, second) with ``round(fraction * N)`` points in the first."""
+        rng = np.random.default_rng(seed)
+        perm = rng.permutation(len(self))
+        k = int(round(fraction * len(self)))
+        return self.subset(np.sort(perm[:k])), self.subset(np.sort(perm[k:]))
+
+    def sample(self, n: int, seed: int) -> PointSet:
+        """Seeded random subsample of ``min(n, N)`` points (order kept)."""
+        if n >= len(self):
+            return self
+        rng = np.random.default_rng(seed)
+        return self.subset(np.sort(rng.choice(len(self), size=n, replace=False)))
+
+    def save_npz(self, path: str | Path, scene: Scene | None = None) -> None:
+        """Write arrays ``row``, ``col``, ``ground``, ``time`` (and ``scene_json``) to an .npz file."""
+        extra = {"scene_json": np.array(scene.to_json())} if scene is not None else {}
+        np.savez(path, row=self.row, col=self.col, ground=self.ground, time=self.time,
+                 grid_shape=np.array(self.grid_shape), **extra)
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> PointSet:
+        """Inverse of :meth:`save_npz` (the scene, if any, via ``Scene.from_dict(json.loads(...))``)."""
+        with np.load(path) as z:
+            return cls(z["row"], z["col"], z["ground"], z["time"], tuple(int(v) for v in z["grid_shape"]))
+
+
+def grid_shape_for(n: int, n_rows: int, n_columns: int) -> tuple[int, int]:
+    """Grid (rows, cols) of about ``n`` nodes with the image's aspect ratio (each >= 2)."""
+    if n < 4:
+        raise InputError(f"a grid needs at least 4 points, got n={n}")
+    gr = max(2, int(round(np.sqrt(n * n_rows / n_columns))))
+    gc = max(2, int(round(n / gr)))
+    return gr, gc
+
+
+def image_grid(
+    scene: Scene,
+    n: int,
+    *,
+    layers: int = 1,
+    height_range: tuple[float, float] | None = None,
+    cell_centred: bool = False,
+    jitter_px: float = 0.0,
+    seed: int = 0,
+) -> PointSet:
+    """Regular image grid of about ``n`` points per layer mapped to the ground.
+
+    Parameters
+    ----------
+    scene : Scene
+    n : int
+        Target number of points per layer; the exact count is ``len(result)``.
+    layers : int
+        1: intersect with the scene terrain (plane or DEM).  >1: a 3D grid, the same
+        image grid intersected with ``layers`` horizontal planes spanning ``height_range``.
+    height_range : (float, float), optional
+        Lowest and highest layer, metres; default the terrain's min/max, widened to
+        +-500 m around the mean height when the terrain is flat.
+    cell_centred : bool
+        False: nodes span the image from the first to the last pixel centre (SCOPs);
+        True: nodes at the centres of ``n`` equal cells (SCPs), so SCP and SCOP grids differ.
+    jitter_px : float
+        Uniform random offset of each node, in +- pixels (seeded); 0 keeps the grid regular.
+    seed : int
+
+    Returns
+    -------
+    PointSet
+        Points whose ray misses a DEM (outside or no-data) are dropped, and the count says so.
+    """
+    if layers < 1:
+        raise InputError(f"layers must be >= 1, got {layers}")
+    gr, gc = grid_shape_for(n, scene.n_rows, scene.n_columns)
+    if cell_centred:
+        rows = (np.arange(gr) + 0.5) * scene.n_rows / gr - 0.5
+        cols = (np.arange(gc) + 0.5) * scene.n_columns / gc - 0.5
+    else:
+        rows = np.linspace(0.0, scene.n_rows - 1.0, gr)
+        cols = np.linspace(0.0, scene.n_columns - 1.0, gc)
+    rr = np.repeat(rows, gc)
+    cc = np.tile(cols, gr)
+    if jitter_px:
+        rng = np.random.default_rng(seed)
+        rr = np.clip(rr + rng.uniform(-jitter_px, jitter_px, rr.shape), -0.5, scene.n_rows - 0.5)
+        cc = np.clip(cc + rng.uniform(-jitter_px, jitter_px, cc.shape), -0.5, scene.n_columns - 0.5)
+    if layers == 1 and isinstance(scene.terrain, FlatTerrain) and not jitter_px:
+        ground = _grid_on_plane(scene, rows, cols, scene.terrain.height_m)
+        return PointSet(rr, cc, ground, scene.scanline_time(rr), (gr, gc, 1))
+    if layers == 1:
+        ground = scene.image_to_ground(rr, cc)
+        ok = np.isfinite(ground[:, 0])
+        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
+    if height_range is None:
+        lo, hi = scene.terrain.min_height, scene.terrain.max_height
+        if hi - lo < 1.0:
+            lo, hi = lo - 500.0, hi + 500.0
+        height_range = (lo, hi)
+    heights = np.linspace(height_range[0], height_range[1], layers)
+    origin, direction = scene.rays(rr, cc)
+    parts = []
+    for h in heights:
+        lam = (h - origin[:, 2]) / direction[:, 2]
+        parts.append(origin + lam[:, None] * direction)
+    ground = np.concatenate(parts)
+    r3, c3 = np.tile(rr, layers), np.tile(cc, layers)
+    return PointSet(r3, c3, ground, scene.scanline_time(r3), (gr, gc, layers))
+
+
+def _grid_on_plane(scene: Scene, rows: np.ndarray, cols: np.ndarray, height: float) -> np.ndarray:
+    """Fast path for a regular grid on a plane: orientation once per grid row, broadcast over columns."""
+    t = scene.scanline_time(rows)
+    centres = scene.exterior.position(t)  # (gr, 3)
+    rot = scene.exterior.rotation(t)  # (gr, 3, 3)
+    xd, yd = scene.interior.detector_focal_plane(cols)
+    x, y = scene.interior.undistort(xd, yd)
+    v = np.stack([x, y, np.full_like(x, -scene.interior.focal_length_m)], axis=-1)  # (gc, 3)
+    out = np.empty((rows.size, cols.size, 3))
+    for k in range(3):  # direction component k for all (row, col): (gr, gc)
+        dk = rot[:, k, :] @ v.T
+        out[:, :, k] = dk
+    lam = (height - centres[:, None, 2]) / out[:, :, 2]
+    out *= lam[:, :, None]
+    out += centres[:, None, :]
+    return out.reshape(-1, 3)
+
+
+def simulate_points(
+    scene: Scene, n: int, *, layers: int = 1, kind: str = "scop", seed: int = 0
+) -> PointSet:
+    """SCOPs (``kind='scop'``: grid through the image corners) or SCPs (``'scp'``: cell-centred grid)."""
+    if kind not in ("scop", "scp"):
+        raise InputError(f"kind must be 'scop' or 'scp', got {kind!r}")
+    return image_grid(scene, n, layers=layers, cell_centred=(kind == "scp"), seed=seed)

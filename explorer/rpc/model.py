@@ -1,0 +1,656 @@
+"""Rational function model (RPC00B) evaluation, iterative localisation and DEM intersection.
+
+Pixel convention (one for the whole package, see ``docs/conventions.md`` and ``docs/rpc.md``):
+rows and columns are **0-based and an integer is the centre of a pixel** (the RPC00B/NITF
+convention). Readers of 1-based formats (DIMAP v2, DIMAP v1.4) convert at read time, so a
+:class:`RationalFunctionModel` never carries another convention.
+
+Ground coordinates are longitude and latitude in degrees (WGS84) and heights in metres above the
+ellipsoid. Everything is vectorised with numpy over arrays of any (broadcastable) shape.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "ConvergenceError",
+    "InverseRFM",
+    "RationalFunctionModel",
+    "ValidityDomain",
+    "evaluate_rpc00b_polynomial",
+    "rpc00b_monomials",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Human-readable names of the 20 RPC00B monomials, in file order (L = longitude, P = latitude,
+#: H = height, all normalised). Same order as NITF RPC00B, GDAL and rpcm.
+RPC00B_TERMS: tuple[str, ...] = (
+    "1", "L", "P", "H", "LP", "LH", "PH", "L2", "P2", "H2",
+    "PLH", "L3", "LP2", "LH2", "L2P", "P3", "PH2", "L2H", "P2H", "H3",
+)  # fmt: skip
+
+
+class ConvergenceError(RuntimeError):
+    """Raised by strict localisation when some points did not converge."""
+
+
+class HeightSource(Protocol):
+    """Anything with a vectorised ``height(lon, lat)`` returning NaN where unknown."""
+
+    def height(self, lon: ArrayLike, lat: ArrayLike) -> FloatArray: ...
+
+
+def _as_float_array(value: ArrayLike, name: str) -> FloatArray:
+    array = np.asarray(value, dtype=np.float64)
+    if np.isnan(array).any():
+        raise ValueError(f"{name} contains NaN ({int(np.isnan(array).sum())} value(s))")
+    return array
+
+
+def evaluate_rpc00b_polynomial(
+    coefficients: ArrayLike, x: FloatArray, y: FloatArray, z: FloatArray
+) -> FloatArray:
+    """Evaluate a cubic RPC00B polynomial with a Horner-like grouping.
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (20,)
+        Coefficients in RPC00B order (see :data:`RPC00B_TERMS`), where ``x`` plays the role of
+        ``L`` (normalised longitude), ``y`` of ``P`` (normalised latitude), ``z`` of ``H``.
+    x, y, z : ndarray
+        Normalised coordinates, broadcastable to a common shape.
+
+    Returns
+    -------
+    ndarray
+        Polynomial values, broadcast shape of ``x, y, z``.
+    """
+    c = np.asarray(coefficients, dtype=np.float64)
+    a0 = c[0] + y * (c[2] + z * (c[6] + c[16] * z) + y * (c[8] + c[18] * z + c[15] * y)) + z * (
+        c[3] + z * (c[9] + c[19] * z)
+    )
+    a1 = c[1] + y * (c[4] + c[10] * z + c[12] * y) + z * (c[5] + c[13] * z)
+    a2 = c[7] + c[14] * y + c[17] * z
+    return a0 + x * (a1 + x * (a2 + c[11] * x))
+
+
+def _rpc00b_polynomial_and_gradient(
+    coefficients: FloatArray, x: FloatArray, y: FloatArray, z: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Value and partial derivatives d/dx, d/dy of an RPC00B polynomial (same conventions)."""
+    c = coefficients
+    value = evaluate_rpc00b_polynomial(c, x, y, z)
+    d_dx = (
+        c[1]
+        + y * (c[4] + c[10] * z + c[12] * y)
+        + z * (c[5] + c[13] * z)
+        + 2.0 * x * (c[7] + c[14] * y + c[17] * z)
+        + 3.0 * c[11] * x * x
+    )
+    d_dy = (
+        c[2]
+        + z * (c[6] + c[16] * z)
+        + 2.0 * y * (c[8] + c[18] * z)
+        + 3.0 * c[15] * y * y
+        + x * (c[4] + c[10] * z + 2.0 * c[12] * y)
+        + c[14] * x * x
+    )
+    return value, d_dx, d_dy
+
+
+def rpc00b_monomials(x: ArrayLike, y: ArrayLike, z: ArrayLike) -> FloatArray:
+    """The 20 RPC00B monomials of normalised coordinates.
+
+    Parameters
+    ----------
+    x, y, z : array_like, shape (N,)
+        Normalised ``L`` (longitude), ``P`` (latitude) and ``H`` (height).
+
+    Returns
+    -------
+    ndarray, shape (N, 20)
+        Column ``k`` is the k-th monomial of :data:`RPC00B_TERMS`.
+    """
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    z = np.asarray(z, dtype=np.float64).ravel()
+    one = np.ones_like(x)
+    return np.stack(
+        [
+            one, x, y, z, x * y, x * z, y * z, x * x, y * y, z * z,
+            x * y * z, x**3, x * y * y, x * z * z, x * x * y, y**3, y * z * z, x * x * z,
+            y * y * z, z**3,
+        ],
+        axis=1,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class InverseRFM:
+    """Image-to-ground rational functions (DIMAP "Direct_Model"), RPC00B monomial order.
+
+    The monomials are taken of the normalised column (role of ``L``), normalised row (role of
+    ``P``) and normalised height (``H``), as in DIMAP v2 and rpcm. Row/column normalisation uses
+    the offsets and scales of the owning :class:`RationalFunctionModel` (0-based centre).
+    """
+
+    lon_num: FloatArray
+    lon_den: FloatArray
+    lat_num: FloatArray
+    lat_den: FloatArray
+
+
+@dataclass(frozen=True)
+class ValidityDomain:
+    """Box where the model is declared valid (degrees, metres, 0-based pixel-centre rows/cols).
+
+    Any bound may be ``None`` when the source does not give it.
+    """
+
+    lon_min: float | None = None
+    lon_max: float | None = None
+    lat_min: float | None = None
+    lat_max: float | None = None
+    h_min: float | None = None
+    h_max: float | None = None
+    row_min: float | None = None
+    row_max: float | None = None
+    col_min: float | None = None
+    col_max: float | None = None
+
+
+@dataclass(frozen=True)
+class RationalFunctionModel:
+    """RPC00B rational function model, 0-based pixel-centre convention.
+
+    ``row = row_offset + row_scale * row_num(L, P, H) / row_den(L, P, H)`` with
+    ``L = (lon - lon_offset) / lon_scale``, ``P = (lat - lat_offset) / lat_scale`` and
+    ``H = (h - height_offset) / height_scale``; the same for ``col``.
+
+    Parameters
+    ----------
+    row_num, row_den, col_num, col_den : ndarray, shape (20,)
+        RPC00B coefficients (LINE_NUM, LINE_DEN, SAMP_NUM, SAMP_DEN), file order.
+    row_offset, col_offset : float
+        Pixels, 0-based pixel-centre convention.
+    lat_offset, lon_offset : float
+        Degrees.
+    height_offset : float
+        Metres above the ellipsoid.
+    row_scale, col_scale, lat_scale, lon_scale, height_scale : float
+        Same units as the offsets; non-zero (may be negative, e.g. PlanetScope ``LAT_SCALE``).
+    inverse : InverseRFM, optional
+        Image-to-ground functions when the file has them (DIMAP); used as Newton start.
+    validity : ValidityDomain, optional
+        Declared validity box; defaults to offset +- scale on each axis.
+    image_size : (rows, cols), optional
+        Image size when the file states it.
+    source_format : str
+        Name of the format that was read (``"rpc00b_txt"``, ``"dimap_v2"``...).
+    source_path : str, optional
+        File the model was read from.
+    metadata : dict
+        Extra fields (error bias, satellite id...).
+    """
+
+    row_num: FloatArray
+    row_den: FloatArray
+    col_num: FloatArray
+    col_den: FloatArray
+    row_offset: float
+    col_offset: float
+    lat_offset: float
+    lon_offset: float
+    height_offset: float
+    row_scale: float
+    col_scale: float
+    lat_scale: float
+    lon_scale: float
+    height_scale: float
+    inverse: InverseRFM | None = None
+    validity: ValidityDomain | None = None
+    image_size: tuple[int, int] | None = None
+    source_format: str = "unknown"
+    source_path: str | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("row_num", "row_den", "col_num", "col_den"):
+            coefficients = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
+            if coefficients.shape != (20,):
+                raise ValueError(f"{name} must have 20 coefficients, got {coefficients.size}")
+            if not np.isfinite(coefficients).all():
+                raise ValueError(f"{name} has non-finite coefficients")
+            object.__setattr__(self, name, coefficients)
+        for name in ("row", "col", "lat", "lon", "height"):
+            offset = float(getattr(self, f"{name}_offset"))
+            scale = float(getattr(self, f"{name}_scale"))
+            if not np.isfinite(offset) or not np.isfinite(scale) or scale == 0.0:
+                raise ValueError(f"{name} offset/scale must be finite, scale non-zero")
+            object.__setattr__(self, f"{name}_offset", offset)
+            object.__setattr__(self, f"{name}_scale", scale)
+        if self.inverse is not None:
+            arrays = {
+                k: np.asarray(getattr(self.inverse, k), dtype=np.float64).reshape(20)
+                for k in ("lon_num", "lon_den", "lat_num", "lat_den")
+            }
+            object.__setattr__(self, "inverse", InverseRFM(**arrays))
+
+    # ------------------------------------------------------------------ domain
+    @property
+    def domain(self) -> ValidityDomain:
+        """Validity domain: the declared one, completed with offset +- |scale| on each axis."""
+        declared = self.validity or ValidityDomain()
+
+        def pick(value: float | None, default: float) -> float:
+            return float(default) if value is None else float(value)
+
+        return ValidityDomain(
+            lon_min=pick(declared.lon_min, self.lon_offset - abs(self.lon_scale)),
+            lon_max=pick(declared.lon_max, self.lon_offset + abs(self.lon_scale)),
+            lat_min=pick(declared.lat_min, self.lat_offset - abs(self.lat_scale)),
+            lat_max=pick(declared.lat_max, self.lat_offset + abs(self.lat_scale)),
+            h_min=pick(declared.h_min, self.height_offset - abs(self.height_scale)),
+            h_max=pick(declared.h_max, self.height_offset + abs(self.height_scale)),
+            row_min=pick(declared.row_min, self.row_offset - abs(self.row_scale)),
+            row_max=pick(declared.row_max, self.row_offset + abs(self.row_scale)),
+            col_min=pick(declared.col_min, self.col_offset - abs(self.col_scale)),
+            col_max=pick(declared.col_max, self.col_offset + abs(self.col_scale)),
+        )
+
+    def height_range(self, fraction: float = 1.0) -> tuple[float, float]:
+        """Height interval ``height_offset -+ fraction * |height_scale|`` in metres.
+
+        ``fraction=1`` is the normalisation domain ([-1, 1] in normalised height). CNES shareloc's
+        ``get_alt_min_max`` uses ``fraction=0.5``.
+        """
+        half = fraction * abs(self.height_scale)
+        return self.height_offset - half, self.height_offset + half
+
+    def in_domain(self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike) -> NDArray[np.bool_]:
+        """Boolean mask of ground points inside :attr:`domain` (bounds included)."""
+        d = self.domain
+        lon_a, lat_a, h_a = np.broadcast_arrays(
+            np.asarray(lon, float), np.asarray(lat, float), np.asarray(h, float)
+        )
+        return (
+            (lon_a >= d.lon_min) & (lon_a <= d.lon_max)
+            & (lat_a >= d.lat_min) & (lat_a <= d.lat_max)
+            & (h_a >= d.h_min) & (h_a <= d.h_max)
+        )  # fmt: skip
+
+    def with_pixel_shift(self, drow: float, dcol: float) -> RationalFunctionModel:
+        """Copy whose image coordinates are shifted: ``row' = row + drow``, ``col' = col + dcol``."""
+        return replace(self, row_offset=self.row_offset + drow, col_offset=self.col_offset + dcol)
+
+    # -------------------------------------------------------------- projection
+    def _normalise_ground(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return (
+            (lon - self.lon_offset) / self.lon_scale,
+            (lat - self.lat_offset) / self.lat_scale,
+            (h - self.height_offset) / self.height_scale,
+        )
+
+    def normalized_projection(
+        self, x: FloatArray, y: FloatArray, z: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Normalised (row, col) of normalised (L, P, H); no offsets or scales applied."""
+        row_n = evaluate_rpc00b_polynomial(self.row_num, x, y, z) / evaluate_rpc00b_polynomial(
+            self.row_den, x, y, z
+        )
+        col_n = evaluate_rpc00b_polynomial(self.col_num, x, y, z) / evaluate_rpc00b_polynomial(
+            self.col_den, x, y, z
+        )
+        return row_n, col_n
+
+    def projection(
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Ground to image.
+
+        Parameters
+        ----------
+        lon, lat : array_like
+            Degrees (WGS84), any broadcastable shapes.
+        h : array_like
+            Metres above the ellipsoid.
+
+        Returns
+        -------
+        row, col : ndarray
+            0-based pixel-centre image coordinates, broadcast shape of the inputs.
+
+        Raises
+        ------
+        ValueError
+            If an input contains NaN (the message names it).
+
+        Notes
+        -----
+        Points outside :attr:`domain` are evaluated (extrapolated) without warning; use
+        :meth:`in_domain` to mask them.
+        """
+        lon_a = _as_float_array(lon, "lon")
+        lat_a = _as_float_array(lat, "lat")
+        h_a = _as_float_array(h, "h")
+        x, y, z = self._normalise_ground(lon_a, lat_a, h_a)
+        row_n, col_n = self.normalized_projection(x, y, z)
+        return row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset
+
+    def inverse_localization(
+        self, row: ArrayLike, col: ArrayLike, h: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Evaluate the file's image-to-ground functions (approximate; DIMAP only).
+
+        Returns
+        -------
+        lon, lat : ndarray
+            Degrees; the vendor's approximation of the inverse, not the exact inverse of
+            :meth:`projection` (use :meth:`localization` for that).
+        """
+        if self.inverse is None:
+            raise ValueError("this model has no image-to-ground coefficients")
+        row_a = _as_float_array(row, "row")
+        col_a = _as_float_array(col, "col")
+        h_a = _as_float_array(h, "h")
+        return self._inverse_normalized(
+            (col_a - self.col_offset) / self.col_scale,
+            (row_a - self.row_offset) / self.row_scale,
+            (h_a - self.height_offset) / self.height_scale,
+            normalized_output=False,
+        )
+
+    def _inverse_normalized(
+        self, col_n: FloatArray, row_n: FloatArray, z: FloatArray, *, normalized_output: bool
+    ) -> tuple[FloatArray, FloatArray]:
+        inv = self.inverse
+        assert inv is not None
+        x_n = evaluate_rpc00b_polynomial(inv.lon_num, col_n, row_n, z) / evaluate_rpc00b_polynomial(
+            inv.lon_den, col_n, row_n, z
+        )
+        y_n = evaluate_rpc00b_polynomial(inv.lat_num, col_n, row_n, z) / evaluate_rpc00b_polynomial(
+            inv.lat_den, col_n, row_n, z
+        )
+        if normalized_output:
+            return x_n, y_n
+        return x_n * self.lon_scale + self.lon_offset, y_n * self.lat_scale + self.lat_offset
+
+    # ------------------------------------------------------------ localisation
+    def _residual_and_jacobian(
+        self, x: FloatArray, y: FloatArray, z: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Pixel (row, col) and their derivatives w.r.t. normalised x (L) and y (P)."""
+        rn, rn_x, rn_y = _rpc00b_polynomial_and_gradient(self.row_num, x, y, z)
+        rd, rd_x, rd_y = _rpc00b_polynomial_and_gradient(self.row_den, x, y, z)
+        cn, cn_x, cn_y = _rpc00b_polynomial_and_gradient(self.col_num, x, y, z)
+        cd, cd_x, cd_y = _rpc00b_polynomial_and_gradient(self.col_den, x, y, z)
+        row = rn / rd * self.row_scale + self.row_offset
+        col = cn / cd * self.col_scale + self.col_offset
+        row_x = (rn_x * rd - rn * rd_x) / (rd * rd) * self.row_scale
+        row_y = (rn_y * rd - rn * rd_y) / (rd * rd) * self.row_scale
+        col_x = (cn_x * cd - cn * cd_x) / (cd * cd) * self.col_scale
+        col_y = (cn_y * cd - cn * cd_y) / (cd * cd) * self.col_scale
+        return row, col, row_x, row_y, col_x, col_y
+
+    @np.errstate(invalid="ignore", over="ignore", divide="ignore")
+    def localization(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        h: ArrayLike,
+        *,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+        residual_tol_px: float = 1e-6,
+        raise_on_failure: bool = False,
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Image to ground at given heights: exact inverse of :meth:`projection` by Newton.
+
+        Newton iterations on the normalised (L, P) with the analytic Jacobian of the projection,
+        started from the file's inverse model when present, else from (L, P) = (0, 0); a step
+        that does not decrease the pixel residual is halved (up to 30 times).
+
+        Parameters
+        ----------
+        row, col : array_like
+            0-based pixel-centre image coordinates, broadcastable.
+        h : array_like
+            Heights, metres above the ellipsoid.
+        tol : float
+            Convergence when the last step is below ``tol`` degrees in longitude and latitude.
+        max_iter : int
+            Maximum Newton iterations.
+        residual_tol_px : float
+            A converged point must also re-project within this many pixels of (row, col).
+        raise_on_failure : bool
+            Raise :class:`ConvergenceError` when any point fails.
+
+        Returns
+        -------
+        lon, lat : ndarray
+            Degrees, broadcast shape; NaN where not converged.
+        converged : ndarray of bool
+            Same shape.
+
+        Raises
+        ------
+        ValueError
+            If an input contains NaN.
+        ConvergenceError
+            With ``raise_on_failure=True``, naming how many points failed.
+        """
+        row_a = _as_float_array(row, "row")
+        col_a = _as_float_array(col, "col")
+        h_a = _as_float_array(h, "h")
+        row_a, col_a, h_a = np.broadcast_arrays(row_a, col_a, h_a)
+        shape = row_a.shape
+        target_row = row_a.ravel().copy()
+        target_col = col_a.ravel().copy()
+        z = (h_a.ravel() - self.height_offset) / self.height_scale
+
+        if self.inverse is not None:
+            x, y = self._inverse_normalized(
+                (target_col - self.col_offset) / self.col_scale,
+                (target_row - self.row_offset) / self.row_scale,
+                z,
+                normalized_output=True,
+            )
+            bad_start = ~(np.isfinite(x) & np.isfinite(y))
+            x = np.where(bad_start, 0.0, x)
+            y = np.where(bad_start, 0.0, y)
+        else:
+            x = np.zeros_like(z)
+            y = np.zeros_like(z)
+
+        tol_x = tol / abs(self.lon_scale)
+        tol_y = tol / abs(self.lat_scale)
+        converged = np.zeros(z.shape, dtype=bool)
+        active = np.arange(z.size)
+        for _ in range(max_iter):
+            if active.size == 0:
+                break
+            xa, ya, za = x[active], y[active], z[active]
+            r, c, r_x, r_y, c_x, c_y = self._residual_and_jacobian(xa, ya, za)
+            e_r = target_row[active] - r
+            e_c = target_col[active] - c
+            det = r_x * c_y - r_y * c_x
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dx = (c_y * e_r - r_y * e_c) / det
+                dy = (-c_x * e_r + r_x * e_c) / det
+            err0 = np.hypot(e_r, e_c)
+            step = np.ones_like(xa)
+            # backtracking: halve the step while the residual grows (vectorised)
+            for _halving in range(30):
+                r1, c1 = self._pixel(xa + step * dx, ya + step * dy, za)
+                err1 = np.hypot(target_row[active] - r1, target_col[active] - c1)
+                worse = ~(err1 <= err0) & (err0 > 0)
+                if not worse.any():
+                    break
+                step = np.where(worse, step * 0.5, step)
+            sx = step * dx
+            sy = step * dy
+            x[active] = xa + sx
+            y[active] = ya + sy
+            finite = np.isfinite(sx) & np.isfinite(sy)
+            done = finite & (np.abs(sx) <= tol_x) & (np.abs(sy) <= tol_y)
+            converged[active[done]] = True
+            failed = ~finite
+            x[active[failed]] = np.nan
+            active = active[~done & ~failed]
+
+        lon = x * self.lon_scale + self.lon_offset
+        lat = y * self.lat_scale + self.lat_offset
+        ok = converged & np.isfinite(lon) & np.isfinite(lat)
+        if ok.any():
+            r_chk, c_chk = self._pixel(x[ok], y[ok], z[ok])
+            resid = np.hypot(r_chk - target_row[ok], c_chk - target_col[ok])
+            ok_idx = np.flatnonzero(ok)
+            ok[ok_idx[~(resid <= residual_tol_px)]] = False
+        lon = np.where(ok, lon, np.nan).reshape(shape)
+        lat = np.where(ok, lat, np.nan).reshape(shape)
+        ok = ok.reshape(shape)
+        if raise_on_failure and not ok.all():
+            n_failed = int((~ok).sum())
+            raise ConvergenceError(
+                f"localization did not converge for {n_failed} of {ok.size} point(s)"
+            )
+        return lon, lat, ok
+
+    def localization_strict(
+        self, row: ArrayLike, col: ArrayLike, h: ArrayLike, **kwargs: Any
+    ) -> tuple[FloatArray, FloatArray]:
+        """:meth:`localization` that raises :class:`ConvergenceError` on any failure."""
+        lon, lat, _ = self.localization(row, col, h, raise_on_failure=True, **kwargs)
+        return lon, lat
+
+    def _pixel(self, x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        row_n, col_n = self.normalized_projection(x, y, z)
+        return row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset
+
+    # ------------------------------------------------------- DEM intersection
+    def localization_on_dem(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        dem: HeightSource | Any,
+        *,
+        h_min: float | None = None,
+        h_max: float | None = None,
+        n_levels: int = 65,
+        height_tol: float = 1e-4,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Intersect each pixel's line of sight with a DEM.
+
+        The line of sight is sampled at ``n_levels`` heights from ``h_max`` down to ``h_min``
+        (each level localised with :meth:`localization`); the first level (from the top) where
+        the ray passes below the terrain brackets the intersection, which is then refined by
+        bisection on the height until the bracket is below ``height_tol`` metres. Because the
+        highest crossing is kept, a ridge that the ray clips before reaching lower terrain is
+        not skipped as long as it spans at least one height level.
+
+        Parameters
+        ----------
+        row, col : array_like
+            0-based pixel-centre image coordinates, broadcastable.
+        dem : object with ``height(lon, lat) -> ndarray`` or a callable ``(lon, lat) -> ndarray``
+            Terrain heights above the ellipsoid (metres), NaN where unknown.
+        h_min, h_max : float, optional
+            Search interval in metres; default: ``dem.min``/``dem.max`` (widened by 1 m) when the
+            DEM has them, else :meth:`height_range`.
+        n_levels : int
+            Number of sampled heights (>= 2).
+        height_tol : float
+            Bisection stops when the height bracket is below this (metres).
+        tol, max_iter : float, int
+            Passed to :meth:`localization`.
+
+        Returns
+        -------
+        lon, lat, h : ndarray
+            Intersection (degrees, metres); NaN where not found.
+        found : ndarray of bool
+            False where no crossing was found in [h_min, h_max], where the DEM was undefined
+            at the bracketing levels, or where localisation did not converge.
+        """
+        row_a = _as_float_array(row, "row")
+        col_a = _as_float_array(col, "col")
+        row_a, col_a = np.broadcast_arrays(row_a, col_a)
+        shape = row_a.shape
+        row_f = row_a.ravel()
+        col_f = col_a.ravel()
+        height_fn = dem.height if hasattr(dem, "height") else dem
+        if h_min is None or h_max is None:
+            if hasattr(dem, "min") and hasattr(dem, "max"):
+                dem_min, dem_max = float(dem.min) - 1.0, float(dem.max) + 1.0
+            else:
+                dem_min, dem_max = self.height_range()
+            h_min = dem_min if h_min is None else h_min
+            h_max = dem_max if h_max is None else h_max
+        if not h_max > h_min:
+            raise ValueError(f"h_max ({h_max}) must be greater than h_min ({h_min})")
+        if n_levels < 2:
+            raise ValueError("n_levels must be >= 2")
+
+        levels = np.linspace(h_max, h_min, n_levels)
+        n = row_f.size
+        lev = np.repeat(levels[:, None], n, axis=1)  # (n_levels, n)
+        lon_l, lat_l, ok_l = self.localization(
+            np.broadcast_to(row_f, lev.shape), np.broadcast_to(col_f, lev.shape), lev,
+            tol=tol, max_iter=max_iter,
+        )  # fmt: skip
+        terrain = np.full(lev.shape, np.nan)
+        if ok_l.any():
+            terrain[ok_l] = np.asarray(height_fn(lon_l[ok_l], lat_l[ok_l]), dtype=np.float64)
+        above = lev - terrain  # > 0: ray above terrain
+        crossing = (above[:-1] > 0) & (above[1:] <= 0)  # finite on both sides implied
+        found = crossing.any(axis=0)
+        first = np.argmax(crossing, axis=0)
+        upper = np.where(found, levels[first], np.nan)
+        lower = np.where(found, levels[np.minimum(first + 1, n_levels - 1)], np.nan)
+
+        fi = np.flatnonzero(found)
+        hi = upper[fi]
+        lo = lower[fi]
+        step = (h_max - h_min) / (n_levels - 1)
+        n_bisect = max(0, int(np.ceil(np.log2(step / height_tol)))) if step > height_tol else 0
+        ok_b = np.ones(fi.size, dtype=bool)
+        for _ in range(n_bisect):
+            mid = 0.5 * (hi + lo)
+            lon_m, lat_m, ok_m = self.localization(row_f[fi], col_f[fi], mid, tol=tol,
+                                                   max_iter=max_iter)
+            t_m = np.full(mid.shape, np.nan)
+            if ok_m.any():
+                t_m[ok_m] = np.asarray(height_fn(lon_m[ok_m], lat_m[ok_m]), dtype=np.float64)
+            below = mid - t_m <= 0
+            ok_b &= np.isfinite(t_m)
+            lo = np.where(below, mid, lo)
+            hi = np.where(below, hi, mid)
+        # final point: middle of the last bracket
+        h_out = np.full(n, np.nan)
+        lon_out = np.full(n, np.nan)
+        lat_out = np.full(n, np.nan)
+        if fi.size:
+            h_fin = 0.5 * (hi + lo)
+            lon_f, lat_f, ok_f = self.localization(row_f[fi], col_f[fi], h_fin, tol=tol,
+                                                   max_iter=max_iter)
+            good = ok_b & ok_f
+            h_out[fi] = np.where(good, h_fin, np.nan)
+            lon_out[fi] = np.where(good, lon_f, np.nan)
+            lat_out[fi] = np.where(good, lat_f, np.nan)
+            found[fi] = good
+        return (
+            lon_out.reshape(shape),
+            lat_out.reshape(shape),
+            h_out.reshape(shape),
+            found.reshape(shape),
+        )

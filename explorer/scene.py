@@ -1,0 +1,302 @@
+"""A pushbroom scene: camera (interior orientation) + MPC orbit and attitude +
+line timing + terrain + local frame, with image -> ground and the collinearity
+residual that every best-scanline method solves.  Saves to and loads from JSON
+exactly.  Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from explorer.errors import SceneFileError, as_points, check_finite
+from explorer.geometry.collinearity import ideal_focal_plane
+from explorer.geometry.exterior import ExteriorOrientation, LineTiming
+from explorer.geometry.frames import LocalFrame
+from explorer.geometry.interior import InteriorOrientation
+from explorer.geometry.terrain import (
+    FlatTerrain,
+    GridDEM,
+    Terrain,
+    intersect_dem,
+    intersect_plane,
+    terrain_from_dict,
+)
+
+SCENE_FILE_VERSION = 1
+CHUNK = 1 << 18  # points per block in per-point matrix work (bounds memory to ~50 MB)
+
+
+def _chunked(n: int, fn: Callable[[slice], tuple[np.ndarray, ...]], widths: tuple[int, ...]):
+    """Run ``fn`` over slices of length CHUNK and stitch its outputs (each (n,) or (n, w))."""
+    if n <= CHUNK:
+        return fn(slice(0, n))
+    outs = [np.empty((n,) if w == 0 else (n, w)) for w in widths]
+    for start in range(0, n, CHUNK):
+        sl = slice(start, min(start + CHUNK, n))
+        for o, r in zip(outs, fn(sl), strict=True):
+            o[sl] = r
+    return tuple(outs)
+
+
+@dataclass
+class Scene:
+    """Everything needed to map between the image and the ground.
+
+    Parameters
+    ----------
+    name : str
+    interior : InteriorOrientation
+    exterior : ExteriorOrientation
+    timing : LineTiming
+    n_rows : int
+        Number of scanlines.
+    terrain : FlatTerrain or GridDEM
+    frame : LocalFrame
+        Where the local ENU frame sits on the WGS84 ellipsoid.
+    metadata : dict
+        Free-form provenance (preset id, sensor, region, table GSD, perturbations).
+    """
+
+    name: str
+    interior: InteriorOrientation
+    exterior: ExteriorOrientation
+    timing: LineTiming
+    n_rows: int
+    terrain: Terrain = field(default_factory=FlatTerrain)
+    frame: LocalFrame = field(default_factory=lambda: LocalFrame(0.0, 0.0, 0.0))
+    metadata: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ image
+    @property
+    def n_columns(self) -> int:
+        return self.interior.n_columns
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, columns)."""
+        return (self.n_rows, self.n_columns)
+
+    @property
+    def pixel_size_m(self) -> float:
+        """Detector pitch, metres: focal-plane metres per pixel."""
+        return self.interior.detector_pitch_m
+
+    def scanline_time(self, row: np.ndarray) -> np.ndarray:
+        """Row (N,) -> exposure time (N,), seconds."""
+        return self.timing.scanline_time(row)
+
+    def row_at_time(self, t: np.ndarray) -> np.ndarray:
+        """Exposure time (N,) seconds -> row (N,)."""
+        return self.timing.row_at_time(t)
+
+    def inside_image(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """True where (row, col) lies on the image, pixel edges included: -0.5 <= row <= rows - 0.5."""
+        row = np.asarray(row, dtype=np.float64)
+        col = np.asarray(col, dtype=np.float64)
+        return (
+            (row >= -0.5) & (row <= self.n_rows - 0.5) & (col >= -0.5) & (col <= self.n_columns - 0.5)
+        )
+
+    # ------------------------------------------------------------ collinearity
+    def focal_plane(self, ground: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured focal-plane coordinates of ground points seen at times t.
+
+        Parameters
+        ----------
+        ground : ndarray, shape (N, 3)
+            Local ENU metres.
+        t : ndarray, shape (N,) or scalar
+            Scanline times, seconds.
+
+        Returns
+        -------
+        x, y : ndarray, shape (N,)
+            Along- and across-track focal-plane coordinates (distorted), metres.
+        """
+        ground = np.asarray(ground, dtype=np.float64)
+        t = np.broadcast_to(np.asarray(t, dtype=np.float64), ground.shape[:1])
+
+        def block(sl: slice) -> tuple[np.ndarray, np.ndarray]:
+            tt = t[sl]
+            x, y = ideal_focal_plane(
+                ground[sl], self.exterior.position(tt), self.exterior.rotation(tt),
+                self.interior.focal_length_m,
+            )
+            return self.interior.distort(x, y)
+
+        return _chunked(ground.shape[0], block, (0, 0))
+
+    def along_track_residual(self, ground: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``x(t) - x_detector(y(t))`` (N,), metres: zero at the best scanline.
+
+        Divide by :attr:`pixel_size_m` for pixels.  One call is one collinearity
+        evaluation per point.
+        """
+        x, y = self.focal_plane(ground, t)
+        return x - self.interior.detector_x(y)
+
+    def column_at_time(self, ground: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Image column (N,) of ground points (N, 3) seen at scanline times t (N,)."""
+        _, y = self.focal_plane(ground, t)
+        return self.interior.y_to_column(y)
+
+    def column_at_row(self, ground: np.ndarray, row: np.ndarray) -> np.ndarray:
+        """Image column (N,) of ground points at (fractional) rows (N,)."""
+        return self.column_at_time(ground, self.scanline_time(row))
+
+    # ------------------------------------------------------------ image->ground
+    def rays(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lines of sight of image points.
+
+        Parameters
+        ----------
+        row, col : ndarray, shape (N,)
+
+        Returns
+        -------
+        origin : ndarray, shape (N, 3)
+            Perspective centres, metres.
+        direction : ndarray, shape (N, 3)
+            Unit directions in the local frame.
+        """
+        row = check_finite(np.atleast_1d(row), "row")
+        col = check_finite(np.atleast_1d(col), "col")
+        row, col = np.broadcast_arrays(row, col)
+        t = self.scanline_time(row)
+        xd, yd = self.interior.detector_focal_plane(col)
+        x, y = self.interior.undistort(xd, yd)
+
+        def block(sl: slice) -> tuple[np.ndarray, np.ndarray]:
+            tt = t[sl]
+            v = np.stack([x[sl], y[sl], np.full(tt.shape, -self.interior.focal_length_m)], axis=-1)
+            d = np.einsum("nij,nj->ni", self.exterior.rotation(tt), v)
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            return self.exterior.position(tt), d
+
+        return _chunked(row.shape[0], block, (3, 3))
+
+    def image_to_ground(
+        self,
+        row: np.ndarray,
+        col: np.ndarray,
+        terrain: Terrain | None = None,
+        *,
+        height: np.ndarray | float | None = None,
+    ) -> np.ndarray:
+        """Intersect lines of sight with the terrain.
+
+        Parameters
+        ----------
+        row, col : ndarray, shape (N,)
+            Image coordinates (0-based, pixel centre).
+        terrain : FlatTerrain or GridDEM, optional
+            Defaults to the scene's terrain.
+        height : float or ndarray (N,), optional
+            Intersect with the plane(s) Z = height instead (exact).
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            Ground points, metres; NaN rows where a DEM is missed (outside or no-data).
+        """
+        origin, direction = self.rays(row, col)
+        if height is not None:
+            return intersect_plane(origin, direction, check_finite(height, "height"))
+        terrain = self.terrain if terrain is None else terrain
+        if isinstance(terrain, FlatTerrain):
+            return intersect_plane(origin, direction, terrain.height_m)
+        return intersect_dem(origin, direction, terrain)
+
+    def footprint(self, height: float | None = None) -> np.ndarray:
+        """Ground corners of the image at a height (default: mean terrain height), shape (4, 3).
+
+        Order: (row 0, col 0), (row 0, last col), (last row, last col), (last row, col 0),
+        pixel edges included.
+        """
+        r1, c1 = self.n_rows - 0.5, self.n_columns - 0.5
+        rows = np.array([-0.5, -0.5, r1, r1])
+        cols = np.array([-0.5, c1, c1, -0.5])
+        h = self.terrain.mean_height if height is None else height
+        return self.image_to_ground(rows, cols, height=h)
+
+    def ground_sample_distance(self) -> tuple[float, float]:
+        """(along-track, across-track) pixel spacing on the ground at the image centre, metres."""
+        rc, cc = (self.n_rows - 1) / 2.0, (self.n_columns - 1) / 2.0
+        h = self.terrain.mean_height
+        g = self.image_to_ground(
+            np.array([rc - 0.5, rc + 0.5, rc, rc]), np.array([cc, cc, cc - 0.5, cc + 0.5]), height=h
+        )
+        return float(np.linalg.norm(g[1] - g[0])), float(np.linalg.norm(g[3] - g[2]))
+
+    def with_terrain(self, terrain: Terrain) -> Scene:
+        """A copy of the scene on another terrain."""
+        return replace(self, terrain=terrain)
+
+    # -------------------------------------------------------------------- JSON
+    def to_dict(self) -> dict:
+        """JSON-ready dict; ``Scene.from_dict(scene.to_dict())`` is exact."""
+        return {
+            "format": "pushbroom-explorer scene",
+            "version": SCENE_FILE_VERSION,
+            "name": self.name,
+            "n_rows": self.n_rows,
+            "interior": self.interior.to_dict(),
+            "exterior": self.exterior.to_dict(),
+            "timing": {"line_period_s": self.timing.line_period_s, "reference_row": self.timing.reference_row},
+            "terrain": self.terrain.to_dict(),
+            "frame": {"lat0_deg": self.frame.lat0_deg, "lon0_deg": self.frame.lon0_deg, "h0_m": self.frame.h0_m},
+            "metadata": self.metadata,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "<dict>") -> Scene:
+        """Build a scene from :meth:`to_dict` output; errors name ``source`` and the bad field."""
+        if not isinstance(d, dict) or d.get("format") != "pushbroom-explorer scene":
+            raise SceneFileError(f"{source}: not a pushbroom-explorer scene file (missing 'format')")
+        if d.get("version") != SCENE_FILE_VERSION:
+            raise SceneFileError(f"{source}: unsupported scene version {d.get('version')!r}")
+        try:
+            return cls(
+                name=str(d["name"]),
+                interior=InteriorOrientation.from_dict(d["interior"]),
+                exterior=ExteriorOrientation.from_dict(d["exterior"]),
+                timing=LineTiming(float(d["timing"]["line_period_s"]), float(d["timing"]["reference_row"])),
+                n_rows=int(d["n_rows"]),
+                terrain=terrain_from_dict(d["terrain"]),
+                frame=LocalFrame(**{k: float(v) for k, v in d["frame"].items()}),
+                metadata=dict(d.get("metadata", {})),
+            )
+        except KeyError as exc:
+            raise SceneFileError(f"{source}: missing field {exc.args[0]!r}") from exc
+        except (TypeError, ValueError) as exc:
+            raise SceneFileError(f"{source}: {exc}") from exc
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
+
+    def save(self, path: str | Path) -> None:
+        """Write the scene to a JSON file."""
+        Path(path).write_text(self.to_json())
+
+    @classmethod
+    def load(cls, path: str | Path) -> Scene:
+        """Read a scene JSON file; raises :class:`SceneFileError` on malformed files."""
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+        return cls.from_dict(d, source=str(path))
+
+
+def validate_ground(ground: np.ndarray) -> np.ndarray:
+    """Alias of :func:`explorer.errors.as_points` for method implementations."""
+    return as_points(ground)
+
+
+__all__ = ["Scene", "GridDEM", "FlatTerrain", "validate_ground"]

@@ -1,0 +1,337 @@
+"""DEM readers (GeoTIFF via rasterio, SRTM ``.hgt``) and the EGM96 geoid (GTX grid).
+
+Ground coordinates are longitude/latitude in degrees; heights in metres. A DEM's vertical
+reference is recorded (``"ellipsoid"``, ``"egm96"`` or ``"unknown"``); RPC models need heights
+above the ellipsoid, see :meth:`Geoid.orthometric_to_ellipsoidal`. Image pixel conventions
+(0-based, integer = pixel centre) are in ``docs/conventions.md`` and ``docs/rpc.md``.
+
+Grid convention: a DEM value belongs to the **centre of its raster cell** (GDAL "PixelIsArea"
+geotransform: node ``(i, j)`` is at ``transform * (j + 0.5, i + 0.5)``). Interpolation is
+bilinear between node centres; outside the node grid, or where a needed node is nodata, the
+height is NaN and the validity mask is False.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "DEFAULT_ASSETS_DIR",
+    "GeoDEM",
+    "Geoid",
+    "read_geotiff_dem",
+    "read_hgt",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Folder of the DEM/geoid assets shipped with the repository (``assets/dem``).
+DEFAULT_ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets" / "dem"
+
+_SNAP = 1e-9  # fractional indices this close to an integer are snapped to it (node exactness)
+
+
+def _snap(index: FloatArray) -> FloatArray:
+    nearest = np.round(index)
+    return np.where(np.abs(index - nearest) < _SNAP, nearest, index)
+
+
+def _bilinear(
+    grid: FloatArray, fi: FloatArray, fj: FloatArray, *, wrap_columns: bool = False
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Bilinear interpolation at fractional (row, col) indices; NaN + False where undefined.
+
+    A neighbour with zero weight does not contribute (so a node value is returned exactly even
+    next to nodata).
+    """
+    n_rows, n_cols = grid.shape
+    fi = _snap(fi)
+    fj = _snap(fj)
+    if wrap_columns:
+        fj = np.mod(fj, n_cols)
+        inside = (fi >= 0) & (fi <= n_rows - 1)
+    else:
+        inside = (fi >= 0) & (fi <= n_rows - 1) & (fj >= 0) & (fj <= n_cols - 1)
+    fi_c = np.where(inside, fi, 0.0)
+    fj_c = np.where(inside, fj, 0.0)
+    i0 = np.minimum(np.floor(fi_c).astype(np.int64), n_rows - 1)
+    j0 = np.floor(fj_c).astype(np.int64)
+    j0 = np.mod(j0, n_cols) if wrap_columns else np.minimum(j0, n_cols - 1)
+    wi = fi_c - i0
+    wj = fj_c - j0
+    i1 = np.minimum(i0 + 1, n_rows - 1)
+    j1 = np.mod(j0 + 1, n_cols) if wrap_columns else np.minimum(j0 + 1, n_cols - 1)
+    total = np.zeros(fi_c.shape)
+    valid = inside.copy()
+    for ii, jj, w in (
+        (i0, j0, (1 - wi) * (1 - wj)),
+        (i0, j1, (1 - wi) * wj),
+        (i1, j0, wi * (1 - wj)),
+        (i1, j1, wi * wj),
+    ):
+        value = grid[ii, jj]
+        used = w > 0
+        valid &= ~used | np.isfinite(value)
+        total += np.where(used, w * np.where(np.isfinite(value), value, 0.0), 0.0)
+    return np.where(valid, total, np.nan), valid
+
+
+@dataclass(frozen=True)
+class GeoDEM:
+    """A gridded DEM in a geographic (lon/lat) or projected CRS.
+
+    Attributes
+    ----------
+    heights : ndarray, shape (n_rows, n_cols)
+        Metres; NaN where nodata.
+    transform : (a, b, c, d, e, f)
+        GDAL-style affine geotransform of cell corners: ``x = c + a * col + b * row``,
+        ``y = f + d * col + e * row`` (rasterio ``Affine`` order). Rotation terms must be 0.
+    crs : str
+        The file's CRS (WKT or authority string); the shareloc DEMs are lon/lat degrees.
+    vertical_reference : str
+        ``"ellipsoid"``, ``"egm96"`` (orthometric) or ``"unknown"``.
+    source_path : str or None
+    """
+
+    heights: FloatArray
+    transform: tuple[float, float, float, float, float, float]
+    crs: str = ""
+    vertical_reference: str = "unknown"
+    source_path: str | None = None
+
+    def __post_init__(self) -> None:
+        a, b, _, d, e, _ = self.transform
+        if b != 0 or d != 0:
+            raise ValueError("rotated geotransforms are not supported")
+        if a == 0 or e == 0:
+            raise ValueError("geotransform pixel size must be non-zero")
+        object.__setattr__(self, "heights", np.asarray(self.heights, dtype=np.float64))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(n_rows, n_cols)."""
+        return self.heights.shape  # type: ignore[return-value]
+
+    def node_coordinates(self, i: ArrayLike, j: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(x, y) = (lon, lat) of node (row ``i``, column ``j``), i.e. of the cell centre."""
+        a, _, c, _, e, f = self.transform
+        return c + (np.asarray(j, float) + 0.5) * a, f + (np.asarray(i, float) + 0.5) * e
+
+    def fractional_index(self, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Fractional (row, col) node indices of (x, y)."""
+        a, _, c, _, e, f = self.transform
+        return (np.asarray(y, float) - f) / e - 0.5, (np.asarray(x, float) - c) / a - 0.5
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(x_min, y_min, x_max, y_max) of the node grid: where :meth:`height` is defined."""
+        n_rows, n_cols = self.shape
+        x0, y0 = self.node_coordinates(0, 0)
+        x1, y1 = self.node_coordinates(n_rows - 1, n_cols - 1)
+        return (float(min(x0, x1)), float(min(y0, y1)), float(max(x0, x1)), float(max(y0, y1)))
+
+    @property
+    def min(self) -> float:
+        """Lowest valid height (metres)."""
+        return float(np.nanmin(self.heights))
+
+    @property
+    def max(self) -> float:
+        """Highest valid height (metres)."""
+        return float(np.nanmax(self.heights))
+
+    def height_and_mask(
+        self, x: ArrayLike, y: ArrayLike
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Bilinear height and validity mask at (x, y) (lon/lat for geographic DEMs).
+
+        Returns
+        -------
+        height : ndarray
+            Broadcast shape of x, y; NaN where the mask is False.
+        valid : ndarray of bool
+            False outside :attr:`bounds`, for NaN input, or next to nodata.
+        """
+        xa, ya = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+        fi, fj = self.fractional_index(xa, ya)
+        finite = np.isfinite(fi) & np.isfinite(fj)
+        h, valid = _bilinear(
+            self.heights, np.where(finite, fi, -1.0), np.where(finite, fj, -1.0)
+        )
+        return h, valid & finite
+
+    def height(self, x: ArrayLike, y: ArrayLike) -> FloatArray:
+        """Bilinear height (metres), NaN where undefined (see :meth:`height_and_mask`)."""
+        return self.height_and_mask(x, y)[0]
+
+
+def read_geotiff_dem(
+    path: str | Path, *, band: int = 1, vertical_reference: str = "unknown"
+) -> GeoDEM:
+    """Read a single-band DEM raster with rasterio.
+
+    Nodata (the file's nodata value or GDAL mask) becomes NaN. Values are cell-centre heights.
+
+    Parameters
+    ----------
+    path : path-like
+    band : int
+        1-based band index.
+    vertical_reference : str
+        What the heights are measured from (files rarely say): ``"ellipsoid"``, ``"egm96"``...
+    """
+    import rasterio
+
+    with rasterio.open(path) as dataset:
+        data = dataset.read(band, masked=True).astype(np.float64)
+        heights = np.ma.filled(data, np.nan)
+        transform = tuple(dataset.transform)[:6]
+        crs = dataset.crs.to_string() if dataset.crs else ""
+    return GeoDEM(
+        heights=heights,
+        transform=transform,  # type: ignore[arg-type]
+        crs=crs,
+        vertical_reference=vertical_reference,
+        source_path=str(path),
+    )
+
+
+_HGT_NAME = re.compile(r"([NS])(\d{1,2})([EW])(\d{1,3})", re.I)
+
+
+def read_hgt(path: str | Path) -> GeoDEM:
+    """Read an SRTM ``.hgt`` tile (1201x1201 or 3601x3601 big-endian int16, -32768 = nodata).
+
+    The file name gives the south-west corner (``N43E007.hgt``); nodes are at whole fractions
+    of a degree from that corner (the first row is the northern edge). Heights are EGM96
+    orthometric.
+    """
+    path = Path(path)
+    match = _HGT_NAME.search(path.name)
+    if match is None:
+        raise ValueError(f"{path.name}: SRTM tile name must look like N43E007.hgt")
+    lat0 = int(match.group(2)) * (1 if match.group(1).upper() == "N" else -1)
+    lon0 = int(match.group(4)) * (1 if match.group(3).upper() == "E" else -1)
+    raw = np.fromfile(path, dtype=">i2")
+    side = int(round(np.sqrt(raw.size)))
+    if side * side != raw.size or side not in (1201, 3601):
+        raise ValueError(f"{path.name}: {raw.size} samples is not a 1201^2 or 3601^2 SRTM tile")
+    heights = raw.reshape(side, side).astype(np.float64)
+    heights[raw.reshape(side, side) == -32768] = np.nan
+    step = 1.0 / (side - 1)
+    transform = (step, 0.0, lon0 - 0.5 * step, 0.0, -step, lat0 + 1 + 0.5 * step)
+    return GeoDEM(heights, transform, crs="EPSG:4326", vertical_reference="egm96",
+                  source_path=str(path))
+
+
+@dataclass(frozen=True)
+class Geoid:
+    """Geoid undulation grid (e.g. EGM96 15'), bilinear, longitude wrap-around.
+
+    Attributes
+    ----------
+    undulation : ndarray, shape (n_rows, n_cols)
+        Metres; row 0 is the southernmost latitude ``lat0`` (GTX order).
+    lat0, lon0, dlat, dlon : float
+        Degrees: first node and spacing.
+    """
+
+    undulation: FloatArray
+    lat0: float
+    lon0: float
+    dlat: float
+    dlon: float
+
+    @classmethod
+    def from_gtx(cls, path: str | Path) -> Geoid:
+        """Read a GTX file: big-endian header ``lat0, lon0, dlat, dlon`` (float64) and
+        ``n_rows, n_cols`` (int32), then ``n_rows * n_cols`` float32 from south to north.
+        Values of -88.8888 (the GTX "no data") become NaN."""
+        data = Path(path).read_bytes()
+        if len(data) < 40:
+            raise ValueError(f"{Path(path).name}: too short for a GTX header")
+        lat0, lon0, dlat, dlon, n_rows, n_cols = struct.unpack(">4d2i", data[:40])
+        expected = 40 + 4 * n_rows * n_cols
+        if n_rows <= 0 or n_cols <= 0 or len(data) != expected:
+            raise ValueError(
+                f"{Path(path).name}: GTX header says {n_rows}x{n_cols}, file has "
+                f"{len(data)} bytes (expected {expected})"
+            )
+        grid = np.frombuffer(data, dtype=">f4", offset=40).astype(np.float64)
+        grid = grid.reshape(n_rows, n_cols)
+        grid[np.abs(grid + 88.8888) < 1e-3] = np.nan
+        return cls(grid, lat0, lon0, dlat, dlon)
+
+    @classmethod
+    def egm96(cls, path: str | Path | None = None) -> Geoid:
+        """EGM96 15' grid shipped in ``assets/dem/egm96_15.gtx`` (or ``path``)."""
+        gtx = Path(path) if path is not None else DEFAULT_ASSETS_DIR / "egm96_15.gtx"
+        if not gtx.exists():
+            raise FileNotFoundError(f"EGM96 grid not found at {gtx}")
+        return cls.from_gtx(gtx)
+
+    @property
+    def wraps(self) -> bool:
+        """True when the columns cover 360 degrees of longitude."""
+        return abs(self.undulation.shape[1] * self.dlon - 360.0) < 1e-9
+
+    def geoid_height(self, lon: ArrayLike, lat: ArrayLike) -> FloatArray:
+        """Geoid undulation N (metres above the ellipsoid) at lon/lat degrees, bilinear.
+
+        Longitudes may be given in any 360-degree range. NaN outside the grid's latitudes.
+        """
+        lon_a, lat_a = np.broadcast_arrays(np.asarray(lon, float), np.asarray(lat, float))
+        fi = (lat_a - self.lat0) / self.dlat
+        fj = (lon_a - self.lon0) / self.dlon
+        finite = np.isfinite(fi) & np.isfinite(fj)
+        value, valid = _bilinear(
+            self.undulation, np.where(finite, fi, -1.0), np.where(finite, fj, -1.0),
+            wrap_columns=self.wraps,
+        )  # fmt: skip
+        return np.where(valid & finite, value, np.nan)
+
+    def orthometric_to_ellipsoidal(
+        self, h: ArrayLike, lon: ArrayLike, lat: ArrayLike
+    ) -> FloatArray:
+        """Height above the ellipsoid ``h + N(lon, lat)`` from a height above the geoid."""
+        return np.asarray(h, float) + self.geoid_height(lon, lat)
+
+    def ellipsoidal_to_orthometric(
+        self, h: ArrayLike, lon: ArrayLike, lat: ArrayLike
+    ) -> FloatArray:
+        """Height above the geoid ``h - N(lon, lat)`` from a height above the ellipsoid."""
+        return np.asarray(h, float) - self.geoid_height(lon, lat)
+
+
+@dataclass(frozen=True)
+class EllipsoidalDEM:
+    """A DEM whose orthometric heights are converted to ellipsoidal on lookup (``h + N``)."""
+
+    dem: GeoDEM
+    geoid: Geoid
+
+    @property
+    def min(self) -> float:
+        """Lower bound of ellipsoidal heights (DEM min + smallest undulation in its box)."""
+        return self.dem.min + float(np.nanmin(self._undulation_samples()))
+
+    @property
+    def max(self) -> float:
+        """Upper bound of ellipsoidal heights (DEM max + largest undulation in its box)."""
+        return self.dem.max + float(np.nanmax(self._undulation_samples()))
+
+    def _undulation_samples(self) -> FloatArray:
+        x0, y0, x1, y1 = self.dem.bounds
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 9), np.linspace(y0, y1, 9))
+        return self.geoid.geoid_height(gx, gy)
+
+    def height(self, lon: ArrayLike, lat: ArrayLike) -> FloatArray:
+        """Ellipsoidal height (metres), NaN where the DEM is undefined."""
+        return self.geoid.orthometric_to_ellipsoidal(self.dem.height(lon, lat), lon, lat)

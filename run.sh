@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# One entry point that does its own set-up on a fresh machine, then runs a job.
+#   ./run.sh explore [--preset WSU] [--port 8080]   the explorer (main job)
+#   ./run.sh test [pytest args]                     the whole test suite
+#   ./run.sh bench [...]  /  ./run.sh pushbroom ...  any CLI command
+set -euo pipefail
+cd "$(dirname "$0")"
+VENV=.venv
+PY="$VENV/bin/python"
+
+system_packages() {
+  # Debian packages: chromium (browser tests, Plotly static images), libtiff-dev + pkg-config (rpcm's srtm4)
+  local need=()
+  command -v chromium >/dev/null 2>&1 || need+=(chromium)
+  pkg-config --exists libtiff-4 2>/dev/null || need+=(libtiff-dev pkg-config)
+  if [ ${#need[@]} -gt 0 ] && command -v apt-get >/dev/null 2>&1; then
+    local sudo=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && sudo="sudo"
+    echo "[setup] apt-get install ${need[*]}"
+    $sudo apt-get update -qq >/dev/null 2>&1 || true
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${need[@]}" >/dev/null
+  fi
+}
+
+python_packages() {
+  local stamp="$VENV/.installed-$(cat pyproject.toml | sha1sum | cut -c1-12)"
+  [ -f "$stamp" ] && return 0
+  [ -x "$PY" ] || python3 -m venv "$VENV"
+  "$PY" -m pip install -q --upgrade pip
+  # torch first: 2.13.0 is the CPU build on machines without a GPU (a bare "torch" pulls CUDA wheels)
+  "$PY" -m pip install -q "torch==2.13.0"
+  "$PY" -m pip install -q -e ".[test]"
+  touch "$stamp"
+}
+
+job="${1:-explore}"; shift || true
+case "$job" in
+  test)
+    system_packages; python_packages
+    exec "$VENV/bin/pytest" -q -n 2 "$@" ;;
+  explore)
+    python_packages
+    exec "$VENV/bin/pushbroom" explore "$@" ;;
+  setup)
+    system_packages; python_packages ;;
+  pushbroom)
+    python_packages; exec "$VENV/bin/pushbroom" "$@" ;;
+  *)
+    python_packages; exec "$VENV/bin/pushbroom" "$job" "$@" ;;
+esac

@@ -1,0 +1,212 @@
+"""Readers: content dispatch, GDAL's own parse as independent truth, malformed files."""
+
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from explorer.rpc import (
+    RPCFormatError,
+    detect_format,
+    read_dg_rpb,
+    read_gdal_vrt,
+    read_rpc,
+    read_rpc_from_raster,
+)
+
+from .conftest import RPC_DIR, normalisation_grid
+
+rasterio = pytest.importorskip("rasterio")
+
+EXPECTED_FORMATS = {
+    "md_dg.RPB": "dg_rpb",
+    "md_ge_rgb_0010000_rpc.txt": "rpc00b_txt",
+    "md_ov_rpc.txt": "rpc00b_txt",
+    "test_rpc.txt": "rpc00b_txt",
+    "rpc.vrt": "gdal_vrt",
+    "rpc_5395.vrt": "gdal_vrt",
+    "rpc_IKONOS.txt": "rpc00b_txt",
+    "rpc_PLANET_L1A.txt": "rpc00b_txt",
+    "rpc_PLANET_L1B.txt": "rpc00b_txt",
+    "rpc_PLEIADES.xml": "dimap_v2",
+    "rpc_SPOT6.xml": "dimap_v2",
+    "rpc_WV1.xml": "dg_xml",
+    "rpc_WV2.xml": "dg_xml",
+    "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.geom": "ossim_geom",
+    "PHRDIMAP_P1BP--2018122638935449CP.XML": "dimap_v1.4",
+    "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML": "dimap_v2",
+}
+
+
+@pytest.mark.parametrize(("name", "fmt"), sorted(EXPECTED_FORMATS.items()))
+def test_dispatch_on_content(name, fmt, tmp_path):
+    assert detect_format(RPC_DIR / name) == fmt
+    # renamed to a neutral extension, the content still decides
+    renamed = tmp_path / "renamed.dat"
+    shutil.copy(RPC_DIR / name, renamed)
+    if fmt != "gdal_vrt":
+        assert detect_format(renamed) == fmt
+        assert read_rpc(renamed).source_format == fmt
+
+
+def _gdal_model(rpcs):
+    """Our model class filled from GDAL's own parse (rasterio RPC object)."""
+    from explorer.rpc import RationalFunctionModel
+
+    d = rpcs.to_dict()
+    return RationalFunctionModel(
+        row_num=d["line_num_coeff"], row_den=d["line_den_coeff"],
+        col_num=d["samp_num_coeff"], col_den=d["samp_den_coeff"],
+        row_offset=d["line_off"], col_offset=d["samp_off"], lat_offset=d["lat_off"],
+        lon_offset=d["long_off"], height_offset=d["height_off"], row_scale=d["line_scale"],
+        col_scale=d["samp_scale"], lat_scale=d["lat_scale"], lon_scale=d["long_scale"],
+        height_scale=d["height_scale"],
+    )
+
+
+@pytest.mark.parametrize("name", ["rpc.vrt", "rpc_5395.vrt"])
+def test_vrt_reader_matches_gdal_parse(name):
+    ours = read_rpc(RPC_DIR / name)
+    with rasterio.open(RPC_DIR / name) as dataset:
+        gdal_rpcs = dataset.rpcs
+    rpcm = pytest.importorskip("rpcm")
+    peer = rpcm.RPCModel({k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
+                          for k, v in gdal_rpcs.to_dict().items()
+                          if k not in ("err_bias", "err_rand")})
+    lon, lat, h = normalisation_grid(ours)
+    row, col = ours.projection(lon, lat, h)
+    col_ref, row_ref = peer.projection(lon, lat, h)
+    assert np.max(np.abs(row - row_ref)) < 1e-6
+    assert np.max(np.abs(col - col_ref)) < 1e-6
+
+
+@pytest.mark.parametrize(("name", "sidecar"), [("md_dg.RPB", "img.RPB"),
+                                               ("rpc_IKONOS.txt", "img_RPC.TXT"),
+                                               ("md_ov_rpc.txt", "img_rpc.txt")])
+def test_sidecar_reader_matches_gdal_parse(name, sidecar, tmp_path):
+    """GDAL reads the same file as the sidecar of a small GeoTIFF; rpcm evaluates it."""
+    rpcm = pytest.importorskip("rpcm")
+    image = tmp_path / "img.tif"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with rasterio.open(image, "w", driver="GTiff", width=4, height=4, count=1,
+                           dtype="uint8") as dst:
+            dst.write(np.zeros((1, 4, 4), dtype="uint8"))
+    shutil.copy(RPC_DIR / name, tmp_path / sidecar)
+    with rasterio.open(image) as dataset:
+        gdal_rpcs = dataset.rpcs
+    assert gdal_rpcs is not None
+    peer = rpcm.RPCModel({k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
+                          for k, v in gdal_rpcs.to_dict().items()
+                          if k not in ("err_bias", "err_rand")})
+    ours = read_rpc(RPC_DIR / name)
+    lon, lat, h = normalisation_grid(ours)
+    row, col = ours.projection(lon, lat, h)
+    col_ref, row_ref = peer.projection(lon, lat, h)
+    assert np.max(np.abs(row - row_ref)) < 1e-6
+    assert np.max(np.abs(col - col_ref)) < 1e-6
+
+
+def test_geotiff_rpc_tag_round_trip(tmp_path):
+    """Write a GeoTIFF carrying the RPC of rpc_IKONOS.txt with rasterio, read it back."""
+    from rasterio.rpc import RPC
+
+    source = read_rpc(RPC_DIR / "rpc_IKONOS.txt")
+    rpcs = RPC(
+        height_off=source.height_offset, height_scale=source.height_scale,
+        lat_off=source.lat_offset, lat_scale=source.lat_scale,
+        long_off=source.lon_offset, long_scale=source.lon_scale,
+        line_off=source.row_offset, line_scale=source.row_scale,
+        samp_off=source.col_offset, samp_scale=source.col_scale,
+        line_num_coeff=[float(v) for v in source.row_num],
+        line_den_coeff=[float(v) for v in source.row_den],
+        samp_num_coeff=[float(v) for v in source.col_num],
+        samp_den_coeff=[float(v) for v in source.col_den],
+    )
+    image = tmp_path / "with_rpc.tif"
+    with rasterio.open(image, "w", driver="GTiff", width=8, height=6, count=1, dtype="uint8",
+                       rpcs=rpcs) as dst:
+        dst.write(np.zeros((1, 6, 8), dtype="uint8"))
+    assert detect_format(image) == "raster"
+    back = read_rpc(image)
+    assert back.source_format == "raster_rpc"
+    assert back.image_size == (6, 8)
+    rpcm = pytest.importorskip("rpcm")
+    peer = rpcm.rpc_from_rpc_file(str(RPC_DIR / "rpc_IKONOS.txt"))
+    lon, lat, h = normalisation_grid(back)
+    row, col = back.projection(lon, lat, h)
+    col_ref, row_ref = peer.projection(lon, lat, h)
+    assert np.max(np.abs(row - row_ref)) < 1e-6
+    assert np.max(np.abs(col - col_ref)) < 1e-6
+
+
+def test_raster_without_rpc_is_rejected(tmp_path):
+    image = tmp_path / "plain.tif"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with rasterio.open(image, "w", driver="GTiff", width=2, height=2, count=1,
+                           dtype="uint8") as dst:
+            dst.write(np.zeros((1, 2, 2), dtype="uint8"))
+    with pytest.raises(RPCFormatError, match="plain.tif: raster has no RPC"):
+        read_rpc_from_raster(image)
+
+
+def test_dimap_conventions_and_metadata():
+    model = read_rpc(RPC_DIR / "rpc_PLEIADES.xml")
+    # file: LINE_OFF 18088.5, SAMP_OFF 20000.5 (1-based) -> 0-based
+    assert model.row_offset == 18087.5
+    assert model.col_offset == 19999.5
+    assert model.inverse is not None
+    assert model.image_size == (36176, 40000)
+    assert model.domain.row_min == 0 and model.domain.col_max == 39999
+    wv = read_rpc(RPC_DIR / "rpc_WV2.xml")
+    assert wv.image_size == (20289, 28244)
+
+
+def test_unsupported_xml_is_rejected():
+    with pytest.raises(RPCFormatError, match="rpc_unsupported.xml"):
+        read_rpc(RPC_DIR / "rpc_unsupported.xml")
+    # the explicit VRT reader still reads its GDAL RPC metadata when asked to
+    assert read_gdal_vrt(RPC_DIR / "rpc_unsupported.xml").source_format == "gdal_vrt"
+
+
+def test_missing_coefficient_is_named(tmp_path):
+    text = (RPC_DIR / "rpc_IKONOS.txt").read_text()
+    lines = [ln for ln in text.splitlines() if not ln.startswith("LINE_NUM_COEFF_12:")]
+    broken = tmp_path / "broken_RPC.TXT"
+    broken.write_text("\n".join(lines))
+    with pytest.raises(RPCFormatError, match="broken_RPC.TXT: missing LINE_NUM_COEFF_12"):
+        read_rpc(broken)
+
+
+def test_truncated_files_are_rejected(tmp_path):
+    for name in ("rpc_IKONOS.txt", "rpc_PLEIADES.xml", "md_dg.RPB",
+                 "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.geom", "rpc.vrt"):
+        data = (RPC_DIR / name).read_bytes()
+        truncated = tmp_path / f"trunc_{name}"
+        truncated.write_bytes(data[: len(data) // 2])
+        with pytest.raises(RPCFormatError, match=f"trunc_{name}"):
+            read_rpc(truncated)
+
+
+def test_not_an_rpc_and_empty(tmp_path):
+    other = tmp_path / "notes.txt"
+    other.write_text("hello\nworld\n")
+    with pytest.raises(RPCFormatError, match="not a recognised RPC"):
+        read_rpc(other)
+    empty = tmp_path / "empty_RPC.TXT"
+    empty.write_text("")
+    with pytest.raises(RPCFormatError, match="is empty"):
+        read_rpc(empty)
+    with pytest.raises(RPCFormatError, match="not a DigitalGlobe RPB"):
+        read_dg_rpb(other)
+
+
+def test_bad_number_is_named(tmp_path):
+    text = (RPC_DIR / "rpc_IKONOS.txt").read_text().replace("LAT_OFF: -34.90300000",
+                                                             "LAT_OFF: abc")
+    bad = tmp_path / "bad_RPC.TXT"
+    bad.write_text(text)
+    with pytest.raises(RPCFormatError, match="LAT_OFF is not a number"):
+        read_rpc(bad)
