@@ -39,13 +39,15 @@ def cmd_presets(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
-    head = f"{'id':7} {'sensor':12} {'region':25} {'rows x cols':>12} {'GSD m':>6} {'lat':>7} {'lon':>8} {'alt km':>6} {'roll':>5} {'pitch':>5}"
+    head = (f"{'id':7} {'sensor':12} {'region':25} {'rows x cols':>12} {'GSD m':>6} {'lat':>7} {'lon':>8} "
+            f"{'alt km':>6} {'roll':>5} {'pitch':>5}")
     print(head)
     print("-" * len(head))
     for r in rows:
         size = f"{r['rows']}x{r['columns']}"
         print(f"{r['id']:7} {r['sensor'][:12]:12} {r['region'][:25]:25} {size:>12} {r['gsd_m']:6.2f} "
-              f"{r['lat_deg']:7.2f} {r['lon_deg']:8.2f} {r['altitude_km']:6.0f} {r['roll_deg']:5.1f} {r['pitch_deg']:5.1f}")
+              f"{r['lat_deg']:7.2f} {r['lon_deg']:8.2f} {r['altitude_km']:6.0f} {r['roll_deg']:5.1f} "
+              f"{r['pitch_deg']:5.1f}")
     return 0
 
 
@@ -59,7 +61,8 @@ def summarize_scene(scene: Scene) -> str:
         f"  GSD at centre: along {along:.4f} m, across {across:.4f} m",
         f"  line period {scene.timing.line_period_s * 1e3:.6f} ms, imaging time "
         f"{scene.n_rows * scene.timing.line_period_s:.3f} s",
-        f"  focal length {scene.interior.focal_length_m} m, detector pitch {scene.interior.detector_pitch_m * 1e6:.4f} um",
+        f"  focal length {scene.interior.focal_length_m} m, "
+        f"detector pitch {scene.interior.detector_pitch_m * 1e6:.4f} um",
         f"  perspective centre at first line (ENU m): {s0.round(1).tolist()}",
         f"  footprint corners (ENU m): {fp[:, :2].round(1).tolist()}",
         f"  terrain: {type(scene.terrain).__name__}, heights {scene.terrain.min_height:.1f} .. "

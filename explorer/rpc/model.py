@@ -286,7 +286,7 @@ class RationalFunctionModel:
         )  # fmt: skip
 
     def with_pixel_shift(self, drow: float, dcol: float) -> RationalFunctionModel:
-        """Copy whose image coordinates are shifted: ``row' = row + drow``, ``col' = col + dcol``."""
+        """Copy with shifted image coordinates: ``row' = row + drow``, ``col' = col + dcol``."""
         return replace(self, row_offset=self.row_offset + drow, col_offset=self.col_offset + dcol)
 
     # -------------------------------------------------------------- projection

@@ -482,7 +482,7 @@ def detect_format(path: str | Path) -> str:
         raise _fail(path, f"cannot be read ({exc.strerror})") from exc
     if not head:
         raise _fail(path, "is empty")
-    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+") or head[:4] in (b"NITF", b"NSIF"):
+    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+", b"NITF", b"NSIF"):
         return "raster"
     stripped = head.lstrip(b"\xef\xbb\xbf \t\r\n")
     if stripped.startswith(b"<"):

@@ -27,10 +27,17 @@ RPCM_READABLE = [
 def normalisation_grid(model, n_lon=9, n_lat=9, n_h=5):
     """3-D grid over offset +- scale in lon, lat and height (ij indexing)."""
     axes = [
-        np.linspace(model.lon_offset - abs(model.lon_scale), model.lon_offset + abs(model.lon_scale), n_lon),
-        np.linspace(model.lat_offset - abs(model.lat_scale), model.lat_offset + abs(model.lat_scale), n_lat),
-        np.linspace(model.height_offset - abs(model.height_scale),
-                    model.height_offset + abs(model.height_scale), n_h),
+        np.linspace(
+            model.lon_offset - abs(model.lon_scale), model.lon_offset + abs(model.lon_scale), n_lon
+        ),
+        np.linspace(
+            model.lat_offset - abs(model.lat_scale), model.lat_offset + abs(model.lat_scale), n_lat
+        ),
+        np.linspace(
+            model.height_offset - abs(model.height_scale),
+            model.height_offset + abs(model.height_scale),
+            n_h,
+        ),
     ]
     return np.meshgrid(*axes, indexing="ij")
 

@@ -10,7 +10,7 @@ from .conftest import RPC_DIR
 
 
 def _affine_model(row_scale=1000.0, col_scale=2000.0):
-    """row = 500 + 1000 * P', col = 1000 + 2000 * L' with L', P' normalised lon, lat: closed form."""
+    """row = 500 + 1000 P', col = 1000 + 2000 L' (L', P' normalised lon, lat): closed form."""
     num_r = np.zeros(20)
     num_r[2] = 1.0
     num_c = np.zeros(20)
@@ -18,9 +18,20 @@ def _affine_model(row_scale=1000.0, col_scale=2000.0):
     den = np.zeros(20)
     den[0] = 1.0
     return RationalFunctionModel(
-        row_num=num_r, row_den=den, col_num=num_c, col_den=den,
-        row_offset=500.0, col_offset=1000.0, lat_offset=45.0, lon_offset=5.0, height_offset=0.0,
-        row_scale=row_scale, col_scale=col_scale, lat_scale=0.1, lon_scale=0.2, height_scale=500.0,
+        row_num=num_r,
+        row_den=den,
+        col_num=num_c,
+        col_den=den,
+        row_offset=500.0,
+        col_offset=1000.0,
+        lat_offset=45.0,
+        lon_offset=5.0,
+        height_offset=0.0,
+        row_scale=row_scale,
+        col_scale=col_scale,
+        lat_scale=0.1,
+        lon_scale=0.2,
+        height_scale=500.0,
     )
 
 
@@ -31,8 +42,13 @@ def test_polynomial_matches_monomials_term_by_term():
     for k in range(20):
         c = np.zeros(20)
         c[k] = 1.0
-        np.testing.assert_allclose(evaluate_rpc00b_polynomial(c, x, y, z), mono[:, k],
-                                   rtol=0, atol=1e-15, err_msg=RPC00B_TERMS[k])
+        np.testing.assert_allclose(
+            evaluate_rpc00b_polynomial(c, x, y, z),
+            mono[:, k],
+            rtol=0,
+            atol=1e-15,
+            err_msg=RPC00B_TERMS[k],
+        )
     # closed-form check of the term order with distinct integer values
     m = rpc00b_monomials([2.0], [3.0], [5.0])[0]
     expected = [1, 2, 3, 5, 6, 10, 15, 4, 9, 25, 30, 8, 18, 50, 12, 27, 75, 20, 45, 125]
@@ -76,9 +92,7 @@ def test_shapes_are_preserved():
 def test_non_convergence_is_flagged_and_strict_raises():
     """A model whose column does not depend on the ground point has no solution for col != 0."""
     model = _affine_model()
-    degenerate = RationalFunctionModel(
-        **{**model.__dict__, "col_num": np.r_[0.0, np.zeros(19)]}
-    )
+    degenerate = RationalFunctionModel(**{**model.__dict__, "col_num": np.r_[0.0, np.zeros(19)]})
     lon, lat, ok = degenerate.localization([500.0, 600.0], [1000.0, 1500.0], 0.0, max_iter=20)
     assert not ok.any()
     assert np.isnan(lon).all() and np.isnan(lat).all()
@@ -130,21 +144,24 @@ def test_localization_on_dem_takes_first_crossing_of_a_ridge():
     """A thin wall along the line of sight: the ray must stop on the wall, not the ground."""
     model = _affine_model()
     # for this model the line of sight is vertical; make it oblique by a height term
-    tilted = RationalFunctionModel(**{**model.__dict__,
-                                      "col_num": np.r_[0.0, 1.0, 0.0, 0.2, np.zeros(16)]})
+    tilted = RationalFunctionModel(
+        **{**model.__dict__, "col_num": np.r_[0.0, 1.0, 0.0, 0.2, np.zeros(16)]}
+    )
     wall_lon = 5.0 - 0.2 * 0.2 * (300.0 / 500.0)  # where the ray of col=1000 is at h=300 m
 
     def terrain(lon, lat):
         lon = np.asarray(lon)
         return np.where(np.abs(lon - wall_lon) < 2e-4, 400.0, 0.0)
 
-    lon, lat, h, found = tilted.localization_on_dem(500.0, 1000.0, terrain, h_min=-10.0,
-                                                    h_max=1000.0, n_levels=400)
+    lon, lat, h, found = tilted.localization_on_dem(
+        500.0, 1000.0, terrain, h_min=-10.0, h_max=1000.0, n_levels=400
+    )
     assert found
     # stopped on the wall face: lon within the wall, h where the ray leaves it going down
     assert abs(lon - wall_lon) <= 2e-4 + 1e-9
     assert h == pytest.approx(300.0 + 2.5, abs=1e-2)
     # no crossing: terrain always below the search interval
-    _, _, h2, found2 = tilted.localization_on_dem(500.0, 1000.0, lambda x, y: x * 0 - 50.0,
-                                                  h_min=0.0, h_max=100.0)
+    _, _, h2, found2 = tilted.localization_on_dem(
+        500.0, 1000.0, lambda x, y: x * 0 - 50.0, h_min=0.0, h_max=100.0
+    )
     assert not found2 and np.isnan(h2)

@@ -40,8 +40,10 @@ def test_localization_round_trip_and_rpcm(name):
     assert np.max(np.abs(lat_est - lat)) < 1e-9
 
 
-@pytest.mark.parametrize("name", ["rpc_PLEIADES.xml", "rpc_SPOT6.xml",
-                                  "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML"])
+@pytest.mark.parametrize(
+    "name",
+    ["rpc_PLEIADES.xml", "rpc_SPOT6.xml", "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML"],
+)
 def test_dimap_inverse_model_matches_rpcm(name):
     """The file's image->ground functions evaluated by rpcm and by us (same 0-based shift)."""
     path = RPC_DIR / name
@@ -60,8 +62,10 @@ def test_dimap_inverse_model_matches_rpcm(name):
 # ----------------------------------------------------------- upstream reference values
 def test_shareloc_dimap_v2_reference_projection():
     # shareloc test_rpc_dimap_v2: col 100.5, row 200.5 (pixel corner) at tol 1e-2 px
-    for name in ("RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML",
-                 "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.geom"):
+    for name in (
+        "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML",
+        "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.geom",
+    ):
         model = read_rpc(RPC_DIR / name)
         row, col = model.projection(7.048662660737769592, 43.72774839443545858, 0.0)
         assert row + 0.5 == pytest.approx(200.5, abs=1e-2)
@@ -80,8 +84,10 @@ def test_shareloc_ossim_kwl_reference_projection():
 @pytest.mark.parametrize("scene", ["178608", "178609"])
 def test_ossim_geom_matches_rpcm_reading_the_dimap_twin(scene):
     """The .geom (0-based) and the DIMAP RPC_*.XML (1-based) of one scene are the same model."""
-    stem = {"178608": "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001",
-            "178609": "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001"}[scene]
+    stem = {
+        "178608": "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001",
+        "178609": "PHR1B_P_201709281038393_SEN_PRG_FC_178609-001",
+    }[scene]
     ours = read_rpc(RPC_DIR / f"{stem}.geom")
     peer = rpcm.rpc_from_rpc_file(str(RPC_DIR / f"RPC_{stem}.XML"))
     lon, lat, h = normalisation_grid(ours)
@@ -134,11 +140,16 @@ def test_phrdimap_projection_matches_rpcm_evaluation():
     and the vendor's inverse model (evaluated by rpcm) checks the 1-based shift."""
     model = read_rpc(RPC_DIR / "PHRDIMAP_P1BP--2018122638935449CP.XML")
     d = {
-        "LINE_OFF": model.row_offset, "SAMP_OFF": model.col_offset,
-        "LAT_OFF": model.lat_offset, "LONG_OFF": model.lon_offset,
-        "HEIGHT_OFF": model.height_offset, "LINE_SCALE": model.row_scale,
-        "SAMP_SCALE": model.col_scale, "LAT_SCALE": model.lat_scale,
-        "LONG_SCALE": model.lon_scale, "HEIGHT_SCALE": model.height_scale,
+        "LINE_OFF": model.row_offset,
+        "SAMP_OFF": model.col_offset,
+        "LAT_OFF": model.lat_offset,
+        "LONG_OFF": model.lon_offset,
+        "HEIGHT_OFF": model.height_offset,
+        "LINE_SCALE": model.row_scale,
+        "SAMP_SCALE": model.col_scale,
+        "LAT_SCALE": model.lat_scale,
+        "LONG_SCALE": model.lon_scale,
+        "HEIGHT_SCALE": model.height_scale,
         "LINE_NUM_COEFF": " ".join(repr(float(v)) for v in model.row_num),
         "LINE_DEN_COEFF": " ".join(repr(float(v)) for v in model.row_den),
         "SAMP_NUM_COEFF": " ".join(repr(float(v)) for v in model.col_num),

@@ -56,11 +56,19 @@ def _gdal_model(rpcs):
 
     d = rpcs.to_dict()
     return RationalFunctionModel(
-        row_num=d["line_num_coeff"], row_den=d["line_den_coeff"],
-        col_num=d["samp_num_coeff"], col_den=d["samp_den_coeff"],
-        row_offset=d["line_off"], col_offset=d["samp_off"], lat_offset=d["lat_off"],
-        lon_offset=d["long_off"], height_offset=d["height_off"], row_scale=d["line_scale"],
-        col_scale=d["samp_scale"], lat_scale=d["lat_scale"], lon_scale=d["long_scale"],
+        row_num=d["line_num_coeff"],
+        row_den=d["line_den_coeff"],
+        col_num=d["samp_num_coeff"],
+        col_den=d["samp_den_coeff"],
+        row_offset=d["line_off"],
+        col_offset=d["samp_off"],
+        lat_offset=d["lat_off"],
+        lon_offset=d["long_off"],
+        height_offset=d["height_off"],
+        row_scale=d["line_scale"],
+        col_scale=d["samp_scale"],
+        lat_scale=d["lat_scale"],
+        lon_scale=d["long_scale"],
         height_scale=d["height_scale"],
     )
 
@@ -71,9 +79,13 @@ def test_vrt_reader_matches_gdal_parse(name):
     with rasterio.open(RPC_DIR / name) as dataset:
         gdal_rpcs = dataset.rpcs
     rpcm = pytest.importorskip("rpcm")
-    peer = rpcm.RPCModel({k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
-                          for k, v in gdal_rpcs.to_dict().items()
-                          if k not in ("err_bias", "err_rand")})
+    peer = rpcm.RPCModel(
+        {
+            k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
+            for k, v in gdal_rpcs.to_dict().items()
+            if k not in ("err_bias", "err_rand")
+        }
+    )
     lon, lat, h = normalisation_grid(ours)
     row, col = ours.projection(lon, lat, h)
     col_ref, row_ref = peer.projection(lon, lat, h)
@@ -81,25 +93,31 @@ def test_vrt_reader_matches_gdal_parse(name):
     assert np.max(np.abs(col - col_ref)) < 1e-6
 
 
-@pytest.mark.parametrize(("name", "sidecar"), [("md_dg.RPB", "img.RPB"),
-                                               ("rpc_IKONOS.txt", "img_RPC.TXT"),
-                                               ("md_ov_rpc.txt", "img_rpc.txt")])
+@pytest.mark.parametrize(
+    ("name", "sidecar"),
+    [("md_dg.RPB", "img.RPB"), ("rpc_IKONOS.txt", "img_RPC.TXT"), ("md_ov_rpc.txt", "img_rpc.txt")],
+)
 def test_sidecar_reader_matches_gdal_parse(name, sidecar, tmp_path):
     """GDAL reads the same file as the sidecar of a small GeoTIFF; rpcm evaluates it."""
     rpcm = pytest.importorskip("rpcm")
     image = tmp_path / "img.tif"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with rasterio.open(image, "w", driver="GTiff", width=4, height=4, count=1,
-                           dtype="uint8") as dst:
+        with rasterio.open(
+            image, "w", driver="GTiff", width=4, height=4, count=1, dtype="uint8"
+        ) as dst:
             dst.write(np.zeros((1, 4, 4), dtype="uint8"))
     shutil.copy(RPC_DIR / name, tmp_path / sidecar)
     with rasterio.open(image) as dataset:
         gdal_rpcs = dataset.rpcs
     assert gdal_rpcs is not None
-    peer = rpcm.RPCModel({k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
-                          for k, v in gdal_rpcs.to_dict().items()
-                          if k not in ("err_bias", "err_rand")})
+    peer = rpcm.RPCModel(
+        {
+            k.upper(): (" ".join(map(str, v)) if isinstance(v, list) else v)
+            for k, v in gdal_rpcs.to_dict().items()
+            if k not in ("err_bias", "err_rand")
+        }
+    )
     ours = read_rpc(RPC_DIR / name)
     lon, lat, h = normalisation_grid(ours)
     row, col = ours.projection(lon, lat, h)
@@ -114,19 +132,25 @@ def test_geotiff_rpc_tag_round_trip(tmp_path):
 
     source = read_rpc(RPC_DIR / "rpc_IKONOS.txt")
     rpcs = RPC(
-        height_off=source.height_offset, height_scale=source.height_scale,
-        lat_off=source.lat_offset, lat_scale=source.lat_scale,
-        long_off=source.lon_offset, long_scale=source.lon_scale,
-        line_off=source.row_offset, line_scale=source.row_scale,
-        samp_off=source.col_offset, samp_scale=source.col_scale,
+        height_off=source.height_offset,
+        height_scale=source.height_scale,
+        lat_off=source.lat_offset,
+        lat_scale=source.lat_scale,
+        long_off=source.lon_offset,
+        long_scale=source.lon_scale,
+        line_off=source.row_offset,
+        line_scale=source.row_scale,
+        samp_off=source.col_offset,
+        samp_scale=source.col_scale,
         line_num_coeff=[float(v) for v in source.row_num],
         line_den_coeff=[float(v) for v in source.row_den],
         samp_num_coeff=[float(v) for v in source.col_num],
         samp_den_coeff=[float(v) for v in source.col_den],
     )
     image = tmp_path / "with_rpc.tif"
-    with rasterio.open(image, "w", driver="GTiff", width=8, height=6, count=1, dtype="uint8",
-                       rpcs=rpcs) as dst:
+    with rasterio.open(
+        image, "w", driver="GTiff", width=8, height=6, count=1, dtype="uint8", rpcs=rpcs
+    ) as dst:
         dst.write(np.zeros((1, 6, 8), dtype="uint8"))
     assert detect_format(image) == "raster"
     back = read_rpc(image)
@@ -145,8 +169,9 @@ def test_raster_without_rpc_is_rejected(tmp_path):
     image = tmp_path / "plain.tif"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with rasterio.open(image, "w", driver="GTiff", width=2, height=2, count=1,
-                           dtype="uint8") as dst:
+        with rasterio.open(
+            image, "w", driver="GTiff", width=2, height=2, count=1, dtype="uint8"
+        ) as dst:
             dst.write(np.zeros((1, 2, 2), dtype="uint8"))
     with pytest.raises(RPCFormatError, match="plain.tif: raster has no RPC"):
         read_rpc_from_raster(image)
@@ -181,8 +206,13 @@ def test_missing_coefficient_is_named(tmp_path):
 
 
 def test_truncated_files_are_rejected(tmp_path):
-    for name in ("rpc_IKONOS.txt", "rpc_PLEIADES.xml", "md_dg.RPB",
-                 "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.geom", "rpc.vrt"):
+    for name in (
+        "rpc_IKONOS.txt",
+        "rpc_PLEIADES.xml",
+        "md_dg.RPB",
+        "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.geom",
+        "rpc.vrt",
+    ):
         data = (RPC_DIR / name).read_bytes()
         truncated = tmp_path / f"trunc_{name}"
         truncated.write_bytes(data[: len(data) // 2])
@@ -204,8 +234,7 @@ def test_not_an_rpc_and_empty(tmp_path):
 
 
 def test_bad_number_is_named(tmp_path):
-    text = (RPC_DIR / "rpc_IKONOS.txt").read_text().replace("LAT_OFF: -34.90300000",
-                                                             "LAT_OFF: abc")
+    text = (RPC_DIR / "rpc_IKONOS.txt").read_text().replace("LAT_OFF: -34.90300000", "LAT_OFF: abc")
     bad = tmp_path / "bad_RPC.TXT"
     bad.write_text(text)
     with pytest.raises(RPCFormatError, match="LAT_OFF is not a number"):
