@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from explorer.geometry.terrain import FlatTerrain, GridDEM, intersect_dem, intersect_plane, synthetic_relief
+from explorer.geometry.terrain import (
+    FlatTerrain,
+    GridDEM,
+    intersect_dem,
+    intersect_plane,
+    synthetic_relief,
+)
 
 
 def test_bilinear_is_exact_for_bilinear_surfaces():
