@@ -17,6 +17,8 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from explorer.errors import ConvergenceError
+
 __all__ = [
     "ConvergenceError",
     "InverseRFM",
@@ -34,10 +36,6 @@ RPC00B_TERMS: tuple[str, ...] = (
     "1", "L", "P", "H", "LP", "LH", "PH", "L2", "P2", "H2",
     "PLH", "L3", "LP2", "LH2", "L2P", "P3", "PH2", "L2H", "P2H", "H3",
 )  # fmt: skip
-
-
-class ConvergenceError(RuntimeError):
-    """Raised by strict localisation when some points did not converge."""
 
 
 class HeightSource(Protocol):
