@@ -146,7 +146,7 @@ class BestScanlineMethod(ABC):
             col = np.full(row.shape, np.nan)
             ok = np.isfinite(row)
             col[ok] = self.scene.column_at_row(ground[ok], row[ok])
-            ce += 1
+            ce += ok
         inside = self.scene.inside_image(row, col)
         return ScanlineResult(row, col, np.asarray(converged, bool), inside, ce, trace, info or {})
 
