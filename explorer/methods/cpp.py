@@ -41,8 +41,8 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.geometry.collinearity import sensor_vectors
+from explorer.methods._common import residual_px
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
-from explorer.methods.hybrid import residual_px
 from explorer.scene import CHUNK, Scene
 
 

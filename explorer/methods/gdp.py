@@ -12,7 +12,7 @@ the predicted distance is below ``tol`` lines.  The best scanline is then found 
 linear interpolation of the residual between the two bracketing integer lines (the
 current line and its neighbour in the predicted direction; if the residual has no sign
 change there the window is widened one line at a time), using the weighted mean of
-eq. 4 of the 2020 paper (``explorer.methods.hybrid.weighted_mean_row``), which is the
+eq. 4 of the 2020 paper (``explorer.methods._common.weighted_mean_row``), which is the
 same straight-line interpolation.
 
 Each prediction costs one collinearity evaluation (CE), the neighbour one more, and the
@@ -33,8 +33,9 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import InputError
+from explorer.methods._common import residual_px, weighted_mean_row
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
-from explorer.methods.hybrid import residual_px, weighted_mean_row, widen_to_sign_change
+from explorer.methods.hybrid import widen_to_sign_change
 from explorer.scene import Scene
 
 

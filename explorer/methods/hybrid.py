@@ -37,46 +37,9 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import InputError
+from explorer.methods._common import changes_sign, residual_px, weighted_mean_row
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.scene import Scene
-
-
-def residual_px(scene: Scene, ground: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Along-track collinearity residual in pixels (one CE per point).
-
-    Parameters
-    ----------
-    scene : Scene
-    ground : ndarray, shape (N, 3)
-        Local ENU metres.
-    rows : ndarray, shape (N,)
-        Candidate (fractional) rows.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-        ``(x - x_detector(y)) / pitch``; positive when the point is still ahead of the
-        detector line (its best scanline is a later row).
-    """
-    return scene.along_track_residual(ground, scene.scanline_time(rows)) / scene.pixel_size_m
-
-
-def has_sign_change(f_lo: np.ndarray, f_hi: np.ndarray) -> np.ndarray:
-    """True where the residual changes sign (or vanishes) between two lines, shape (N,)."""
-    return (f_lo == 0) | (f_hi == 0) | (np.sign(f_lo) != np.sign(f_hi))
-
-
-def weighted_mean_row(lo: np.ndarray, hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray) -> np.ndarray:
-    """Eq. 4 of the 2020 paper: ``(t1/|x1| + t2/|x2|) / (1/|x1| + 1/|x2|)``, shape (N,).
-
-    Written as ``(t1 |x2| + t2 |x1|) / (|x1| + |x2|)`` so that a residual that is exactly
-    zero on a line returns that line instead of NaN.  Rows are linear in time, so the
-    mean is taken on rows directly.
-    """
-    a, b = np.abs(f_lo), np.abs(f_hi)
-    s = a + b
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(s > 0, (lo * b + hi * a) / s, lo)
 
 
 def widen_to_sign_change(
@@ -124,7 +87,7 @@ def widen_to_sign_change(
     ndarray of bool, shape (M,)
         True where a sign change was found.
     """
-    found = has_sign_change(f_lo, f_hi)
+    found = changes_sign(f_lo, f_hi)
     alive = ~found & np.isfinite(f_lo) & np.isfinite(f_hi)
     for _ in range(max_steps):
         idx = np.flatnonzero(alive)
@@ -144,7 +107,7 @@ def widen_to_sign_change(
         flo_new = np.where(up, f_hi[idx], f_new)
         fhi_new = np.where(up, f_new, f_lo[idx])
         lo[idx], hi[idx], f_lo[idx], f_hi[idx] = lo_new, hi_new, flo_new, fhi_new
-        ok = has_sign_change(flo_new, fhi_new)
+        ok = changes_sign(flo_new, fhi_new)
         found[idx[ok]] = True
         alive[idx[ok]] = False
         if trace is not None and current is not None and index is not None:

@@ -41,38 +41,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from explorer.methods._common import changes_sign, residual_and_column_px, weighted_mean_row
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.scene import Scene
 
 SELECT_CHOICES = ("nearest", "lower")
-
-
-def residual_px(scene: Scene, ground: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Along-track residual and column of ground points at given rows (one CE per point).
-
-    Parameters
-    ----------
-    scene : Scene
-    ground : ndarray, shape (N, 3)
-        Local ENU metres.
-    rows : ndarray, shape (N,)
-        (Fractional) rows at which the points are projected.
-
-    Returns
-    -------
-    f : ndarray, shape (N,)
-        ``x - x_detector(y)`` in pixels (``Scene.along_track_residual / pixel_size_m``).
-    col : ndarray, shape (N,)
-        Image column of the point at that row.
-    """
-    x, y = scene.focal_plane(ground, scene.scanline_time(rows))
-    f = (x - scene.interior.detector_x(y)) / scene.pixel_size_m
-    return f, scene.interior.y_to_column(y)
-
-
-def _changes_sign(fa: np.ndarray, fb: np.ndarray) -> np.ndarray:
-    """True where a root lies in the closed interval between residuals ``fa`` and ``fb``."""
-    return (np.sign(fa) * np.sign(fb)) <= 0
 
 
 def _nan_row(n: int) -> np.ndarray:
@@ -159,13 +132,13 @@ def sequential_walk(
                 cand, row_prev, f_prev, c_prev = cand[keep], row_prev[keep], f_prev[keep], c_prev[keep]
                 if not act.size:
                     break
-        f, c = residual_px(scene, g, cand)
+        f, c = residual_and_column_px(scene, g, cand)
         bracket.ce[index[act]] += 1
         if trace is not None:
             tr = np.full(n_all, np.nan)
             tr[index[act]] = cand
             trace.append(tr)
-        done = _changes_sign(f_prev, f)
+        done = changes_sign(f_prev, f)
         if done.any():
             finish(done, f[done], c[done])
         # without a known end, a point that evaluated ``hi`` with no sign change is finished (not found)
@@ -226,8 +199,7 @@ class _IntegerRowSearch(BestScanlineMethod):
         info["bracket_lo"] = b.lo.copy()
         if self.interpolate:
             # eq. 4: t = (t1/|x1| + t2/|x2|) / (1/|x1| + 1/|x2|) = (t1 |x2| + t2 |x1|) / (|x1| + |x2|)
-            t1 = b.lo[ok]
-            row[ok] = (t1 * a2 + (t1 + 1.0) * a1) / (a1 + a2)
+            row[ok] = weighted_mean_row(b.lo[ok], b.lo[ok] + 1.0, b.f_lo[ok], b.f_hi[ok])
             # column by the collinearity at the interpolated row: one more CE, only where a row exists
             col = _nan_row(n)
             col[ok] = self.scene.column_at_row(ground[ok], row[ok])
@@ -269,7 +241,7 @@ class SequentialSearch(_IntegerRowSearch):
         n = ground.shape[0]
         b = _Bracket(n)
         lo = np.full(n, float(self.first_row))
-        f0, c0 = residual_px(self.scene, ground, lo)
+        f0, c0 = residual_and_column_px(self.scene, ground, lo)
         b.ce += 1
         if trace is not None:
             trace.append(lo.copy())
@@ -327,14 +299,14 @@ class BisectingWindowSearch(_IntegerRowSearch):
         b = _Bracket(n)
         lo = np.full(n, float(self.first_row))
         hi = np.full(n, float(self.last_row))
-        f_lo, c_lo = residual_px(scene, ground, lo)
-        f_hi, c_hi = residual_px(scene, ground, hi)
+        f_lo, c_lo = residual_and_column_px(scene, ground, lo)
+        f_hi, c_hi = residual_and_column_px(scene, ground, hi)
         b.ce += 2
         windows: list[np.ndarray] | None = [] if trace is not None else None
         if trace is not None:
             trace.append(lo.copy())
             trace.append(hi.copy())
-        ok = _changes_sign(f_lo, f_hi)
+        ok = changes_sign(f_lo, f_hi)
         act = np.flatnonzero(ok)
         # halving: all points share the same window length up to one row, so the loop is short
         while act.size:
@@ -347,13 +319,13 @@ class BisectingWindowSearch(_IntegerRowSearch):
             if not act.size:
                 break
             mid = np.floor(0.5 * (lo[act] + hi[act]))
-            f_mid, c_mid = residual_px(scene, ground[act], mid)
+            f_mid, c_mid = residual_and_column_px(scene, ground[act], mid)
             b.ce[act] += 1
             if trace is not None:
                 tr = np.full(n, np.nan)
                 tr[act] = mid
                 trace.append(tr)
-            left = _changes_sign(f_lo[act], f_mid)
+            left = changes_sign(f_lo[act], f_mid)
             li, ri = act[left], act[~left]
             hi[li], f_hi[li], c_hi[li] = mid[left], f_mid[left], c_mid[left]
             lo[ri], f_lo[ri], c_lo[ri] = mid[~left], f_mid[~left], c_mid[~left]

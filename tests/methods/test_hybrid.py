@@ -9,7 +9,8 @@ import pytest
 from explorer.errors import InputError
 from explorer.geometry.interior import InteriorOrientation
 from explorer.methods import create
-from explorer.methods.hybrid import HybridObjectSpace, weighted_mean_row
+from explorer.methods._common import weighted_mean_row
+from explorer.methods.hybrid import HybridObjectSpace
 from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
 from explorer.scene import Scene
