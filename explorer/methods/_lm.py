@@ -1,0 +1,562 @@
+"""Shared machinery of the learned best-scanline methods (``lrm``, ``prm``, ``mlp``,
+``ann``, ``ogp``): feature scaling with a training-domain check, the seeded 70/30
+SCOP split, a sigmoid multilayer perceptron with flat parameters, and a
+Levenberg-Marquardt trainer with early stopping (torch, float64).
+
+The trainer follows MATLAB's ``trainlm`` as used by Ahooei Nezhad et al. (2024,
+Remote Sensing 16:2787, section 2.4: "the Levenberg-Marquardt algorithm and the
+sigmoid function") and (2021, Adv. Space Res. 68:3584, the ANN error model):
+damped Gauss-Newton steps ``(J^T J + mu I) d = J^T e`` with ``mu`` divided by 10
+after a successful step and multiplied by 10 until the error decreases, stopping when
+the validation error has stayed above its best for ``max_fail`` epochs in a row (the
+weights with the best validation error are kept), on a vanishing gradient, on
+``mu > mu_max``, on the error goal or after ``max_epochs``.  MATLAB's defaults
+(``mu`` 1e-3, factors 0.1/10, ``mu_max`` 1e10, 6 validation failures, 1000 epochs)
+are kept except the gradient bound: 1e-12 instead of 1e-7, because a sub-pixel
+scanline over thousands of rows needs a relative target error near 1e-6.
+The Jacobian of the outputs with respect to all parameters comes from
+``torch.func.jacrev`` of one sample's output, vmapped over the samples.
+Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from explorer.points import PointSet
+
+# ------------------------------------------------------------------- parameters
+
+
+def take_params(name: str, params: dict, defaults: dict) -> dict:
+    """``defaults`` updated by ``params``; raises ``TypeError`` naming any unknown parameter."""
+    unknown = sorted(set(params) - set(defaults))
+    if unknown:
+        raise TypeError(f"{name}: unknown parameter(s) {unknown}; accepted: {sorted(defaults)}")
+    return {**defaults, **params}
+
+
+# ----------------------------------------------------------------- feature scaling
+
+
+@dataclass
+class FeatureScaler:
+    """Affine map of features to [-1, 1] from the training SCOPs (min/max per column).
+
+    Attributes
+    ----------
+    offset, scale : ndarray, shape (D,)
+        ``normalised = (value - offset) / scale``.
+    """
+
+    offset: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def fit(cls, values: np.ndarray, names: Sequence[str] | None = None) -> FeatureScaler:
+        """Scaler of ``values`` (N, D); raises ``ValueError`` for a constant column."""
+        values = np.asarray(values, dtype=np.float64)
+        lo, hi = values.min(axis=0), values.max(axis=0)
+        scale = (hi - lo) / 2.0
+        bad = ~(scale > 0)
+        if bad.any():
+            which = [names[k] if names else str(k) for k in np.flatnonzero(bad)]
+            raise ValueError(f"feature(s) {', '.join(which)} constant over the control points: cannot scale")
+        return cls((hi + lo) / 2.0, scale)
+
+    def transform(self, values: np.ndarray) -> np.ndarray:
+        """Normalised values (N, D)."""
+        return (values - self.offset) / self.scale
+
+    def inverse(self, values: np.ndarray) -> np.ndarray:
+        """Undo :meth:`transform`."""
+        return values * self.scale + self.offset
+
+    def in_domain(self, normalised: np.ndarray, margin: float) -> np.ndarray:
+        """True (N,) where every normalised feature lies in ``[-1 - margin, 1 + margin]``."""
+        return np.all(np.abs(normalised) <= 1.0 + margin, axis=1)
+
+
+def default_use_height(control: PointSet, threshold_m: float = 1.0) -> bool:
+    """The papers' rule: use Z as a feature only when the SCOPs' heights span more than ``threshold_m``.
+
+    With SCOPs on the mean-height plane (the papers' protocol) the model is a function
+    of (X, Y) only.
+    """
+    z = control.ground[:, 2]
+    return bool(np.ptp(z) > threshold_m)
+
+
+class GroundFeatures:
+    """Normalised (X, Y[, Z]) features of ground points and the training-domain check.
+
+    Parameters
+    ----------
+    control : PointSet
+        SCOPs the scaling is fitted on.
+    use_height : bool or None
+        Include Z; ``None`` applies :func:`default_use_height`.
+    domain_margin : float
+        Points whose normalised features leave ``[-1 - margin, 1 + margin]`` are outside
+        the training domain (the models are not trusted there).
+    height_tolerance_m : float
+        Without Z, points farther than this from the SCOPs' mean height are outside the
+        domain (the model only knows that plane).
+    """
+
+    def __init__(
+        self,
+        control: PointSet,
+        use_height: bool | None,
+        domain_margin: float,
+        height_tolerance_m: float,
+    ) -> None:
+        self.use_height = default_use_height(control) if use_height is None else bool(use_height)
+        self.columns = [0, 1, 2] if self.use_height else [0, 1]
+        names = ["X", "Y", "Z"] if self.use_height else ["X", "Y"]
+        self.scaler = FeatureScaler.fit(control.ground[:, self.columns], names)
+        self.domain_margin = float(domain_margin)
+        self.height_tolerance_m = float(height_tolerance_m)
+        self.mean_height = float(control.ground[:, 2].mean())
+
+    @property
+    def n_features(self) -> int:
+        return len(self.columns)
+
+    def __call__(self, ground: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised features (N, D) and the in-domain mask (N,) of ground points (N, 3)."""
+        f = self.scaler.transform(ground[:, self.columns])
+        ok = self.scaler.in_domain(f, self.domain_margin)
+        if not self.use_height:
+            ok &= np.abs(ground[:, 2] - self.mean_height) <= self.height_tolerance_m
+        return f, ok
+
+    def info(self) -> dict:
+        return {
+            "use_height": self.use_height,
+            "feature_offset": self.scaler.offset.tolist(),
+            "feature_scale": self.scaler.scale.tolist(),
+            "domain_margin": self.domain_margin,
+            "mean_height_m": self.mean_height,
+        }
+
+
+def split_train_validation(n: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Seeded random split of ``range(n)`` into sorted (train, validation) index arrays.
+
+    ``round(fraction * n)`` points go to training (the papers' 70/30 split).
+    """
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(n)
+    k = int(round(fraction * n))
+    return np.sort(perm[:k]), np.sort(perm[k:])
+
+
+def check_split_sizes(name: str, n: int, n_train: int, n_val: int, n_features: int) -> None:
+    """Raise a clear ``ValueError`` when a split cannot train a model on ``n_features`` inputs.
+
+    The training part must at least fix an affine function of the inputs
+    (``n_features + 1`` points) and the validation part needs one point.
+    """
+    if n_train < n_features + 1 or n_val < 1:
+        raise ValueError(
+            f"{name}: {n} control points give {n_train} training / {n_val} validation points; "
+            f"need at least {n_features + 1} training and 1 validation point"
+        )
+
+
+# ----------------------------------------------------------------------- network
+
+
+class SigmoidMLP:
+    """Fully connected network: logistic-sigmoid hidden layers, one linear output.
+
+    The parameters live in one flat float64 vector (the Levenberg-Marquardt unknowns),
+    laid out layer by layer as ``W (out, in)`` row-major then ``b (out,)``.
+
+    Parameters
+    ----------
+    n_inputs : int
+    hidden : sequence of int
+        Neurons per hidden layer (the papers: one layer of 5-50).
+    """
+
+    def __init__(self, n_inputs: int, hidden: Sequence[int]) -> None:
+        if n_inputs < 1 or not hidden or any(int(h) < 1 for h in hidden):
+            raise ValueError(f"invalid network shape: {n_inputs} inputs, hidden {list(hidden)}")
+        self.n_inputs = int(n_inputs)
+        self.hidden = tuple(int(h) for h in hidden)
+        sizes = (self.n_inputs, *self.hidden, 1)
+        self.shapes = [(sizes[k + 1], sizes[k]) for k in range(len(sizes) - 1)]
+        self.n_params = sum(o * i + o for o, i in self.shapes)
+
+    def init_params(self, generator: torch.Generator) -> torch.Tensor:
+        """Nguyen-Widrow initial weights (seeded), flat float64 vector (P,).
+
+        Hidden rows get norm ``0.7 h^(1/n_in)`` and biases uniform in +- that, so the
+        sigmoids' transitions spread over the normalised input box without being steep
+        (steep initial sigmoids can leave steps between the grid nodes of the SCOPs that
+        neither the training nor the validation points see); the output layer starts small.
+        """
+        parts = []
+        for k, (o, i) in enumerate(self.shapes):
+            if k < len(self.shapes) - 1:
+                beta = 0.7 * o ** (1.0 / i)
+                w = torch.rand(o, i, generator=generator, dtype=torch.float64) * 2 - 1
+                w = beta * w / w.norm(dim=1, keepdim=True)
+                b = beta * (torch.rand(o, generator=generator, dtype=torch.float64) * 2 - 1)
+            else:
+                w = (torch.rand(o, i, generator=generator, dtype=torch.float64) * 2 - 1) / np.sqrt(i)
+                b = torch.zeros(o, dtype=torch.float64)
+            parts += [w.reshape(-1), b]
+        return torch.cat(parts)
+
+    def forward(self, theta: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """Network output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)."""
+        h = x
+        pos = 0
+        last = len(self.shapes) - 1
+        for k, (o, i) in enumerate(self.shapes):
+            w = theta[pos:pos + o * i].reshape(o, i)
+            pos += o * i
+            b = theta[pos:pos + o]
+            pos += o
+            h = h @ w.T + b
+            if k < last:
+                h = torch.sigmoid(h)
+        return h[:, 0]
+
+
+# ----------------------------------------------------------- Levenberg-Marquardt
+
+
+@contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run torch CPU ops on ``n`` threads inside the block, then restore the setting.
+
+    The networks here are tiny (tens of points, tens to thousands of parameters): with
+    several threads torch spends its time synchronising, and on a shared machine a
+    multi-threaded Jacobian is 10x slower than a single-threaded one.
+    """
+    old = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+@dataclass
+class LMResult:
+    """Outcome of :func:`levenberg_marquardt` (errors in the normalised target units).
+
+    Attributes
+    ----------
+    theta : Tensor (P,)
+        Parameters with the lowest validation error met during training.
+    epochs : int
+        Levenberg-Marquardt steps taken (accepted epochs).
+    best_epoch : int
+        Epoch of ``theta``.
+    stop_reason : str
+        "goal", "min_grad", "mu_max", "validation", "max_epochs" or "non_finite".
+    converged : bool
+        Stopped for a reason other than ``max_epochs`` / ``non_finite``.
+    train_mse, val_mse : float
+        Mean squared errors of ``theta`` on the two sets.
+    history : dict
+        "train_mse", "val_mse", "mu" at the start and after each epoch (``epochs + 1`` values).
+    """
+
+    theta: torch.Tensor
+    epochs: int
+    best_epoch: int
+    stop_reason: str
+    converged: bool
+    train_mse: float
+    val_mse: float
+    history: dict = field(default_factory=dict)
+
+
+def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float) -> torch.Tensor:
+    """Solve ``(J^T J + mu I) d = J^T e``; uses ``d = J^T (J J^T + mu I)^-1 e`` when P > N."""
+    n, p = jac.shape
+    if p <= n:
+        a = jac.T @ jac
+        a.diagonal().add_(mu)
+        rhs = jac.T @ err
+    else:
+        a = jac @ jac.T
+        a.diagonal().add_(mu)
+        rhs = err
+    chol, info = torch.linalg.cholesky_ex(a)
+    if int(info) != 0:
+        sol = torch.linalg.lstsq(a, rhs[:, None]).solution[:, 0]
+    else:
+        sol = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
+    return sol if p <= n else jac.T @ sol
+
+
+def levenberg_marquardt(
+    net: SigmoidMLP,
+    theta0: torch.Tensor,
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_val: np.ndarray,
+    y_val: np.ndarray,
+    *,
+    max_epochs: int = 1000,
+    mu: float = 1e-3,
+    mu_dec: float = 0.1,
+    mu_inc: float = 10.0,
+    mu_max: float = 1e10,
+    min_grad: float = 1e-12,
+    goal: float = 0.0,
+    max_fail: int = 6,
+    device: str | torch.device = "cpu",
+) -> LMResult:
+    """Train ``net`` by Levenberg-Marquardt with early stopping on the validation set.
+
+    Runs on one CPU thread (:func:`torch_threads`), restoring torch's setting after.
+
+    Parameters
+    ----------
+    net : SigmoidMLP
+    theta0 : Tensor (P,)
+        Initial parameters (float64).
+    x_train, y_train : ndarray (N, D), (N,)
+        Normalised training inputs and targets.
+    x_val, y_val : ndarray (M, D), (M,)
+        Normalised validation inputs and targets (M may be 0: no early stopping).
+    max_epochs : int
+    mu, mu_dec, mu_inc, mu_max : float
+        Initial damping, its decrease/increase factors and the stopping bound.
+    min_grad : float
+        Stop when the gradient norm of the training MSE falls below this.
+    goal : float
+        Stop when the training MSE reaches this.
+    max_fail : int
+        Stop after the validation MSE stayed above its best this many epochs in a row.
+    device : str or torch.device
+        Where the tensors live ("cpu" is enough for these small problems).
+
+    Returns
+    -------
+    LMResult
+    """
+    with torch_threads(1):
+        return _lm_run(
+            net, theta0, x_train, y_train, x_val, y_val, max_epochs=max_epochs, mu=mu, mu_dec=mu_dec,
+            mu_inc=mu_inc, mu_max=mu_max, min_grad=min_grad, goal=goal, max_fail=max_fail, device=device,
+        )
+
+
+def _lm_run(
+    net: SigmoidMLP,
+    theta0: torch.Tensor,
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_val: np.ndarray,
+    y_val: np.ndarray,
+    *,
+    max_epochs: int = 1000,
+    mu: float = 1e-3,
+    mu_dec: float = 0.1,
+    mu_inc: float = 10.0,
+    mu_max: float = 1e10,
+    min_grad: float = 1e-12,
+    goal: float = 0.0,
+    max_fail: int = 6,
+    device: str | torch.device = "cpu",
+) -> LMResult:
+    """Body of :func:`levenberg_marquardt`."""
+    dev = torch.device(device)
+
+    def tensor(a: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)).to(dev)
+
+    xt, yt, xv, yv = tensor(x_train), tensor(y_train), tensor(x_val), tensor(y_val)
+    n = xt.shape[0]
+    has_val = xv.shape[0] > 0
+
+    def residual(theta: torch.Tensor) -> torch.Tensor:
+        return yt - net.forward(theta, xt)
+
+    # Jacobian of the network outputs (N, P), row by row: jacrev of one sample's output,
+    # vmapped over the samples (cost O(N P); jacrev of the whole batch costs O(N^2 P)).
+    # With r = y - f the Gauss-Newton step is d = (J^T J + mu I)^-1 J^T r.
+    per_sample = torch.func.vmap(
+        torch.func.jacrev(lambda theta, xi: net.forward(theta, xi[None, :])[0]), in_dims=(None, 0)
+    )
+
+    def jac_fn(theta: torch.Tensor) -> torch.Tensor:
+        return per_sample(theta, xt)
+
+    def val_mse(theta: torch.Tensor) -> float:
+        if not has_val:
+            return float("nan")
+        with torch.no_grad():
+            return float(torch.mean((yv - net.forward(theta, xv)) ** 2))
+
+    theta = theta0.detach().clone().to(device=dev, dtype=torch.float64)
+    with torch.no_grad():
+        err = residual(theta)
+    perf = float(torch.mean(err**2))
+    best_theta, best_val, best_epoch = theta.clone(), val_mse(theta), 0
+    fails = 0
+    hist: dict[str, list[float]] = {"train_mse": [perf], "val_mse": [best_val], "mu": [mu]}
+    stop, done = "max_epochs", 0
+    for epoch in range(1, max_epochs + 1):
+        if not np.isfinite(perf):
+            stop = "non_finite"
+            break
+        if perf <= goal:
+            stop = "goal"
+            break
+        jf = jac_fn(theta).detach()
+        grad = float(torch.linalg.vector_norm(2.0 * (jf.T @ err)) / n)
+        if grad < min_grad:
+            stop = "min_grad"
+            break
+        improved = False
+        while mu <= mu_max:
+            step = _lm_step(jf, err, mu)
+            cand = theta + step
+            with torch.no_grad():
+                cerr = residual(cand)
+            cperf = float(torch.mean(cerr**2))
+            if np.isfinite(cperf) and cperf < perf:
+                theta, err, perf = cand, cerr, cperf
+                mu = max(mu * mu_dec, 1e-20)
+                improved = True
+                break
+            mu *= mu_inc
+        if not improved:
+            stop = "mu_max"
+            break
+        done = epoch
+        v = val_mse(theta)
+        hist["mu"].append(mu)
+        hist["train_mse"].append(perf)
+        hist["val_mse"].append(v)
+        if not has_val:
+            best_theta, best_epoch = theta.clone(), epoch
+            continue
+        if v < best_val:
+            best_theta, best_val, best_epoch = theta.clone(), v, epoch
+            fails = 0
+        elif v > best_val:
+            fails += 1
+            if fails >= max_fail:
+                stop = "validation"
+                break
+    with torch.no_grad():
+        train_best = float(torch.mean((yt - net.forward(best_theta, xt)) ** 2))
+    vbest = val_mse(best_theta)
+    ok = stop not in ("max_epochs", "non_finite") and np.isfinite(train_best)
+    return LMResult(best_theta, done, best_epoch, stop, bool(ok), train_best, vbest, hist)
+
+
+# ------------------------------------------------------------- network training
+
+
+@dataclass
+class TrainedNetwork:
+    """A trained :class:`SigmoidMLP` with its target scaling.
+
+    Attributes
+    ----------
+    net : SigmoidMLP
+    theta : Tensor (P,)
+        Parameters on ``device``.
+    target_offset, target_scale : float
+        ``target = network output * target_scale + target_offset``.
+    device : torch.device
+    """
+
+    net: SigmoidMLP
+    theta: torch.Tensor
+    target_offset: float
+    target_scale: float
+    device: torch.device
+
+    def predict(self, x: np.ndarray, chunk: int = 1 << 18) -> np.ndarray:
+        """Target values (N,) of normalised inputs ``x`` (N, D): chunked, no autograd, float64."""
+        out = np.empty(x.shape[0])
+        with torch.no_grad():
+            for s in range(0, x.shape[0], chunk):
+                xs = torch.from_numpy(np.ascontiguousarray(x[s:s + chunk], dtype=np.float64)).to(self.device)
+                out[s:s + chunk] = self.net.forward(self.theta, xs).cpu().numpy()
+        return out * self.target_scale + self.target_offset
+
+
+def fit_network(
+    x: np.ndarray,
+    y: np.ndarray,
+    hidden: Sequence[int],
+    *,
+    name: str,
+    seed: int,
+    train_fraction: float = 0.7,
+    max_epochs: int = 1000,
+    max_fail: int = 6,
+    device: str | torch.device = "cpu",
+    min_inputs: int | None = None,
+) -> tuple[TrainedNetwork, dict]:
+    """Train a sigmoid MLP on normalised inputs ``x`` (N, D) for targets ``y`` (N,).
+
+    The targets are scaled to [-1, 1] (min/max); the points are split 70/30 (seeded)
+    into training and validation sets; the initial weights come from a torch generator
+    seeded with ``seed``; training is :func:`levenberg_marquardt` in float64.
+
+    Returns
+    -------
+    TrainedNetwork
+    dict
+        ``n_params``, ``n_train``, ``n_val``, ``epochs``, ``best_epoch``, ``stop_reason``,
+        ``optimizer_converged``, ``train_rmse`` and ``val_rmse`` (target units).
+
+    Raises
+    ------
+    ValueError
+        If the split leaves too few points (:func:`check_split_sizes`).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if not (0.0 < train_fraction < 1.0):
+        raise ValueError(f"{name}: train_fraction must lie in (0, 1), got {train_fraction}")
+    tr, va = split_train_validation(x.shape[0], train_fraction, seed)
+    check_split_sizes(name, x.shape[0], tr.size, va.size, min_inputs if min_inputs is not None else x.shape[1])
+    lo, hi = float(y.min()), float(y.max())
+    offset = (hi + lo) / 2.0
+    scale = (hi - lo) / 2.0
+    if not scale > 1e-300:
+        scale = 1.0  # constant target: nothing to scale
+    yn = (y - offset) / scale
+    dev = torch.device(device)
+    net = SigmoidMLP(x.shape[1], hidden)
+    gen = torch.Generator(device="cpu").manual_seed(int(seed))
+    theta0 = net.init_params(gen)
+    res = levenberg_marquardt(
+        net, theta0.to(dev), x[tr], yn[tr], x[va], yn[va], max_epochs=max_epochs,
+        max_fail=max_fail, device=dev,
+    )
+    info = {
+        "hidden": list(net.hidden),
+        "n_params": net.n_params,
+        "n_train": int(tr.size),
+        "n_val": int(va.size),
+        "epochs": res.epochs,
+        "best_epoch": res.best_epoch,
+        "stop_reason": res.stop_reason,
+        "optimizer_converged": res.converged,
+        "train_rmse": float(np.sqrt(res.train_mse) * scale),
+        "val_rmse": float(np.sqrt(res.val_mse) * scale),
+        "seed": int(seed),
+    }
+    return TrainedNetwork(net, res.theta, offset, scale, dev), info

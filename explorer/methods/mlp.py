@@ -1,0 +1,212 @@
+"""Best scanline by a multilayer perceptron trained on simulated control points: ``mlp``.
+
+Ahooei Nezhad, Valadan Zoej, Khoshelham, Ghorbanian, Farnaghi, Jamali, Youssefi,
+Gheisari (2024), "Best Scanline Determination of Pushbroom Images for a Direct
+Object to Image Space Transformation Using Multilayer Perceptron", Remote Sensing
+16:2787, sections 2.4-3: the scanline is ``r = f(X, Y)`` (eq. 3) with ``f`` an MLP
+of sigmoid hidden units trained by Levenberg-Marquardt on SCOPs split 70 % /
+30 % into training and validation sets; a grid search over 1-5 hidden layers of
+10-50 neurons picks the structure; one hidden layer of 5-10 neurons and 100 SCOPs
+gave sub-pixel accuracy on all ten images (Table 3, Figures 3-8).
+
+Inputs (X, Y[, Z]) and the target row are scaled to [-1, 1] by the SCOPs' extent;
+the Levenberg-Marquardt trainer and the network are in :mod:`explorer.methods._lm`
+(torch, float64).  The column comes from the collinearity at the predicted row
+(one collinearity evaluation per point).  Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from explorer.methods._lm import GroundFeatures, fit_network, take_params
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
+from explorer.points import PointSet
+from explorer.scene import Scene
+
+
+def network_verdict(name: str, info: dict, max_val_rmse_px: float) -> bool:
+    """Decide whether a trained model is usable, record it in ``info`` and warn if not.
+
+    Usable ("converged") means: the optimiser ended with a finite error (an exhausted
+    epoch budget is allowed, see ``stop_reason`` / ``optimizer_converged``) and the
+    validation RMSE is at most ``max_val_rmse_px`` -- the papers' feasibility criterion
+    (sub-pixel).
+    """
+    ok = info["stop_reason"] != "non_finite" and np.isfinite(info["val_rmse_px"])
+    ok = bool(ok and info["val_rmse_px"] <= max_val_rmse_px)
+    info["converged"] = ok
+    if not ok:
+        warnings.warn(
+            f"{name}: training did not converge (stop: {info['stop_reason']}, validation RMSE "
+            f"{info['val_rmse_px']:.3g} px, limit {max_val_rmse_px} px, after {info['epochs']} epochs); "
+            "its points are marked not converged",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return ok
+
+
+@register
+class MLPMethod(BestScanlineMethod):
+    """``mlp``: scanline = MLP(X, Y[, Z]) trained on SCOPs (Remote Sens. 16:2787).
+
+    Parameters
+    ----------
+    scene : Scene
+    hidden_layers : int
+        Number of hidden layers (default 1).
+    neurons : int or sequence of int
+        Neurons per hidden layer (default 10; a sequence gives each layer its own).
+    seed : int
+        Seeds the 70/30 split and the initial weights (default 0).
+    max_epochs : int
+        Levenberg-Marquardt epoch budget (default 1000, MATLAB's ``trainlm``).
+    max_fail : int
+        Early stopping: validation error above its best this many epochs in a row (6).
+    train_fraction : float
+        Share of SCOPs used for training, the rest validates (0.7).
+    use_height : bool or None
+        Include Z; default only when the SCOPs' heights span more than 1 m.
+    device : str
+        torch device for training and inference (default "cpu").
+    max_val_rmse_px : float
+        A network whose validation RMSE exceeds this is flagged not converged (1.0).
+    domain_margin, height_tolerance_m : float
+        Training-domain check as in :class:`explorer.methods.regression.LinearRegressionMethod`
+        (0.05, 1.0 m): points outside are not located (``converged``/``inside`` False).
+    """
+
+    name = "mlp"
+    label = "MLP-BSD"
+    reference = (
+        "Ahooei Nezhad, Valadan Zoej, Khoshelham, Ghorbanian, Farnaghi, Jamali, Youssefi, Gheisari "
+        "(2024) Remote Sensing 16:2787"
+    )
+    family = "learned"
+    needs_fit = True
+    exactness = "approximate"
+
+    DEFAULTS = {
+        "hidden_layers": 1, "neurons": 10, "seed": 0, "max_epochs": 1000, "max_fail": 6,
+        "train_fraction": 0.7, "use_height": None, "device": "cpu", "max_val_rmse_px": 1.0,
+        "domain_margin": 0.05, "height_tolerance_m": 1.0,
+    }
+
+    def __init__(self, scene: Scene, **params) -> None:
+        p = take_params(self.name, params, self.DEFAULTS)
+        super().__init__(scene, **p)
+        neurons = p["neurons"]
+        if isinstance(neurons, Iterable):
+            self.hidden = tuple(int(v) for v in neurons)
+        else:
+            self.hidden = (int(neurons),) * int(p["hidden_layers"])
+        if not self.hidden or min(self.hidden) < 1:
+            raise ValueError(f"{self.name}: need at least one hidden layer of >= 1 neuron, got {self.hidden}")
+
+    def _fit(self, control: PointSet) -> None:
+        p = self.params
+        self.features = GroundFeatures(control, p["use_height"], p["domain_margin"], p["height_tolerance_m"])
+        x, _ = self.features(control.ground)
+        t0 = time.perf_counter()
+        self.network, info = fit_network(
+            x, control.row, self.hidden, name=self.name, seed=p["seed"],
+            train_fraction=p["train_fraction"], max_epochs=p["max_epochs"], max_fail=p["max_fail"],
+            device=p["device"],
+        )
+        info["train_rmse_px"] = info.pop("train_rmse")
+        info["val_rmse_px"] = info.pop("val_rmse")
+        info["train_s"] = time.perf_counter() - t0
+        info["n_control"] = len(control)
+        info.update(self.features.info())
+        self.fit_info = info
+        network_verdict(self.name, info, p["max_val_rmse_px"])
+
+    def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
+        f, ok = self.features(ground)
+        row = self.network.predict(f)
+        converged = ok & bool(self.fit_info["converged"])
+        ce = np.zeros(row.shape, dtype=np.int64)
+        res = self._result(ground, row, converged, ce, trace=[row.copy()] if trace else None,
+                           info={"in_domain": ok})
+        res.inside &= ok
+        return res
+
+
+@dataclass
+class GridSearchResult:
+    """Outcome of :func:`grid_search`.
+
+    Attributes
+    ----------
+    table : list of dict
+        One row per structure: ``layers``, ``neurons``, ``n_params``, ``val_rmse_px``,
+        ``train_rmse_px``, ``epochs``, ``stop_reason``, ``converged``, ``fit_s``.
+    best : dict
+        The chosen row (lowest validation RMSE among converged networks; ties go to
+        fewer parameters).
+    method : MLPMethod
+        The fitted network of ``best``.
+    """
+
+    table: list[dict] = field(default_factory=list)
+    best: dict = field(default_factory=dict)
+    method: MLPMethod | None = None
+
+
+def grid_search(
+    scene: Scene,
+    scops: PointSet,
+    layers: Iterable[int] = range(1, 6),
+    neurons: Iterable[int] = range(10, 51, 10),
+    seed: int = 0,
+    **params,
+) -> GridSearchResult:
+    """The paper's structure search: train every (layers, neurons) network on the same
+    70/30 split and rank them by validation RMSE (Remote Sens. 16:2787, section 3).
+
+    Parameters
+    ----------
+    scene : Scene
+    scops : PointSet
+    layers, neurons : iterables of int
+        Hidden layers 1-5 and neurons per layer 10-50 by 10 in the paper (41 to
+        10,401 parameters).
+    seed : int
+    **params
+        Other :class:`MLPMethod` parameters (``max_epochs``, ``use_height``, ...).
+
+    Returns
+    -------
+    GridSearchResult
+    """
+    table, fitted = [], []
+    for n_layers in layers:
+        for n_neurons in neurons:
+            m = MLPMethod(scene, hidden_layers=int(n_layers), neurons=int(n_neurons), seed=seed, **params)
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                m.fit(scops)
+            fi = m.fit_info
+            table.append({
+                "layers": int(n_layers), "neurons": int(n_neurons), "n_params": fi["n_params"],
+                "val_rmse_px": fi["val_rmse_px"], "train_rmse_px": fi["train_rmse_px"],
+                "epochs": fi["epochs"], "stop_reason": fi["stop_reason"], "converged": fi["converged"],
+                "fit_s": time.perf_counter() - t0,
+            })
+            fitted.append(m)
+    if not table:
+        raise ValueError("grid_search: empty layers/neurons ranges")
+    def rank(k: int) -> tuple:
+        v = table[k]["val_rmse_px"]
+        return (not table[k]["converged"], v if np.isfinite(v) else np.inf, table[k]["n_params"])
+
+    order = sorted(range(len(table)), key=rank)
+    k = order[0]
+    return GridSearchResult(table, dict(table[k]), fitted[k])
