@@ -1,0 +1,129 @@
+"""``nn-rfm``: Habib et al.'s hybrid network + RFM, against exact simulated points.
+
+Truth: exact rows/columns of simulated SCPs and exact ray/terrain intersections.  Measured with
+the defaults (7 sigmoid nodes, 12 x 12 x 5 synthetic grid, Tikhonov 1e-5):
+
+* fitted on exact SCOPs (a regular grid on the terrain, 400 points) the final RFM reproduces
+  SCP rows/cols to 0.13 / 0.10 px RMS on QII with 300 m relief (the network's own accuracy)
+  and 0.003 px on flat SCB; the bounds below (0.5 px, 0.05 px) keep a 4x margin or more;
+* on 572 irregular GCPs with 0.5 px / 0.3 m noise (QII, 300 m relief, 500 check points) the
+  hybrid beats the direct cubic RFM in all of seeds 0-4 (see ``compare_nn_rfm``'s notes); the
+  test uses seed 1 (direct 0.39 m with 2 failed check points, hybrid 0.18 m).  With only the
+  paper's 9 check points the direct RFM is as good or better in all five seeds: its failures
+  are local poles that 9 random points rarely hit, so 500 check points are used here.
+"""
+
+import numpy as np
+import pytest
+
+from explorer.errors import NotFittedError
+from explorer.methods import create
+from explorer.methods.nn_rfm import compare_nn_rfm, irregular_gcps
+from explorer.points import simulate_points
+from explorer.presets import build_scene
+
+pytestmark = pytest.mark.filterwarnings("ignore:network training stopped at max_iter")
+
+
+@pytest.fixture(scope="module")
+def qii():
+    return build_scene("QII", relief_m=300.0, relief_seed=1)
+
+
+@pytest.fixture(scope="module")
+def fitted_qii(qii):
+    return create("nn-rfm", qii, seed=0).fit(simulate_points(qii, 400))
+
+
+def test_not_fitted_error(qii):
+    with pytest.raises(NotFittedError):
+        create("nn-rfm", qii).ground_to_image(np.zeros((1, 3)))
+
+
+def test_scanline_accuracy_on_relief_from_exact_scops(fitted_qii, qii):
+    check = simulate_points(qii, 400, kind="scp")  # cell-centred grid on the DEM
+    res = fitted_qii.ground_to_image(check.ground)
+    assert res.valid.all()
+    assert np.sqrt(np.mean((res.row - check.row) ** 2)) < 0.5
+    assert np.sqrt(np.mean((res.col - check.col) ** 2)) < 0.5
+    assert np.all(res.ce_evaluations == 0)
+    assert fitted_qii.fit_info["n_synthetic"] == 720
+
+
+def test_flat_scene_single_layer_and_height_domain():
+    scene = build_scene("SCB")
+    method = create("nn-rfm", scene, seed=0, max_iter=400).fit(simulate_points(scene, 200))
+    assert len(method.fit_info["synthetic_heights_m"]) == 1
+    check = simulate_points(scene, 200, kind="scp")
+    res = method.ground_to_image(check.ground)
+    assert res.valid.all()
+    assert np.sqrt(np.mean((res.row - check.row) ** 2)) < 0.05
+    above = scene.image_to_ground(np.array([1000.0]), np.array([700.0]), height=scene.terrain.mean_height + 30.0)
+    assert not method.ground_to_image(above).valid[0]
+
+
+def test_out_of_image_points_are_flagged(fitted_qii, qii):
+    rows = np.array([-80.0, qii.n_rows + 80.0, 3000.0, 3000.0])
+    cols = np.array([3000.0, 3000.0, -80.0, qii.n_columns + 80.0])
+    ground = qii.image_to_ground(rows, cols, height=qii.terrain.mean_height)
+    res = fitted_qii.ground_to_image(ground, trace=True)
+    assert not res.valid.any()
+    assert not res.inside.any()
+    assert len(res.trace) == 1
+    far = np.array([[90_000.0, 0.0, qii.terrain.mean_height]])
+    assert not fitted_qii.ground_to_image(far).valid[0]
+
+
+def test_irregular_gcps_are_exact_before_noise_and_noise_has_the_requested_sigma(qii):
+    exact, noisy = irregular_gcps(qii, 572, noise_px=0.5, noise_m=0.3, seed=3)
+    assert len(exact) == 572
+    # exact points lie on the DEM, at the ray of their image coordinates
+    np.testing.assert_allclose(exact.ground[:, 2], qii.terrain.height(exact.ground[:, 0], exact.ground[:, 1]),
+                               atol=1e-6)
+    again = qii.image_to_ground(exact.row, exact.col)
+    np.testing.assert_allclose(again, exact.ground, atol=1e-6)
+    # sample std of 572 normals is within ~6 % of sigma (1 sigma of the estimate is 3 %)
+    assert np.std(noisy.row - exact.row) == pytest.approx(0.5, rel=0.1)
+    assert np.std(noisy.ground - exact.ground) == pytest.approx(0.3, rel=0.1)
+
+
+def test_compare_hybrid_beats_direct_rfm_on_irregular_noisy_gcps(qii):
+    tab = compare_nn_rfm(qii, n_checks=500, noise_px=0.5, noise_m=0.3, seed=1)
+    for key in ("rfm", "nn_rfm", "nn"):
+        for stat in ("rms_x", "rms_y", "rms_total", "mean_x", "mean_y"):
+            assert np.isfinite(tab[key][stat])
+    assert tab["n_gcps"] == 572 and tab["n_checks"] == 500
+    assert tab["nn_rfm"]["n_failed"] == 0
+    assert tab["nn_rfm"]["rms_total"] < tab["rfm"]["rms_total"]
+    # and in image space (no inversion involved): the RFM poles show up as large errors
+    assert tab["nn_rfm"]["image_max_px"] < tab["rfm"]["image_max_px"]
+    assert tab["paper"]["nn_rfm"]["rms_x"] == 0.851
+
+
+def test_compare_nine_check_points_like_the_paper_returns_finite_numbers(qii):
+    tab = compare_nn_rfm(qii, n_gcps=150, n_checks=9, seed=2, max_iter=300)
+    assert tab["n_checks"] == 9 and len(tab["rfm"]["err_x"]) == 9
+    assert np.isfinite(tab["nn_rfm"]["rms_total"]) and np.isfinite(tab["rfm"]["rms_total"])
+
+
+def test_seeded_reproducibility():
+    scene = build_scene("SCB", relief_m=200.0, relief_seed=5)
+    scops = simulate_points(scene, 120)
+    ground = simulate_points(scene, 50, kind="scp").ground
+    a = create("nn-rfm", scene, seed=4, max_iter=200).fit(scops).ground_to_image(ground)
+    b = create("nn-rfm", scene, seed=4, max_iter=200).fit(scops).ground_to_image(ground)
+    c = create("nn-rfm", scene, seed=5, max_iter=200).fit(scops).ground_to_image(ground)
+    np.testing.assert_array_equal(a.row, b.row)
+    assert np.max(np.abs(a.row - c.row)) > 0
+
+
+def test_surface_variant_on_flat_terrain():
+    scene = build_scene("SCB")
+    method = create("nn-rfm", scene, synthetic="surface", seed=0, max_iter=400).fit(simulate_points(scene, 200))
+    check = simulate_points(scene, 200, kind="scp")
+    res = method.ground_to_image(check.ground)
+    assert res.valid.all()
+    assert np.sqrt(np.mean((res.row - check.row) ** 2)) < 0.1
+    assert np.sqrt(np.mean((res.col - check.col) ** 2)) < 0.1
+    with pytest.raises(ValueError):
+        create("nn-rfm", scene, synthetic="surface", grid=(10, 10, 3)).fit(simulate_points(scene, 50))
