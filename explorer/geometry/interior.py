@@ -7,6 +7,10 @@ integer = detector centre) sits at
     y = (col - principal_column) * detector_pitch
     x = along_track_offset + sum_k line_curvature[k-1] * y**k     (k >= 1)
 
+Optionally the detectors are unevenly spaced (products resampled to a uniform ground spacing,
+look-angle tables): with ``u = col - principal_column`` (pixels),
+``y = detector_pitch * (u + sum_k column_polynomial[k-2] * u**k)`` (k >= 2); empty by default.
+
 The lens may add radial distortion; ``distort`` maps ideal (pinhole) focal-plane
 coordinates to the measured ones, ``undistort`` inverts it.
 """
@@ -40,6 +44,11 @@ class InteriorOrientation:
         ``x(y) = offset + c1 y + c2 y**2 + ...`` (units m^(1-k)).
     radial_distortion : tuple of float
         ``k1, k2, ...`` of ``r_d = r (1 + k1 r**2 + k2 r**4 + ...)`` (units m^-2k).
+    column_polynomial : tuple of float
+        ``a2, a3, ...`` of a non-uniform detector spacing
+        ``y = pitch * (u + a2 u**2 + a3 u**3 + ...)``, ``u = col - principal_column`` in pixels
+        (units px^(1-k)).  Empty (default): evenly spaced detectors.  ``y`` must stay monotonic
+        in ``col`` over the array.
     """
 
     focal_length_m: float
@@ -49,6 +58,7 @@ class InteriorOrientation:
     along_track_offset_m: float = 0.0
     line_curvature: tuple[float, ...] = field(default_factory=tuple)
     radial_distortion: tuple[float, ...] = field(default_factory=tuple)
+    column_polynomial: tuple[float, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
         if not (self.focal_length_m > 0 and self.detector_pitch_m > 0):
@@ -61,19 +71,52 @@ class InteriorOrientation:
         self.principal_column = float(self.principal_column)
         self.line_curvature = tuple(float(c) for c in self.line_curvature)
         self.radial_distortion = tuple(float(k) for k in self.radial_distortion)
+        self.column_polynomial = tuple(float(a) for a in self.column_polynomial)
+
+    @property
+    def has_uniform_spacing(self) -> bool:
+        """True when the detectors are evenly spaced (``column_to_y`` is linear)."""
+        return not any(self.column_polynomial)
 
     @property
     def is_straight_line(self) -> bool:
-        """True when the detector line is straight through x = offset and there is no distortion."""
-        return not any(self.line_curvature) and not any(self.radial_distortion)
+        """True when the detector line is straight through x = offset, there is no distortion and
+        the detectors are evenly spaced (the simplest model; fast paths may assume it)."""
+        return not any(self.line_curvature) and not any(self.radial_distortion) and self.has_uniform_spacing
+
+    def _spacing(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``g(u) = u + sum a_k u**k`` and ``g'(u)`` for offsets u (pixels)."""
+        g = u.copy()
+        dg = np.ones_like(u)
+        power = u.copy()  # u**(k-1)
+        for k, a in enumerate(self.column_polynomial, start=2):
+            dg = dg + k * a * power
+            power = power * u
+            g = g + a * power
+        return g, dg
 
     def column_to_y(self, col: np.ndarray) -> np.ndarray:
         """Detector column (N,) -> across-track focal-plane coordinate y (N,), metres."""
-        return (np.asarray(col, dtype=np.float64) - self.principal_column) * self.detector_pitch_m
+        u = np.asarray(col, dtype=np.float64) - self.principal_column
+        if self.column_polynomial:
+            u = self._spacing(u)[0]
+        return u * self.detector_pitch_m
 
     def y_to_column(self, y: np.ndarray) -> np.ndarray:
-        """Across-track focal-plane coordinate y (N,), metres -> column (N,)."""
-        return np.asarray(y, dtype=np.float64) / self.detector_pitch_m + self.principal_column
+        """Across-track focal-plane coordinate y (N,), metres -> column (N,).
+
+        With a ``column_polynomial`` the inverse is found by Newton's method (to 1e-12 px)."""
+        target = np.asarray(y, dtype=np.float64) / self.detector_pitch_m
+        if not self.column_polynomial:
+            return target + self.principal_column
+        u = target.copy()
+        for _ in range(30):
+            g, dg = self._spacing(u)
+            step = (g - target) / dg
+            u = u - step
+            if np.all(np.abs(step[np.isfinite(step)]) < 1e-12):
+                break
+        return u + self.principal_column
 
     def detector_x(self, y: np.ndarray) -> np.ndarray:
         """Along-track position of the detector line at y (N,) metres -> x (N,) metres."""
@@ -120,7 +163,7 @@ class InteriorOrientation:
 
     def to_dict(self) -> dict:
         """JSON-ready dict (exact float round trip)."""
-        return {
+        d = {
             "focal_length_m": self.focal_length_m,
             "detector_pitch_m": self.detector_pitch_m,
             "n_columns": self.n_columns,
@@ -129,6 +172,9 @@ class InteriorOrientation:
             "line_curvature": list(self.line_curvature),
             "radial_distortion": list(self.radial_distortion),
         }
+        if self.column_polynomial:
+            d["column_polynomial"] = list(self.column_polynomial)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> InteriorOrientation:
@@ -141,4 +187,5 @@ class InteriorOrientation:
             along_track_offset_m=float(d.get("along_track_offset_m", 0.0)),
             line_curvature=tuple(d.get("line_curvature", ())),
             radial_distortion=tuple(d.get("radial_distortion", ())),
+            column_polynomial=tuple(d.get("column_polynomial", ())),
         )
