@@ -28,6 +28,7 @@ from explorer.geometry.terrain import (
 )
 
 SCENE_FILE_VERSION = 1
+RIGOROUS_SCENE_FORMAT = "pushbroom-explorer rigorous line-scan scene"
 CHUNK = 1 << 18  # points per block in per-point matrix work (bounds memory to ~50 MB)
 
 
@@ -285,12 +286,17 @@ class Scene:
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:
-        """Read a scene JSON file; raises :class:`SceneFileError` on malformed files."""
+        """Read a scene JSON file (an MPC scene, or a rigorous line-scan scene of
+        :mod:`explorer.real.linescan`); raises :class:`SceneFileError` on malformed files."""
         path = Path(path)
         try:
             d = json.loads(path.read_text())
         except json.JSONDecodeError as exc:
             raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+        if cls is Scene and isinstance(d, dict) and d.get("format") == RIGOROUS_SCENE_FORMAT:
+            from explorer.real.linescan import RigorousLineScanScene
+
+            return RigorousLineScanScene.from_dict(d, source=str(path))
         return cls.from_dict(d, source=str(path))
 
 

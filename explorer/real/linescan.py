@@ -29,7 +29,6 @@ and measured agreement with the vendor RPCs: ``docs/real_images.md``.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -42,7 +41,7 @@ from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import terrain_from_dict
-from explorer.scene import Scene
+from explorer.scene import RIGOROUS_SCENE_FORMAT, Scene
 
 __all__ = [
     "C_LIGHT",
@@ -390,7 +389,7 @@ class LineScanExterior:
 
 
 # --------------------------------------------------------------------------- scene
-RIGOROUS_FORMAT = "pushbroom-explorer rigorous line-scan scene"
+RIGOROUS_FORMAT = RIGOROUS_SCENE_FORMAT
 
 
 @dataclass
@@ -663,11 +662,4 @@ def _grid(n: int, rows: int, cols: int, offset: bool) -> tuple[np.ndarray, np.nd
 
 def load_scene(path: str | Path) -> Scene:
     """Load an MPC scene or a rigorous line-scan scene JSON, whichever the file holds."""
-    path = Path(path)
-    try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
-    if isinstance(d, dict) and d.get("format") == RIGOROUS_FORMAT:
-        return RigorousLineScanScene.from_dict(d, source=str(path))
-    return Scene.from_dict(d, source=str(path))
+    return Scene.load(path)
