@@ -11,6 +11,7 @@ import importlib.util
 import sys
 
 from explorer.errors import ConvergenceError, InputError, SceneFileError
+from explorer.rpc.readers import RPCFormatError
 
 COMMAND_MODULES = (
     "explorer.commands.simulate",
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (InputError, SceneFileError, ConvergenceError, KeyError, FileNotFoundError) as exc:
+    except (InputError, SceneFileError, RPCFormatError, ConvergenceError, KeyError, FileNotFoundError) as exc:
         print(f"pushbroom {args.command}: error: {exc}", file=sys.stderr)
         return 2
 
