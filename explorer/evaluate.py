@@ -30,6 +30,7 @@ class Evaluation:
     ce_evals_per_point: float
     converged_frac: float
     valid_frac: float
+    ce_evals_max: int = 0
     residual_row: np.ndarray = field(repr=False, default=None)
     residual_col: np.ndarray = field(repr=False, default=None)
     evaluated_index: np.ndarray = field(repr=False, default=None)
@@ -56,6 +57,7 @@ def evaluate_method(
     *,
     max_points: int | None = None,
     seed: int = 0,
+    fit: bool = True,
 ) -> Evaluation:
     """Fit (when ``control`` is given and the method learns) and evaluate on ``check``.
 
@@ -69,9 +71,12 @@ def evaluate_method(
     max_points : int, optional
         Evaluate on a seeded random subsample of this size (reported in ``n_evaluated``).
     seed : int
+    fit : bool
+        Fit the method on ``control`` first (default).  False: the caller has fit it already
+        (and timed the fit itself); ``fit_s`` is then 0 and ``control`` only sets ``n_scops``.
     """
     fit_s = 0.0
-    if method.needs_fit:
+    if method.needs_fit and fit:
         if control is None:
             raise ValueError(f"{method.name} needs control points")
         t0 = time.perf_counter()
@@ -103,6 +108,7 @@ def evaluate_method(
         ce_evals_per_point=float(res.ce_evaluations.mean()) if len(res) else 0.0,
         converged_frac=float(res.converged.mean()) if len(res) else 0.0,
         valid_frac=float(res.valid.mean()) if len(res) else 0.0,
+        ce_evals_max=int(res.ce_evaluations.max()) if len(res) else 0,
         residual_row=dr,
         residual_col=dc,
         evaluated_index=index,

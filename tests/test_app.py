@@ -1,0 +1,458 @@
+"""The explorer driven from Python: a viser server on a free port, the GUI's handles set
+from the test (setting ``.value`` runs the callbacks), the scene and panels checked.
+
+The methods used here are tiny test-only methods registered for the duration of these
+tests only (``toy_methods``), so the explorer is tested through the registry alone,
+whatever methods the package ships.  Truth: the SCPs' exact rows (``simulate_points``)
+and the brute-force solver of ``tests/truth.py``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+import warnings
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from explorer.methods import base as methods_base
+from explorer.methods.base import BestScanlineMethod, ScanlineResult
+from explorer.points import PointSet
+from tests.truth import brute_force_rows
+
+viser = pytest.importorskip("viser")
+
+from explorer.app import (  # noqa: E402
+    ExplorerApp,
+    ExplorerModel,
+    FitPool,
+    Settings,
+    accepted_params,
+    gui_params,
+    serve,
+)
+from explorer.panels import NEGATIVE_END, POSITIVE_END, diverging_rgb  # noqa: E402
+
+
+# ------------------------------------------------------------------ toy methods
+class ToyPoly(BestScanlineMethod):
+    """Test-only learned method: least-squares polynomial row(x, y) of degree ``hidden_layers``.
+
+    Parameters
+    ----------
+    hidden_layers : int
+        Polynomial degree (stands in for an MLP's depth).
+    neurons : int
+        Unused.
+    """
+
+    name = "toy_poly"
+    label = "toy polynomial"
+    reference = "test only"
+    family = "learned"
+    needs_fit = True
+    exactness = "approximate"
+
+    def __init__(self, scene, *, hidden_layers: int = 1, neurons: int = 10, **params) -> None:
+        super().__init__(scene, hidden_layers=hidden_layers, neurons=neurons, **params)
+        self.degree = int(hidden_layers)
+
+    def _features(self, g: np.ndarray) -> np.ndarray:
+        x = (g[:, 0] - self.mu[0]) / self.sd[0]
+        y = (g[:, 1] - self.mu[1]) / self.sd[1]
+        cols = [np.ones_like(x)]
+        for d in range(1, self.degree + 1):
+            for i in range(d + 1):
+                cols.append(x ** (d - i) * y**i)
+        return np.stack(cols, 1)
+
+    def _fit(self, control: PointSet) -> None:
+        self.mu = control.ground.mean(0)
+        self.sd = control.ground.std(0) + 1e-9
+        self.coef, *_ = np.linalg.lstsq(self._features(control.ground), control.row, rcond=None)
+
+    def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
+        row = self._features(ground) @ self.coef
+        n = len(row)
+        return self._result(ground, row, np.ones(n, bool), np.zeros(n, int))
+
+
+class ToyBisect(BestScanlineMethod):
+    """Test-only search: 40 bisections of the along-track residual over the image rows."""
+
+    name = "toy_bisect"
+    label = "toy bisection"
+    reference = "test only"
+    family = "search"
+    needs_fit = False
+    exactness = "exact"
+    iterations = 40
+
+    def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
+        sc = self.scene
+        n = len(ground)
+        lo = np.full(n, -0.5)
+        hi = np.full(n, sc.n_rows - 0.5)
+        flo = sc.along_track_residual(ground, sc.scanline_time(lo))
+        fhi = sc.along_track_residual(ground, sc.scanline_time(hi))
+        ok = np.sign(flo) != np.sign(fhi)
+        visited: list[np.ndarray] | None = [] if trace else None
+        for _ in range(self.iterations):
+            mid = 0.5 * (lo + hi)
+            fm = sc.along_track_residual(ground, sc.scanline_time(mid))
+            if visited is not None:
+                visited.append(mid.copy())
+            same = np.sign(fm) == np.sign(flo)
+            lo = np.where(same, mid, lo)
+            flo = np.where(same, fm, flo)
+            hi = np.where(same, hi, mid)
+        row = np.where(ok, 0.5 * (lo + hi), np.nan)
+        return self._result(ground, row, ok, np.full(n, 2 + self.iterations), trace=visited)
+
+
+class ToySlow(ToyPoly):
+    """Test-only learned method whose training takes 1.5 s."""
+
+    name = "toy_slow"
+    label = "toy slow"
+
+    def _fit(self, control: PointSet) -> None:
+        time.sleep(1.5)
+        super()._fit(control)
+
+
+class ToyBroken(ToyPoly):
+    """Test-only learned method whose training fails."""
+
+    name = "toy_broken"
+    label = "toy broken"
+
+    def _fit(self, control: PointSet) -> None:
+        raise RuntimeError("toy training failure")
+
+
+class ToyUnconverged(ToyPoly):
+    """Test-only learned method whose training reports no convergence (and warns)."""
+
+    name = "toy_unconverged"
+    label = "toy unconverged"
+
+    def _fit(self, control: PointSet) -> None:
+        super()._fit(control)
+        self.fit_info.update(converged=False, stop_reason="max_epochs", val_rmse_px=3.5)
+        warnings.warn("toy_unconverged: training did not converge", RuntimeWarning, stacklevel=2)
+
+
+TOYS = (ToyPoly, ToyBisect, ToySlow, ToyBroken, ToyUnconverged)
+
+
+@contextlib.contextmanager
+def toy_registry() -> Iterator[None]:
+    """Register the toy methods while the block runs (never leaks into other tests)."""
+    methods_base.registry()  # discover the package's own methods first
+    with pytest.MonkeyPatch.context() as mp:
+        for cls in TOYS:
+            mp.setitem(methods_base._REGISTRY, cls.name, cls)
+        yield
+
+
+@pytest.fixture(scope="module", autouse=True)
+def toy_methods():
+    with toy_registry():
+        yield
+
+
+@pytest.fixture
+def server():
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield srv
+    srv.stop()
+
+
+def make_app(server, methods=("toy_poly", "toy_bisect"), **kw) -> ExplorerApp:
+    kw.setdefault("scp_count", 3000)
+    kw.setdefault("sweep", False)
+    kw.setdefault("background", False)
+    return ExplorerApp(server, methods=list(methods), **kw)
+
+
+# ------------------------------------------------------------------------ tests
+def test_scene_nodes_and_counts(server):
+    app = make_app(server)
+    s = app.settings()
+    names = set(app.nodes)
+    for n in ("/ground/surface", "/ground/outline", "/orbit/track", "/orbit/sensor_frames",
+              "/orbit/direction", "/orbit/flight_label", "/scanlines/planes", "/scanlines/edges",
+              "/scanlines/labels/0", "/scanlines/labels/2", "/points/scops", "/points/scps",
+              "/selected/point", "/selected/ray", "/selected/label"):
+        assert n in names, n
+    # first / middle / last / selected scanline planes: 4 triangles in ONE mesh
+    planes = app.nodes["/scanlines/planes"]
+    assert planes.faces.shape == (4, 3) and planes.vertices.shape == (12, 3)
+    assert app.nodes["/scanlines/labels/0"].text.startswith("first scanline")
+    assert app.nodes["/scanlines/labels/2"].text.startswith("last scanline")
+    scops = app.model.scops(s)
+    scps = app.model.scps(s)
+    assert app.nodes["/points/scops"].points.shape == (len(scops), 3)
+    assert app.nodes["/points/scps"].points.shape == (len(scps), 3)
+    # kilometres around the scene centre, float32 on the wire
+    pts = app.nodes["/points/scps"].points
+    assert pts.dtype == np.float32
+    assert np.abs(pts).max() < 10.0  # WSU is ~2 km wide
+    # the satellite track is displayed at the compressed distance (2.5 footprint diagonals)
+    track = app.nodes["/orbit/track"].points
+    d = np.linalg.norm(track.mean(0))
+    assert 2.0 * app.frame.diagonal_km < d < 3.0 * app.frame.diagonal_km
+
+
+def test_scp_colours_follow_residuals(server):
+    app = make_app(server)
+    app.handles["limit"].value = "0.01"  # toy_poly errs by up to ~0.03 px: both ends saturate
+    s = app.settings()
+    assert s.color_method == "toy_poly" and s.limit_px == 0.01
+    ev = app.runs["toy_poly"].evaluation
+    scps = app.model.scps(s)
+    # the residuals are the method's rows minus the SCPs' exact rows
+    truth = ToyPoly(app.scene).fit(app.model.scops(s)).ground_to_image(scps.ground).row - scps.row
+    np.testing.assert_allclose(ev.residual_row, truth[ev.evaluated_index], atol=1e-9)
+    cloud = app.nodes["/points/scps"]
+    res = truth[app.cloud_index]
+    np.testing.assert_array_equal(cloud.colors, diverging_rgb(res, 0.01))
+    assert res.max() > 0.01 and res.min() < -0.01
+    assert tuple(cloud.colors[np.argmax(res)]) == POSITIVE_END  # red end
+    assert tuple(cloud.colors[np.argmin(res)]) == NEGATIVE_END  # blue end
+    # the cloud's points are those SCPs' ground coordinates (km from the scene centre)
+    np.testing.assert_allclose(cloud.points, app.frame.ground(scps.ground[app.cloud_index]), atol=1e-5)
+
+
+def test_exact_method_colours_are_neutral_and_its_rows_exact(server):
+    app = make_app(server)
+    app.handles["color_method"].value = "toy_bisect"
+    ev = app.runs["toy_bisect"].evaluation
+    assert np.nanmax(np.abs(ev.residual_row)) < 1e-6
+    colors = app.nodes["/points/scps"].colors
+    assert np.all(np.abs(colors.astype(int) - 221) <= 1)  # the light-grey centre of the scale
+
+
+def test_point_cloud_decimation_is_named(server):
+    app = make_app(server, max_cloud_points=1000)
+    assert app.nodes["/points/scps"].points.shape == (1000, 3)
+    assert "1,000 of 3,0" in app.handles["cloud_text"].content  # names the decimation
+
+
+def test_changing_preset_rebuilds_only_the_scene_dependent_parts(server):
+    app = make_app(server)
+    c0 = dict(app.model.counters)
+    old_ground = app.nodes["/ground/surface"]
+    app.handles["preset"].value = "ISB"
+    assert app.scene.name == "ISB"
+    assert app.handles["sel_row"].max == app.scene.n_rows - 1
+    assert app.nodes["/ground/surface"] is not old_ground
+    c1 = dict(app.model.counters)
+    assert c1["scene"] == c0["scene"] + 1 and c1["scps"] == c0["scps"] + 1
+    # back to WSU: everything cached, nothing recomputed
+    app.handles["preset"].value = "WSU"
+    assert app.model.counters == c1
+
+
+def test_caches_recompute_only_what_depends_on_a_control(server):
+    app = make_app(server)
+    c = dict(app.model.counters)
+    app.handles["scps"].value = "10000"  # SCPs: new points, new evaluations, no refit
+    c2 = dict(app.model.counters)
+    assert c2["fit"] == c["fit"] and c2["scene"] == c["scene"] and c2["scops"] == c["scops"]
+    assert c2["scps"] == c["scps"] + 1 and c2["evaluate"] == c["evaluate"] + 2
+    assert app.runs["toy_bisect"].evaluation.fit_s == 0.0 and app.runs["toy_poly"].evaluation.fit_s > 0
+    app.handles["density"].value = "30"  # SCOPs: refit only the learned method
+    c3 = dict(app.model.counters)
+    assert c3["fit"] == c2["fit"] + 1 and c3["scene"] == c2["scene"] and c3["scps"] == c2["scps"]
+    assert app.runs["toy_poly"].evaluation.n_scops == len(app.model.scops(app.settings()))
+    for key, value in (("color_method", "toy_bisect"), ("limit", "0.5"), ("exaggeration", 2.0)):
+        app.handles[key].value = value  # presentation only
+    assert app.model.counters == c3
+
+
+def test_mlp_controls_reach_methods_that_declare_them(server):
+    assert {"hidden_layers", "neurons"} <= set(accepted_params(ToyPoly))
+    assert gui_params(ToyPoly, Settings(mlp_layers=3, mlp_neurons=7)) == {"hidden_layers": 3, "neurons": 7}
+    assert gui_params(ToyBisect, Settings(mlp_layers=3)) == {}
+    app = make_app(server)
+    rmse1 = app.runs["toy_poly"].evaluation.rmse_px
+    app.handles["layers"].value = 3
+    run = app.runs["toy_poly"]
+    assert run.fit.params["hidden_layers"] == 3 and run.fit.method.degree == 3
+    assert run.evaluation.rmse_px < rmse1
+
+
+def test_residual_map_panel_holds_the_model_residuals(server):
+    app = make_app(server, max_map_points=None)
+    fig = app.handles["maps"].figure
+    s = app.settings()
+    scps = app.model.scps(s)
+    for name in ("toy_poly", "toy_bisect"):
+        ev = app.runs[name].evaluation
+        (tr,) = [t for t in fig.data if t.name == name]
+        ok = np.isfinite(ev.residual_row)
+        np.testing.assert_array_equal(np.asarray(tr.customdata), ev.residual_row[ok])
+        np.testing.assert_array_equal(np.asarray(tr.x), scps.col[ev.evaluated_index[ok]])
+        np.testing.assert_array_equal(np.asarray(tr.y), scps.row[ev.evaluated_index[ok]])
+    assert fig.layout.coloraxis.cmin == -1.0 and fig.layout.coloraxis.cmax == 1.0
+    assert "toy_poly" in app.handles["summary"].content
+
+
+def test_worst_point_selection_and_search_trace(server):
+    app = make_app(server)
+    app.handles["color_method"].value = "toy_bisect"
+    sel = app.selection
+    s = app.settings()
+    scps = app.model.scps(s)
+    ev = app.runs["toy_bisect"].evaluation
+    i = ev.evaluated_index[np.nanargmax(np.abs(ev.residual_row))]
+    np.testing.assert_array_equal(sel.ground, scps.ground[i])
+    assert sel.exact_row == scps.row[i]
+    # the search path: one scanline per bisection, converging on the exact row
+    assert len(sel.trace_rows) == ToyBisect.iterations
+    assert app.nodes["/selected/trace"].points.shape == (ToyBisect.iterations, 2, 3)
+    assert abs(sel.trace_rows[-1] - scps.row[i]) < 1e-6
+    assert abs(sel.trace_rows[0] - (app.scene.n_rows - 1) / 2) < 1e-9  # first midpoint
+    assert "visited 40 scanlines" in app.handles["sel_text"].content
+    # the ray joins the point to the (displayed) perspective centre of its exact scanline
+    ray = app.nodes["/selected/ray"].points[0]
+    centre = app.scene.exterior.position(app.scene.scanline_time(np.array([scps.row[i]])))
+    np.testing.assert_allclose(ray[0], app.frame.ground(scps.ground[i][None])[0], atol=1e-5)
+    np.testing.assert_allclose(ray[1], app.frame.sensor(centre)[0], atol=1e-4)
+
+
+def test_image_point_selection_from_the_sliders(server):
+    app = make_app(server)
+    app.handles["sel_row"].value = 1234.5
+    assert app.handles["sel_mode"].value == "image point"
+    app.handles["sel_col"].value = 2000.0
+    sel = app.selection
+    assert (sel.exact_row, sel.exact_col) == (1234.5, 2000.0)
+    exact = brute_force_rows(app.scene, sel.ground[None])[0]
+    assert abs(exact - 1234.5) < 1e-6
+    assert abs(sel.est_row - exact) < 0.1  # toy_poly, the colour method, is close
+
+
+def test_a_failing_method_is_reported_not_fatal(server):
+    app = make_app(server, methods=("toy_poly", "toy_broken"))
+    assert not app.runs["toy_broken"].ok and app.runs["toy_poly"].ok
+    assert "toy training failure" in app.handles["summary"].content
+    assert "failed: toy_broken" in app.handles["status"].content
+    assert app.errors == []
+
+
+def test_unconverged_training_is_reported(server):
+    with pytest.warns(RuntimeWarning, match="did not converge"):
+        app = make_app(server, methods=("toy_unconverged",))
+    assert app.runs["toy_unconverged"].ok
+    text = app.handles["summary"].content
+    assert "training did not converge (stop_reason max_epochs, val_rmse_px 3.5)" in text
+
+
+def test_slow_methods_run_on_a_named_subsample(server):
+    model = ExplorerModel(locate_budget_s=1e-4, min_subsample=500, probe_points=200)
+    app = make_app(server, model=model)
+    run = app.runs["toy_bisect"]
+    assert run.subsampled and run.evaluation.n_evaluated == 500
+    assert "subsample of 500" in app.handles["summary"].content
+    assert "500 of 3,0" in app.handles["maps"].figure.layout.annotations[1].text
+    assert "toy_bisect" in app.handles["status"].content
+
+
+def test_accuracy_sweep_over_scop_densities(server):
+    app = make_app(server, sweep=True)
+    evs = app.sweeps["toy_poly"]
+    assert [e.n_scops for e in evs] == sorted(e.n_scops for e in evs) and len(evs) == 8
+    assert len(app.sweeps["toy_bisect"]) == 1 and app.sweeps["toy_bisect"][0].n_scops == 0
+    fig = app.handles["accuracy"].figure
+    (rm,) = [t for t in fig.data if t.name == "toy_poly RMSE"]
+    np.testing.assert_array_equal(np.asarray(rm.customdata), [e.rmse_px for e in evs])
+    assert fig.layout.xaxis.type == "log" and fig.layout.yaxis.type == "log"
+
+
+def test_background_worker_shows_fast_methods_while_a_slow_one_trains(server):
+    app = make_app(server, methods=("toy_poly", "toy_slow"), background=True, fit_wait_s=0.2)
+    try:
+        assert app.wait_update(1, timeout=60)  # the scene, drawn while the methods load
+        assert app.scene is not None and "/ground/surface" in app.nodes
+        assert app.wait_update(app.wait_methods(60), timeout=60)
+        assert "toy_poly" in app.runs
+        assert "toy_slow" in app.pending or "toy_slow" in app.runs
+        assert app.wait_idle(timeout=60)
+        assert app.runs["toy_slow"].ok and not app.pending
+        assert app.runs["toy_slow"].evaluation.fit_s >= 1.5
+        gen = app.request_update()
+        app.handles["preset"].value = "linear"
+        assert app.wait_update(gen + 1, timeout=60) and app.wait_idle(timeout=60)
+        assert app.scene.name == "linear" and app.runs["toy_slow"].ok
+        assert app.errors == []
+    finally:
+        app.close()
+    assert not app._worker.is_alive()
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def test_explore_command_and_clean_shutdown():
+    from explorer.cli import build_parser
+
+    args = build_parser().parse_args(["explore", "--preset", "ISB", "--host", "127.0.0.1", "--port", "0"])
+    assert (args.preset, args.host, args.port) == ("ISB", "127.0.0.1", 0)
+    assert callable(args.func)
+    box: dict = {}
+    stop = threading.Event()
+    th = threading.Thread(target=lambda: box.setdefault("rc", serve(
+        "ISB", port=0, methods=["toy_poly"], ready=lambda a: box.setdefault("app", a), stop_event=stop,
+        scp_count=2000, sweep=False)), daemon=True)
+    th.start()
+    t0 = time.monotonic()
+    while "app" not in box and time.monotonic() - t0 < 60:
+        time.sleep(0.05)
+    app = box["app"]
+    assert app.url.startswith("http://127.0.0.1:")
+    port = int(app.url.rsplit(":", 1)[1])
+    assert app.wait_idle(60) and app.scene.name == "ISB"
+    stop.set()
+    th.join(30)
+    assert not th.is_alive() and box["rc"] == 0
+    assert _port_free(port)
+
+
+def test_fit_pool_order_priorities_and_keep():
+    cond = threading.Condition()
+    done: list = []
+    pool = FitPool(cond, lambda key, prio: done.append((key, prio)), threads=1)
+    gate = threading.Event()
+    order: list = []
+    try:
+        pool.submit("blocker", lambda: (gate.wait(10), order.append("blocker")), 0)
+        t0 = time.monotonic()
+        while "blocker" not in pool.running and time.monotonic() - t0 < 10:
+            time.sleep(0.01)
+        pool.submit("sweep-cheap", lambda: order.append("sweep-cheap"), 1, cost=0.1)
+        pool.submit("main-dear", lambda: order.append("main-dear"), 0, cost=5.0)
+        pool.submit("main-cheap", lambda: order.append("main-cheap"), 0, cost=0.1)
+        pool.submit("dropped", lambda: order.append("dropped"), 0, cost=0.0)
+        pool.submit("main-cheap", lambda: order.append("twice"), 0)  # already queued: ignored
+        pool.keep({"sweep-cheap", "main-dear", "main-cheap"})
+        assert pool.is_pending("main-dear") and not pool.is_pending("dropped")
+        gate.set()
+        pool.wait_for(["sweep-cheap"], time.monotonic() + 10)
+    finally:
+        pool.close()
+    # priority first, then expected cost; a dropped job never runs
+    assert order == ["blocker", "main-cheap", "main-dear", "sweep-cheap"]
+    assert [k for k, _ in done] == order and not pool.busy
