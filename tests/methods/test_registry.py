@@ -1,0 +1,52 @@
+"""The registry: every method of the issue is registered, imports cleanly and follows the interface."""
+
+import numpy as np
+import pytest
+
+from explorer.errors import NotFittedError
+from explorer.methods import DISCOVERY_ERRORS, available, create, registry
+from explorer.points import simulate_points
+from explorer.presets import build_scene
+
+EXPECTED = {
+    "ss", "bws", "ss-interp", "bws-interp", "nr", "cpp", "gdp", "hybrid",
+    "ogp", "ann", "mlp", "lrm", "prm", "rfm", "bpnn", "nn-rfm", "exact", "csm-secant",
+}
+
+
+def test_every_method_is_registered_and_imports():
+    names = set(available())  # runs the discovery
+    assert DISCOVERY_ERRORS == {}
+    assert EXPECTED <= names
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_interface_metadata(name):
+    cls = registry()[name]
+    assert cls.name == name and cls.label and cls.reference
+    assert cls.family in ("search", "learned", "generalized")
+    assert cls.exactness in ("exact", "pixel", "approximate")
+
+
+@pytest.mark.parametrize("name", sorted(n for n in EXPECTED if registry()[n].needs_fit))
+def test_learned_methods_refuse_to_predict_before_fit(name):
+    method = create(name, build_scene("SCB"))
+    with pytest.raises(NotFittedError):
+        method.ground_to_image(np.zeros((2, 3)))
+
+
+def test_unknown_method_is_a_clear_error():
+    with pytest.raises(KeyError, match="unknown method"):
+        create("nope", build_scene("SCB"))
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED - {"ss", "ss-interp"}))
+def test_far_outside_points_flagged_by_every_method(name):
+    scene = build_scene("SCB")
+    method = create(name, scene)
+    if method.needs_fit:
+        method.fit(simulate_points(scene, 500, kind="scop"))
+    far = scene.image_to_ground(np.array([-400.0, scene.n_rows + 400.0, 100.0]),
+                                np.array([100.0, 100.0, scene.n_columns + 300.0]))
+    res = method.ground_to_image(far)
+    assert not res.valid.any()
