@@ -46,7 +46,7 @@ for preset in PRESETS:
         scops = simulate_points(scene, n, kind="scop")
         for name in methods:
             try:
-                ev = evaluate_method(create(name, scene, seed=0), scps, scops)
+                ev = evaluate_method(create(name, scene), scps, scops)
             except ValueError as exc:  # too few SCOPs for the model
                 print(preset, name, n, "skipped:", exc)
                 continue

@@ -67,13 +67,13 @@ def test_rpc_orthoimage_agrees_with_gdal_rpc_warp(tmp_path):
     dem_path = ASSETS / "MNT_P1BP--2018122638935449CP.tif"  # heights above the ellipsoid
     rpc = read_rpc(DATA / "PHRDIMAP_P1BP--2018122638935449CP.XML").with_pixel_shift(-19000, -19500)
     dem = read_geotiff_dem(dem_path)
-    n = 160
+    n = 200
     corners = np.array([0, 0, n - 1, n - 1.0]), np.array([0, n - 1, n - 1, 0.0])
     lon, lat, _, ok = rpc.localization_on_dem(*corners, dem)
     assert ok.all()
     epsg = LocalFrame(float(lat.mean()), float(lon.mean())).utm_epsg()
-    grid = grid_covering(lon, lat, 1.0, epsg)
-    pattern = default_pattern(epsg, 1.0, (grid.x0, grid.y0))
+    grid = grid_covering(lon, lat, 0.5, epsg)
+    pattern = default_pattern(epsg, 0.5, (grid.x0, grid.y0))
 
     def to_lonlat(r, c):
         lo, la, _, _ = rpc.localization_on_dem(r, c, dem, n_levels=12)
