@@ -35,10 +35,14 @@ from explorer.bench import run_bench
 from explorer.methods import available
 
 methods = [m for m in METHODS if m in available()]
-report = run_bench(presets=PRESETS, methods=methods, scops=SCOPS, n_scps=N_SCPS, seed=0)
-for r in report["runs"]:
-    print(f"{r['preset']:7s} {r['method']:6s} SCOPs {r['n_scops']:4d}: RMSE {r['rmse_px']:.2e} px "
-          f"dr_max {r['dr_max_px']:.2e} px  locate {r['locate_s']:.3f} s on {r['n_evaluated']} points")
+report = run_bench(presets=PRESETS, methods=methods, scops=SCOPS, n_scps=N_SCPS, seed=0, progress=False)
+def num(v):
+    return "n/a" if v is None else f"{v:.2e}"
+
+
+for r in report.runs:
+    print(f"{r['preset']:7s} {r['method']:6s} SCOPs {r['n_scops']:4d}: RMSE {num(r['rmse_px'])} px "
+          f"dr_max {num(r['dr_max_px'])} px  locate {num(r['locate_s'])} s on {r['n_evaluated']} points")
 
 # %% [markdown]
 # ## The published numbers
