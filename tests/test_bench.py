@@ -233,3 +233,19 @@ def test_paper_tables_are_self_consistent():
     np.testing.assert_allclose(d.std(axis=0), pt.HABIB_TABLE2["rms"], atol=1.5e-3)
     for t in pt.ALL_TABLES.values():
         assert t["paper"] in pt.PAPERS and t["table"].startswith("Table") and t["page"]
+
+
+def test_bench_cli_on_a_real_rpc(tmp_path, capsys):
+    """``bench --rpc``: resection of a real Pleiades RPC, then the methods on that scene."""
+    from explorer.cli import main
+
+    out = tmp_path / "rpc.json"
+    code = main(["bench", "--rpc", "tests/data/rpc/rpc_PLEIADES.xml", "--degree", "3", "--gcps", "49",
+                 "--methods", "nr,lrm", "--scops", "30", "--scps", "2000", "--no-progress", "--json", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "GCPs: RMSE" in text
+    runs = json.loads(out.read_text())["runs"]
+    assert {r["method"] for r in runs} == {"nr", "lrm"}
+    nr = next(r for r in runs if r["method"] == "nr")
+    assert nr["preset"] == "rpc_PLEIADES" and nr["rmse_px"] < 1e-8

@@ -45,12 +45,24 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    result = run_bench(
-        args.preset, args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,
-        relief_seed=args.relief_seed, attitude_rate_scale=args.attitude_rate_scale,
-        max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
-        method_params=parse_params(args.param), progress=not args.no_progress,
-    )
+    if args.rpc:
+        from explorer.bench import bench_scene, parse_counts, resolve_methods
+        from explorer.real.from_rpc import scene_from_rpc
+
+        scene, report = scene_from_rpc(args.rpc, dem=args.dem, n_gcps=args.gcps, degree=args.degree)
+        print(report.summary())
+        result = bench_scene(
+            scene, Path(args.rpc).stem, resolve_methods(args.methods), parse_counts(args.scops), args.scps,
+            seed=args.seed, max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
+            method_params=parse_params(args.param),
+        )
+    else:
+        result = run_bench(
+            args.preset, args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,
+            relief_seed=args.relief_seed, attitude_rate_scale=args.attitude_rate_scale,
+            max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
+            method_params=parse_params(args.param), progress=not args.no_progress,
+        )
     print(format_table(result.runs))
     failed = [r for r in result.runs if r.get("error")]
     sub = [r for r in result.runs if r.get("subsampled")]
@@ -95,4 +107,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="constructor parameter of a method (JSON value), repeatable")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", default=None, metavar="OUT", help="write the runs as JSON")
+    p.add_argument("--rpc", default=None, help="benchmark on the scene resected from this RPC file instead of a preset")
+    p.add_argument("--dem", default=None, help="with --rpc: DEM for the GCP heights (GeoTIFF or .hgt)")
+    p.add_argument("--gcps", type=int, default=100, help="with --rpc: about this many GCPs per height layer")
+    p.add_argument("--degree", type=int, default=2, help="with --rpc: degree of the MPC polynomials")
     p.set_defaults(func=cmd_bench)
