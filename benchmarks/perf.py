@@ -222,7 +222,7 @@ def write_doc(data: dict) -> None:
             paper = PAPER_SECONDS.get(r["method"])
             t = r["median_s"]
             scaled = f" (timed on {r['n_timed']:,}, scaled)" if r.get("scaled") else ""
-            vs_paper = f"{paper / t:.0f}x" if paper else "-"
+            vs_paper = (f"{paper / t:.0f}x" if paper / t >= 10 else f"{paper / t:.2g}x") if paper else "-"
             vs_nr = f"{nr['median_s'] / t:.1f}x" if nr else "n/a"
             lines.append(
                 f"| `{r['method']}`{scaled} | {_fmt_s(t)} | {_fmt_s(r['median_cpu_s'])} | {_fmt_rate(r['n'], t)} | "
@@ -278,9 +278,10 @@ def write_doc(data: dict) -> None:
                          "at that rate.")
         lines += [
             "",
-            f"The wall times were taken while other engineers' jobs kept the 1-minute load average at "
-            f"{min(loads):.1f}-{max(loads):.1f} on the two cores, so our two threads shared them; the CPU seconds "
-            "are what the work itself costs.  CPU time / threads is the wall time an idle machine would give if "
+            f"Other engineers' jobs ran on the same two cores: the 1-minute load average was "
+            f"{min(loads):.1f}-{max(loads):.1f} during these measurements (above 2 our threads shared the cores, "
+            "and even below 2 a neighbour's burst can take one of them); the CPU seconds are what the work itself "
+            "costs.  CPU time / threads is the wall time an idle machine would give if "
             "both threads scale perfectly (the kernel is one `prange` loop with no shared state; the serial part "
             "-- input validation, `inside` flags, allocation -- is about 15 % of the CPU time).",
             "",
