@@ -9,6 +9,7 @@ import pytest
 from explorer.geometry.interior import InteriorOrientation
 from explorer.methods import create
 from explorer.methods.newton import residual_and_derivative
+from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
 from explorer.scene import Scene
 from tests.truth import brute_force_rows
@@ -194,3 +195,18 @@ def test_chunked_evaluation_gives_identical_results(monkeypatch):
     res = create("nr", scene).ground_to_image(ground)
     np.testing.assert_array_equal(res.row, ref.row)
     np.testing.assert_array_equal(res.col, ref.col)
+
+
+@pytest.mark.parametrize("preset", ["WSU", "agile"])
+def test_compiled_evaluator_gives_the_same_rows(preset):
+    """The compiled residual kernel changes the speed of NR, not its answer (exact SCP rows as truth)."""
+    scene = build_scene(preset, relief_m=500.0, relief_seed=1)
+    pts = simulate_points(scene, 2000, kind="scp")
+    plain = create("nr", scene).ground_to_image(pts.ground)
+    fast = create("nr", scene, evaluator="compiled").ground_to_image(pts.ground)
+    assert np.max(np.abs(fast.row - pts.row)) < 1e-9
+    assert np.max(np.abs(fast.row - plain.row)) < 1e-9
+    # the same iteration: round-off in the stopping test may move a point by one iteration at most
+    assert np.max(np.abs(fast.ce_evaluations - plain.ce_evaluations)) <= 1
+    with pytest.raises(ValueError, match="evaluator"):
+        create("nr", scene, evaluator="gpu")
