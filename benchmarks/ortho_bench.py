@@ -1,0 +1,116 @@
+"""Orthorectification benchmark: our RPC orthoimage against GDAL's RPC warp on the same points in one run,
+and the scale run.  Writes ``benchmarks/results/ortho.json``.
+
+Usage: python benchmarks/ortho_bench.py [--size 400] [--scale 10000]
+  --size   source crop (pixels) of the real Pleiades RPC scene for the GDAL comparison
+  --scale  output size of the synthetic ISB scale run (0 skips it)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import rasterio
+from rasterio.rpc import RPC
+from rasterio.warp import Resampling, reproject
+
+from explorer.geometry.frames import LocalFrame
+from explorer.ortho import (
+    NODATA,
+    RPCProjector,
+    SceneProjector,
+    SourceImage,
+    default_pattern,
+    grid_covering,
+    measure_geolocation,
+    ortho_dask_array,
+    render_synthetic_source,
+    scene_image_to_lonlat,
+    write_orthoimage,
+)
+from explorer.presets import build_scene
+from explorer.rpc import read_rpc
+from explorer.terrain_io import read_geotiff_dem
+
+ROOT = Path(__file__).resolve().parent.parent
+DEM = ROOT / "assets" / "dem" / "MNT_P1BP--2018122638935449CP.tif"
+RPC_FILE = ROOT / "tests" / "data" / "rpc" / "PHRDIMAP_P1BP--2018122638935449CP.XML"
+
+
+def gdal_comparison(n: int, tmp: Path) -> dict:
+    rpc = read_rpc(RPC_FILE).with_pixel_shift(-19000, -19500)
+    dem = read_geotiff_dem(DEM)
+    r = np.array([0, 0, n - 1, n - 1.0])
+    c = np.array([0, n - 1, n - 1, 0.0])
+    lon, lat, _, _ = rpc.localization_on_dem(r, c, dem)
+    epsg = LocalFrame(float(lat.mean()), float(lon.mean())).utm_epsg()
+    grid = grid_covering(lon, lat, 0.5, epsg)
+    pattern = default_pattern(epsg, 0.5, (grid.x0, grid.y0))
+
+    def to_lonlat(rr, cc):
+        lo, la, _, _ = rpc.localization_on_dem(rr, cc, dem, n_levels=12)
+        return lo, la
+
+    src = render_synthetic_source(to_lonlat, (n, n), pattern, tmp / "src.npy")
+    t0 = time.perf_counter()
+    ours = np.asarray(ortho_dask_array(RPCProjector(rpc, (n, n), dem=dem), SourceImage(src), grid, 512).compute())
+    t_ours = time.perf_counter() - t0
+    gdal = np.full(ours.shape, NODATA, np.float32)
+    g_rpc = RPC(height_off=rpc.height_offset, height_scale=rpc.height_scale, lat_off=rpc.lat_offset,
+                lat_scale=rpc.lat_scale, line_den_coeff=list(rpc.row_den), line_num_coeff=list(rpc.row_num),
+                line_off=rpc.row_offset, line_scale=rpc.row_scale, long_off=rpc.lon_offset,
+                long_scale=rpc.lon_scale, samp_den_coeff=list(rpc.col_den), samp_num_coeff=list(rpc.col_num),
+                samp_off=rpc.col_offset, samp_scale=rpc.col_scale)
+    t0 = time.perf_counter()
+    reproject(np.load(src), gdal, rpcs=g_rpc, src_crs="EPSG:4326", dst_crs=f"EPSG:{epsg}",
+              dst_transform=rasterio.Affine(*grid.transform), resampling=Resampling.bilinear,
+              dst_nodata=float(NODATA), RPC_DEM=str(DEM), tolerance=0)
+    t_gdal = time.perf_counter() - t0
+    return {"source_px": [n, n], "output_px": [grid.height, grid.width], "ours_s": t_ours, "gdal_s": t_gdal,
+            "ours_vs_pattern": measure_geolocation(ours, grid, pattern, block=32),
+            "gdal_vs_pattern": measure_geolocation(gdal, grid, pattern, block=32),
+            "ours_vs_gdal": measure_geolocation(ours, grid, pattern, block=32, reference=gdal)}
+
+
+def scale_run(n: int, chunk: int, tmp: Path) -> dict:
+    scene = build_scene("ISB")
+    lon, lat, _ = scene.frame.enu_to_geodetic(scene.footprint())
+    epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()
+    g0 = grid_covering(lon, lat, 1.0, epsg)
+    gsd = max(g0.width, g0.height) / n
+    g1 = grid_covering(lon, lat, gsd, epsg)
+    grid = type(g1)(epsg, g1.x0, g1.y0, gsd, n, n)
+    pattern = default_pattern(epsg, gsd, (grid.x0, grid.y0))
+    src = render_synthetic_source(scene_image_to_lonlat(scene), scene.shape, pattern, tmp / "isb.npy")
+    arr = ortho_dask_array(SceneProjector(scene, "exact"), SourceImage(src), grid, chunk)
+    t0 = time.perf_counter()
+    stats = write_orthoimage(arr, grid, tmp / "isb.tif", scheduler="threads")
+    dt = time.perf_counter() - t0
+    return {"output_px": [n, n], "gsd_m": gsd, "chunk": chunk, "seconds": dt, "s_per_1e8_px": dt / n / n * 1e8,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, **stats}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", type=int, default=400)
+    ap.add_argument("--scale", type=int, default=10000)
+    ap.add_argument("--chunk", type=int, default=2048)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = {"gdal_comparison": gdal_comparison(args.size, Path(tmp))}
+        print(json.dumps(out, indent=1), flush=True)
+        if args.scale:
+            out["scale"] = scale_run(args.scale, args.chunk, Path(tmp))
+            print(json.dumps(out["scale"], indent=1))
+    path = ROOT / "benchmarks" / "results" / "ortho.json"
+    path.write_text(json.dumps(out, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
