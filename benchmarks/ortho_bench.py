@@ -16,17 +16,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rasterio
-from rasterio.rpc import RPC
-from rasterio.warp import Resampling, reproject
 
 from explorer.geometry.frames import LocalFrame
 from explorer.ortho import (
-    NODATA,
     RPCProjector,
     SceneProjector,
     SourceImage,
     default_pattern,
+    gdal_rpc_orthoimage,
     grid_covering,
     measure_geolocation,
     ortho_dask_array,
@@ -61,16 +58,9 @@ def gdal_comparison(n: int, tmp: Path) -> dict:
     t0 = time.perf_counter()
     ours = np.asarray(ortho_dask_array(RPCProjector(rpc, (n, n), dem=dem), SourceImage(src), grid, 512).compute())
     t_ours = time.perf_counter() - t0
-    gdal = np.full(ours.shape, NODATA, np.float32)
-    g_rpc = RPC(height_off=rpc.height_offset, height_scale=rpc.height_scale, lat_off=rpc.lat_offset,
-                lat_scale=rpc.lat_scale, line_den_coeff=list(rpc.row_den), line_num_coeff=list(rpc.row_num),
-                line_off=rpc.row_offset, line_scale=rpc.row_scale, long_off=rpc.lon_offset,
-                long_scale=rpc.lon_scale, samp_den_coeff=list(rpc.col_den), samp_num_coeff=list(rpc.col_num),
-                samp_off=rpc.col_offset, samp_scale=rpc.col_scale)
+    source = np.load(src)
     t0 = time.perf_counter()
-    reproject(np.load(src), gdal, rpcs=g_rpc, src_crs="EPSG:4326", dst_crs=f"EPSG:{epsg}",
-              dst_transform=rasterio.Affine(*grid.transform), resampling=Resampling.bilinear,
-              dst_nodata=float(NODATA), RPC_DEM=str(DEM), tolerance=0)
+    gdal = gdal_rpc_orthoimage(source, rpc, grid, DEM)
     t_gdal = time.perf_counter() - t0
     return {"source_px": [n, n], "output_px": [grid.height, grid.width], "ours_s": t_ours, "gdal_s": t_gdal,
             "ours_vs_pattern": measure_geolocation(ours, grid, pattern, block=32),

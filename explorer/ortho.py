@@ -428,3 +428,37 @@ def measure_geolocation(
     norm = np.hypot(s[:, 0], s[:, 1])
     return {"mean_shift_px": s.mean(axis=0).tolist(), "rms_px": float(np.sqrt(np.mean(norm**2))),
             "max_px": float(norm.max()), "n_tiles": int(len(s))}
+
+
+def gdal_rpc_orthoimage(source: np.ndarray, rpc: Any, grid: OrthoGrid, dem_path: str | Path | None = None,
+                        height: float | None = None) -> np.ndarray:
+    """The same orthoimage by GDAL's RPC warper (rasterio), the peer this module is checked against.
+
+    Parameters
+    ----------
+    source : ndarray, shape (rows, cols)
+        Source image in the RPC's pixel grid (0-based pixel centres; GDAL applies its own half-pixel shift).
+    rpc : RationalFunctionModel
+    grid : OrthoGrid
+    dem_path : path, optional
+        DEM GDAL reads (``RPC_DEM``), heights above the ellipsoid; else the constant ``height``.
+
+    Returns
+    -------
+    ndarray (grid.height, grid.width) float32, :data:`NODATA` outside.
+    """
+    import rasterio
+    from rasterio.rpc import RPC
+    from rasterio.warp import Resampling, reproject
+
+    g_rpc = RPC(height_off=rpc.height_offset, height_scale=rpc.height_scale, lat_off=rpc.lat_offset,
+                lat_scale=rpc.lat_scale, line_den_coeff=list(rpc.row_den), line_num_coeff=list(rpc.row_num),
+                line_off=rpc.row_offset, line_scale=rpc.row_scale, long_off=rpc.lon_offset,
+                long_scale=rpc.lon_scale, samp_den_coeff=list(rpc.col_den), samp_num_coeff=list(rpc.col_num),
+                samp_off=rpc.col_offset, samp_scale=rpc.col_scale)
+    options = {"RPC_DEM": str(dem_path)} if dem_path is not None else {"RPC_HEIGHT": float(height or 0.0)}
+    out = np.full((grid.height, grid.width), NODATA, np.float32)
+    reproject(np.asarray(source, np.float32), out, rpcs=g_rpc, src_crs="EPSG:4326", dst_crs=f"EPSG:{grid.epsg}",
+              dst_transform=rasterio.Affine(*grid.transform), resampling=Resampling.bilinear,
+              dst_nodata=float(NODATA), tolerance=0, **options)
+    return out

@@ -14,6 +14,7 @@ from explorer.ortho import (
     SceneProjector,
     SourceImage,
     default_pattern,
+    gdal_rpc_orthoimage,
     grid_covering,
     measure_geolocation,
     ortho_dask_array,
@@ -58,9 +59,6 @@ def test_geolocation_measure_detects_a_known_shift(tmp_path):
 
 
 def test_rpc_orthoimage_agrees_with_gdal_rpc_warp(tmp_path):
-    from rasterio.rpc import RPC
-    from rasterio.warp import Resampling, reproject
-
     from explorer.rpc import read_rpc
     from explorer.terrain_io import read_geotiff_dem
 
@@ -81,15 +79,7 @@ def test_rpc_orthoimage_agrees_with_gdal_rpc_warp(tmp_path):
 
     src = render_synthetic_source(to_lonlat, (n, n), pattern, tmp_path / "src.npy")
     ours = np.asarray(ortho_dask_array(RPCProjector(rpc, (n, n), dem=dem), SourceImage(src), grid, 64).compute())
-    gdal = np.full(ours.shape, NODATA, np.float32)
-    g_rpc = RPC(height_off=rpc.height_offset, height_scale=rpc.height_scale, lat_off=rpc.lat_offset,
-                lat_scale=rpc.lat_scale, line_den_coeff=list(rpc.row_den), line_num_coeff=list(rpc.row_num),
-                line_off=rpc.row_offset, line_scale=rpc.row_scale, long_off=rpc.lon_offset,
-                long_scale=rpc.lon_scale, samp_den_coeff=list(rpc.col_den), samp_num_coeff=list(rpc.col_num),
-                samp_off=rpc.col_offset, samp_scale=rpc.col_scale)
-    reproject(np.load(src), gdal, rpcs=g_rpc, src_crs="EPSG:4326", dst_crs=f"EPSG:{epsg}",
-              dst_transform=rasterio.Affine(*grid.transform), resampling=Resampling.bilinear,
-              dst_nodata=float(NODATA), RPC_DEM=str(dem_path), tolerance=0)
+    gdal = gdal_rpc_orthoimage(np.load(src), rpc, grid, dem_path)
     ours_geo = measure_geolocation(ours, grid, pattern, block=32)
     gdal_geo = measure_geolocation(gdal, grid, pattern, block=32)
     between = measure_geolocation(ours, grid, pattern, block=32, reference=gdal)
