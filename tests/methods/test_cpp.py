@@ -2,49 +2,26 @@
 check points (image grid -> ground through the rigorous model) and the brute-force
 bracketing solver of ``tests/truth.py``."""
 
-from functools import cache
 
 import numpy as np
 import pytest
 
 from explorer.errors import InputError
-from explorer.geometry.interior import InteriorOrientation
 from explorer.methods import create
 from explorer.methods.cpp import CentralPerspectivePlane
 from explorer.points import simulate_points
-from explorer.presets import build_scene, preset_ids
-from explorer.scene import Scene
+from explorer.presets import preset_ids
+from tests.methods.cases import curved_scene, scene_for, scps_for
 from tests.truth import brute_force_rows
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
-
-
-@cache
-def _scene(preset, relief=0.0):
-    return build_scene(preset, relief_m=relief, relief_seed=3)
-
-
-@cache
-def _scps(preset, relief=0.0):
-    return simulate_points(_scene(preset, relief), 2000, kind="scp")
-
-
-def _curved_scene(preset="WSU"):
-    """Offset, curved detector line and radial distortion (the plane is then a curved surface)."""
-    base = _scene(preset)
-    pitch = base.interior.detector_pitch_m
-    interior = InteriorOrientation(
-        base.interior.focal_length_m, pitch, base.n_columns, principal_column=base.n_columns / 2 - 17.7,
-        along_track_offset_m=37.2 * pitch, line_curvature=(2e-4, 3e-3), radial_distortion=(2e-3,),
-    )
-    return Scene("curved", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
 
 
 @pytest.mark.parametrize("preset", preset_ids())
 def test_exact_rows_on_every_preset(preset):
     """Straight detector line: the plane root is the best scanline, on every preset including
     ``agile`` (the planes are exact per line whatever the attitude rates; the secant absorbs them)."""
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     res = create("cpp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
@@ -53,7 +30,7 @@ def test_exact_rows_on_every_preset(preset):
 
 @pytest.mark.parametrize("preset", ["WSU", "ISB"])
 def test_exact_rows_with_relief(preset):
-    scene, scps = _scene(preset, 800.0), _scps(preset, 800.0)
+    scene, scps = scene_for(preset, 800.0), scps_for(preset, 800.0)
     assert np.ptp(scps.ground[:, 2]) > 300  # the points really are spread in height
     res = create("cpp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
@@ -61,7 +38,7 @@ def test_exact_rows_with_relief(preset):
 
 
 def test_matches_brute_force_truth_on_random_points():
-    scene = _scene("WSU", 800.0)
+    scene = scene_for("WSU", 800.0)
     rng = np.random.default_rng(11)
     row = rng.uniform(0, scene.n_rows - 1, 30)
     col = rng.uniform(0, scene.n_columns - 1, 30)
@@ -72,7 +49,7 @@ def test_matches_brute_force_truth_on_random_points():
 
 
 def test_curved_detector_and_distortion_need_the_refinement():
-    scene = _curved_scene()
+    scene = curved_scene()
     scps = simulate_points(scene, 2000, kind="scp")
     plane_only = create("cpp", scene, refine=False).ground_to_image(scps.ground)
     # the plane through the straight chord of a curved line misses by up to ~0.5 px here
@@ -88,7 +65,7 @@ def test_linear_preset_converges_after_one_plane_step():
     """Constant velocity and attitude: d(t) = n . (P - S0 - V t) is linear in t with the same slope
     for every point, so the first step (slope measured at the image centre) lands on the root and
     the second plane evaluation confirms it: at most 2 plane evaluations + 1 column CE."""
-    scene, scps = _scene("linear"), _scps("linear")
+    scene, scps = scene_for("linear"), scps_for("linear")
     res = create("cpp", scene).ground_to_image(scps.ground)
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
     assert res.ce_evaluations.max() <= 3
@@ -96,7 +73,7 @@ def test_linear_preset_converges_after_one_plane_step():
 
 @pytest.mark.parametrize("preset", ["WSU", "agile"])
 def test_out_of_image_points_are_flagged(preset):
-    scene = _scene(preset)
+    scene = scene_for(preset)
     n, m = scene.n_rows, scene.n_columns
     rows = np.array([-300.0, -5.0, -0.7, n - 0.3, n + 5.0, n + 300.0, 3.0 * n, 100.0, 100.0, -0.3, n - 0.7])
     cols = np.array([100.0] * 7 + [-50.0, m + 20.0, 100.0, 100.0])
@@ -119,7 +96,7 @@ def test_ce_per_point_is_plausible(preset, max_ce):
     the 1e-7-row tolerance in 2-3 more: measured <= 4 plane evaluations, bound 5 (+1 column).  The
     strong, varying rates of ``agile`` change the spacing by a few per cent (first step up to ~130
     rows off), costing 2 more secant steps: measured <= 6, bound 7 (+1 column)."""
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     method = create("cpp", scene)
     res = method.ground_to_image(scps.ground)
     assert method.setup_ce == 3
@@ -128,7 +105,7 @@ def test_ce_per_point_is_plausible(preset, max_ce):
 
 
 def test_trace_converges_to_exact_row():
-    scene, scps = _scene("ISB"), _scps("ISB").sample(300, seed=1)
+    scene, scps = scene_for("ISB"), scps_for("ISB").sample(300, seed=1)
     res = create("cpp", scene).ground_to_image(scps.ground, trace=True)
     assert res.trace is not None and len(res.trace) >= 3
     assert all(t.shape == scps.row.shape for t in res.trace)
@@ -140,11 +117,11 @@ def test_trace_converges_to_exact_row():
 
 
 def test_registry_and_parameters():
-    scene = _scene("WSU")
+    scene = scene_for("WSU")
     assert isinstance(create("cpp", scene), CentralPerspectivePlane)
     assert CentralPerspectivePlane.family == "search" and not CentralPerspectivePlane.needs_fit
     assert create("cpp", scene).refine is False  # straight undistorted line: plane root is exact
-    assert create("cpp", _curved_scene()).refine is True
+    assert create("cpp", curved_scene()).refine is True
     with pytest.raises(InputError):
         create("cpp", scene, tol=0.0)
     with pytest.raises(InputError):

@@ -1,48 +1,27 @@
 """GDP (general distance prediction) against independent truth: the exact rows of simulated
 check points and the brute-force bracketing solver of ``tests/truth.py``."""
 
-from functools import cache
 
 import numpy as np
 import pytest
 
 from explorer.errors import InputError
-from explorer.geometry.interior import InteriorOrientation
 from explorer.methods import create
 from explorer.methods.gdp import GeneralDistancePrediction
 from explorer.points import simulate_points
-from explorer.presets import build_scene, preset_ids
-from explorer.scene import Scene
+from explorer.presets import preset_ids
+from tests.methods.cases import curved_scene, interpolation_bound, scene_for, scps_for
 from tests.truth import brute_force_rows
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
 SMOOTH_PRESETS = [p for p in preset_ids() if p != "agile"]
 
 
-@cache
-def _scene(preset, relief=0.0, jitter=1.0):
-    return build_scene(preset, relief_m=relief, relief_seed=3, jitter_amplitude_scale=jitter)
-
-
-@cache
-def _scps(preset, relief=0.0, jitter=1.0):
-    return simulate_points(_scene(preset, relief, jitter), 2000, kind="scp")
-
-
-def _interpolation_bound(scene, ground, row):
-    """Independent bound (rows) of linear interpolation of the residual between the integer lines
-    around ``row``: |x''| / (8 |x'|), x'' from second differences on the lines around them."""
-    l1 = np.floor(row)
-    f = np.array([scene.along_track_residual(ground, scene.scanline_time(l1 + k)) for k in (-1, 0, 1, 2)])
-    d2 = np.maximum(np.abs(f[0] - 2 * f[1] + f[2]), np.abs(f[1] - 2 * f[2] + f[3]))
-    return d2 / (8 * np.abs(f[2] - f[1]))
-
-
 @pytest.mark.parametrize("preset", SMOOTH_PRESETS)
 def test_exact_rows_on_smooth_presets(preset):
     """Smooth orbit and attitude: the linear interpolation between the bracketing lines is exact to
     ~1e-7 px (the residual is straight to that level over one line)."""
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     res = create("gdp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
@@ -52,7 +31,7 @@ def test_exact_rows_on_smooth_presets(preset):
 def test_agile_attitude_rates_alone_meet_the_bar():
     """``agile`` without its jitter (strong body rates and accelerations only): prediction from the
     first line still converges and the interpolation stays below the bar (measured 3.1e-7 px)."""
-    scene, scps = _scene("agile", jitter=0.0), _scps("agile", jitter=0.0)
+    scene, scps = scene_for("agile", jitter=0.0), scps_for("agile", jitter=0.0)
     res = create("gdp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
@@ -65,11 +44,11 @@ def test_agile_with_jitter_is_limited_by_the_linear_interpolation():
     x(row) by |x''| up to 6.6e-4 px/row^2, so the interpolation misses by up to |x''|/(8|x'|) ~ 7.6e-5
     rows (measured: max 6.7e-5 px, RMSE 3.5e-5 px on 2000 SCPs).  The test checks every point
     against that independently computed bound and the paper's own claim (better than 1e-4 px)."""
-    scene, scps = _scene("agile"), _scps("agile")
+    scene, scps = scene_for("agile"), scps_for("agile")
     res = create("gdp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     err = np.abs(res.row - scps.row)
-    bound = _interpolation_bound(scene, scps.ground, scps.row)
+    bound = interpolation_bound(scene, scps.ground, scps.row)
     assert np.all(err <= 1.05 * bound + 1e-10)
     assert err.max() < 1e-4
     assert err.max() > BAR_PX  # the limitation is real: interpolation, not convergence
@@ -77,7 +56,7 @@ def test_agile_with_jitter_is_limited_by_the_linear_interpolation():
 
 @pytest.mark.parametrize("preset", ["WSU", "ISB"])
 def test_exact_rows_with_relief(preset):
-    scene, scps = _scene(preset, 800.0), _scps(preset, 800.0)
+    scene, scps = scene_for(preset, 800.0), scps_for(preset, 800.0)
     assert np.ptp(scps.ground[:, 2]) > 300
     res = create("gdp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
@@ -85,7 +64,7 @@ def test_exact_rows_with_relief(preset):
 
 
 def test_matches_brute_force_truth_on_random_points():
-    scene = _scene("WSU", 800.0)
+    scene = scene_for("WSU", 800.0)
     rng = np.random.default_rng(11)
     row = rng.uniform(0, scene.n_rows - 1, 30)
     col = rng.uniform(0, scene.n_columns - 1, 30)
@@ -97,13 +76,7 @@ def test_matches_brute_force_truth_on_random_points():
 
 def test_curved_detector_and_distortion():
     """The generalized distance is measured to the curved line x_det(y): no planarity assumed."""
-    base = _scene("WSU")
-    pitch = base.interior.detector_pitch_m
-    interior = InteriorOrientation(
-        base.interior.focal_length_m, pitch, base.n_columns, principal_column=base.n_columns / 2 - 17.7,
-        along_track_offset_m=37.2 * pitch, line_curvature=(2e-4, 3e-3), radial_distortion=(2e-3,),
-    )
-    scene = Scene("curved", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
+    scene = curved_scene()
     scps = simulate_points(scene, 2000, kind="scp")
     res = create("gdp", scene).ground_to_image(scps.ground)
     assert res.valid.all()
@@ -112,7 +85,7 @@ def test_curved_detector_and_distortion():
 
 @pytest.mark.parametrize("preset", ["WSU", "agile"])
 def test_out_of_image_points_are_flagged(preset):
-    scene = _scene(preset)
+    scene = scene_for(preset)
     n, m = scene.n_rows, scene.n_columns
     rows = np.array([-300.0, -5.0, -1.2, n + 0.2, n + 5.0, n + 300.0, -0.7, n - 0.3, 100.0, 100.0, -0.3, n - 0.7])
     cols = np.array([100.0] * 8 + [-50.0, m + 20.0, 100.0, 100.0])
@@ -134,7 +107,7 @@ def test_ce_per_point_is_plausible(preset, max_ce):
     plus 0.5 of rounding: from the first line (<= 8300 lines away) 8300 -> 333 -> 14 -> 1.1 -> < 1,
     i.e. <= 4-5 predictions, + 1 neighbour + 1 column <= 7.  On ``agile`` the slope is up to 1.14
     (14 % left per prediction): 6000 -> 840 -> 118 -> 17 -> 2.9 -> < 1, 6 predictions, <= 9."""
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     method = create("gdp", scene)
     res = method.ground_to_image(scps.ground)
     assert method.setup_ce == 0
@@ -143,7 +116,7 @@ def test_ce_per_point_is_plausible(preset, max_ce):
 
 
 def test_trace_converges_to_exact_row():
-    scene, scps = _scene("ISB"), _scps("ISB").sample(300, seed=1)
+    scene, scps = scene_for("ISB"), scps_for("ISB").sample(300, seed=1)
     res = create("gdp", scene).ground_to_image(scps.ground, trace=True)
     assert res.trace is not None and len(res.trace) >= 3
     assert all(t.shape == scps.row.shape for t in res.trace)
@@ -159,14 +132,14 @@ def test_trace_converges_to_exact_row():
 
 
 def test_registry_and_parameters():
-    scene = _scene("WSU")
+    scene = scene_for("WSU")
     assert isinstance(create("gdp", scene), GeneralDistancePrediction)
     with pytest.raises(InputError):
         create("gdp", scene, tol=0.2)
     with pytest.raises(InputError):
         create("gdp", scene, start_row=0.5)
     # starting from the last line instead of the first changes the path, not the answer
-    scps = _scps("WSU").sample(200, seed=2)
+    scps = scps_for("WSU").sample(200, seed=2)
     a = create("gdp", scene).ground_to_image(scps.ground)
     b = create("gdp", scene, start_row=scene.n_rows - 1).ground_to_image(scps.ground)
     np.testing.assert_allclose(a.row, b.row, atol=1e-9)

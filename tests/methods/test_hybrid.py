@@ -1,42 +1,21 @@
 """Hybrid object-space method (Jannati) against independent truth: the exact rows of simulated
 check points and the brute-force bracketing solver of ``tests/truth.py``."""
 
-from functools import cache
 
 import numpy as np
 import pytest
 
 from explorer.errors import InputError
-from explorer.geometry.interior import InteriorOrientation
 from explorer.methods import create
 from explorer.methods._common import weighted_mean_row
 from explorer.methods.hybrid import HybridObjectSpace
 from explorer.points import simulate_points
-from explorer.presets import build_scene, preset_ids
-from explorer.scene import Scene
+from explorer.presets import preset_ids
+from tests.methods.cases import curved_scene, interpolation_bound, scene_for, scps_for
 from tests.truth import brute_force_rows
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
 SMOOTH_PRESETS = [p for p in preset_ids() if p != "agile"]
-
-
-@cache
-def _scene(preset, relief=0.0, jitter=1.0):
-    return build_scene(preset, relief_m=relief, relief_seed=3, jitter_amplitude_scale=jitter)
-
-
-@cache
-def _scps(preset, relief=0.0, jitter=1.0):
-    return simulate_points(_scene(preset, relief, jitter), 2000, kind="scp")
-
-
-def _interpolation_bound(scene, ground, row):
-    """Independent bound (rows) of linear interpolation of the residual between the integer lines
-    around ``row``: |x''| / (8 |x'|), x'' from second differences on the lines around them."""
-    l1 = np.floor(row)
-    f = np.array([scene.along_track_residual(ground, scene.scanline_time(l1 + k)) for k in (-1, 0, 1, 2)])
-    d2 = np.maximum(np.abs(f[0] - 2 * f[1] + f[2]), np.abs(f[1] - 2 * f[2] + f[3]))
-    return d2 / (8 * np.abs(f[2] - f[1]))
 
 
 def test_eq4_weighted_mean_is_the_linear_root():
@@ -48,7 +27,7 @@ def test_eq4_weighted_mean_is_the_linear_root():
 
 @pytest.mark.parametrize("preset", SMOOTH_PRESETS)
 def test_exact_rows_on_smooth_presets(preset):
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     res = create("hybrid", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
@@ -58,7 +37,7 @@ def test_exact_rows_on_smooth_presets(preset):
 def test_agile_attitude_rates_alone_meet_the_bar():
     """``agile`` without its jitter: the stage-1 projective approximation stays within 0.02 line and
     eq. 4 is exact to 3e-7 px."""
-    scene, scps = _scene("agile", jitter=0.0), _scps("agile", jitter=0.0)
+    scene, scps = scene_for("agile", jitter=0.0), scps_for("agile", jitter=0.0)
     res = create("hybrid", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     assert np.max(np.abs(res.row - scps.row)) < BAR_PX
@@ -71,11 +50,11 @@ def test_agile_with_jitter_is_limited_by_the_eq4_interpolation():
     x(row) by |x''| up to 6.6e-4 px/row^2, so eq. 4 misses by up to |x''|/(8|x'|) ~ 7.6e-5 rows
     (measured: max 6.7e-5 px, RMSE 3.5e-5 px on 2000 SCPs).  Every point is checked against that
     independently computed bound."""
-    scene, scps = _scene("agile"), _scps("agile")
+    scene, scps = scene_for("agile"), scps_for("agile")
     res = create("hybrid", scene).ground_to_image(scps.ground)
     assert res.valid.all()
     err = np.abs(res.row - scps.row)
-    bound = _interpolation_bound(scene, scps.ground, scps.row)
+    bound = interpolation_bound(scene, scps.ground, scps.row)
     assert np.all(err <= 1.05 * bound + 1e-10)
     assert err.max() < 1e-4
     assert err.max() > BAR_PX  # the limitation is real: interpolation, not the bracketing
@@ -83,7 +62,7 @@ def test_agile_with_jitter_is_limited_by_the_eq4_interpolation():
 
 @pytest.mark.parametrize("preset", ["WSU", "ISB"])
 def test_exact_rows_with_relief(preset):
-    scene, scps = _scene(preset, 800.0), _scps(preset, 800.0)
+    scene, scps = scene_for(preset, 800.0), scps_for(preset, 800.0)
     assert np.ptp(scps.ground[:, 2]) > 300
     res = create("hybrid", scene).ground_to_image(scps.ground)
     assert res.valid.all()
@@ -91,7 +70,7 @@ def test_exact_rows_with_relief(preset):
 
 
 def test_matches_brute_force_truth_on_random_points():
-    scene = _scene("WSU", 800.0)
+    scene = scene_for("WSU", 800.0)
     rng = np.random.default_rng(11)
     row = rng.uniform(0, scene.n_rows - 1, 30)
     col = rng.uniform(0, scene.n_columns - 1, 30)
@@ -102,13 +81,7 @@ def test_matches_brute_force_truth_on_random_points():
 
 
 def test_curved_detector_and_distortion():
-    base = _scene("WSU")
-    pitch = base.interior.detector_pitch_m
-    interior = InteriorOrientation(
-        base.interior.focal_length_m, pitch, base.n_columns, principal_column=base.n_columns / 2 - 17.7,
-        along_track_offset_m=37.2 * pitch, line_curvature=(2e-4, 3e-3), radial_distortion=(2e-3,),
-    )
-    scene = Scene("curved", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
+    scene = curved_scene()
     scps = simulate_points(scene, 2000, kind="scp")
     res = create("hybrid", scene).ground_to_image(scps.ground)
     assert res.valid.all()
@@ -121,7 +94,7 @@ def test_stage1_approximation_is_built_from_the_rigorous_model(approximation):
     setup cost).  On WSU with 800 m relief the projective transformation is within 1e-4 line of the
     exact rows (measured 7e-6), the affine within 0.5 line (measured 0.14); the final rows are exact
     either way."""
-    scene, scps = _scene("WSU", 800.0), _scps("WSU", 800.0)
+    scene, scps = scene_for("WSU", 800.0), scps_for("WSU", 800.0)
     method = create("hybrid", scene, approximation=approximation)
     assert method.setup_ce == 18
     approx_err = np.abs(method.approximate_rows(scps.ground) - scps.row)
@@ -132,7 +105,7 @@ def test_stage1_approximation_is_built_from_the_rigorous_model(approximation):
 
 @pytest.mark.parametrize("preset", ["WSU", "agile"])
 def test_out_of_image_points_are_flagged(preset):
-    scene = _scene(preset)
+    scene = scene_for(preset)
     n, m = scene.n_rows, scene.n_columns
     rows = np.array([-300.0, -5.0, -1.2, n + 0.2, n + 5.0, n + 300.0, -0.7, n - 0.3, 100.0, 100.0, -0.3, n - 0.7])
     cols = np.array([100.0] * 8 + [-50.0, m + 20.0, 100.0, 100.0])
@@ -153,7 +126,7 @@ def test_ce_per_point_is_plausible(preset, max_ce, max_mean):
     approximation is within 5e-4 line, so the two lines around it bracket the root unless it sits
     within 5e-4 of an integer line on the wrong side (one widening): 3 CE, rarely 4.  On ``agile`` the
     smooth approximation cannot follow the jitter (up to 5 lines off), so up to 6 widenings: <= 9."""
-    scene, scps = _scene(preset), _scps(preset)
+    scene, scps = scene_for(preset), scps_for(preset)
     method = create("hybrid", scene)
     res = method.ground_to_image(scps.ground)
     assert res.ce_evaluations.min() == 3
@@ -162,7 +135,7 @@ def test_ce_per_point_is_plausible(preset, max_ce, max_mean):
 
 
 def test_trace_converges_to_exact_row():
-    scene, scps = _scene("ISB"), _scps("ISB").sample(300, seed=1)
+    scene, scps = scene_for("ISB"), scps_for("ISB").sample(300, seed=1)
     method = create("hybrid", scene)
     res = method.ground_to_image(scps.ground, trace=True)
     assert res.trace is not None and len(res.trace) >= 4
@@ -177,7 +150,7 @@ def test_trace_converges_to_exact_row():
 
 
 def test_registry_and_parameters():
-    scene = _scene("WSU")
+    scene = scene_for("WSU")
     assert isinstance(create("hybrid", scene), HybridObjectSpace)
     with pytest.raises(InputError):
         create("hybrid", scene, approximation="spline")
