@@ -236,7 +236,7 @@ class SigmoidMLP:
 
 
 @contextmanager
-def torch_threads(n: int) -> Iterator[None]:
+def torch_threads(n: int = 1) -> Iterator[None]:
     """Run torch CPU ops on ``n`` threads inside the block, then restore the setting.
 
     The networks here are tiny (tens of points, tens to thousands of parameters): with
@@ -244,7 +244,7 @@ def torch_threads(n: int) -> Iterator[None]:
     multi-threaded Jacobian is 10x slower than a single-threaded one.
     """
     old = torch.get_num_threads()
-    torch.set_num_threads(n)
+    torch.set_num_threads(max(1, int(n)))
     try:
         yield
     finally:
@@ -302,6 +302,7 @@ def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float) -> torch.Tensor:
     return sol if p <= n else jac.T @ sol
 
 
+@torch_threads(1)
 def levenberg_marquardt(
     net: SigmoidMLP,
     theta0: torch.Tensor,
@@ -349,32 +350,6 @@ def levenberg_marquardt(
     -------
     LMResult
     """
-    with torch_threads(1):
-        return _lm_run(
-            net, theta0, x_train, y_train, x_val, y_val, max_epochs=max_epochs, mu=mu, mu_dec=mu_dec,
-            mu_inc=mu_inc, mu_max=mu_max, min_grad=min_grad, goal=goal, max_fail=max_fail, device=device,
-        )
-
-
-def _lm_run(
-    net: SigmoidMLP,
-    theta0: torch.Tensor,
-    x_train: np.ndarray,
-    y_train: np.ndarray,
-    x_val: np.ndarray,
-    y_val: np.ndarray,
-    *,
-    max_epochs: int = 1000,
-    mu: float = 1e-3,
-    mu_dec: float = 0.1,
-    mu_inc: float = 10.0,
-    mu_max: float = 1e10,
-    min_grad: float = 1e-12,
-    goal: float = 0.0,
-    max_fail: int = 6,
-    device: str | torch.device = "cpu",
-) -> LMResult:
-    """Body of :func:`levenberg_marquardt`."""
     dev = torch.device(device)
 
     def tensor(a: np.ndarray) -> torch.Tensor:

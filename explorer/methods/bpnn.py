@@ -34,13 +34,13 @@ Conventions: ``docs/conventions.md`` (rows/cols 0-based pixel centre, local ENU 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 
 from explorer.errors import InputError, NotFittedError, check_finite
+from explorer.methods._lm import torch_threads
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -48,21 +48,6 @@ from explorer.scene import Scene
 __all__ = ["BPNetworkGeometryModel", "BPNNMethod", "MLPRegressor", "compare_bpnn_rfm", "torch_threads"]
 
 _DTYPE = torch.float64
-
-
-@contextmanager
-def torch_threads(n: int = 1) -> Iterator[None]:
-    """Run a block with ``n`` torch intra-op threads, restoring the previous count afterwards.
-
-    These networks have tens to hundreds of parameters: one thread is the fastest, and on a
-    shared, loaded machine several threads spin and can be hundreds of times slower.
-    """
-    old = torch.get_num_threads()
-    torch.set_num_threads(max(1, int(n)))
-    try:
-        yield
-    finally:
-        torch.set_num_threads(old)
 
 
 def _normaliser(values: np.ndarray, min_scale: float) -> tuple[float, float, bool]:
