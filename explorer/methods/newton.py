@@ -134,6 +134,23 @@ def residual_and_derivative(
     return f, dfdr, inner.y_to_column(yd)
 
 
+def _kernel_params(scene: Scene, *, required: bool):
+    """The scene packed for the compiled kernels, or None where they do not apply (no numba, not an
+    MPC scene) and ``required`` is False."""
+    from explorer.geometry.kernels import NUMBA_AVAILABLE, CollinearityParams
+
+    reason = None if NUMBA_AVAILABLE else "numba is not available"
+    params = None
+    if reason is None:
+        try:
+            params = CollinearityParams.from_scene(scene)
+        except AttributeError:
+            reason = f"{scene.name} is not an MPC scene (no orbit and attitude polynomials)"
+    if params is None and required:
+        raise ValueError(f"evaluator='compiled' does not apply: {reason}")
+    return params
+
+
 @register
 class NewtonRaphson(BestScanlineMethod):
     """Safeguarded Newton-Raphson on the along-track collinearity residual (Chen & Rau 1993).
@@ -158,11 +175,13 @@ class NewtonRaphson(BestScanlineMethod):
         the residual over +-``fd_step_px`` rows (3 CE per iteration).
     fd_step_px : float
         Step of the central difference, rows (default 0.5).
-    evaluator : {"numpy", "compiled"}
-        How the residual and its analytic derivative are evaluated: vectorised numpy (default, the
-        plain method the benchmark compares against) or the compiled kernel of
-        :func:`explorer.geometry.kernels.residual_and_rate` (same numbers to round-off, several times
-        faster; MPC scenes only).  The iteration is the same either way.
+    evaluator : {"auto", "compiled", "numpy"}
+        ``"compiled"``: the whole iteration of each point in one numba ``prange`` loop
+        (:func:`explorer.geometry.newton_kernel.solve_newton_raphson`; MPC scenes, numba); ``"numpy"``:
+        the plain vectorised loop over the points still iterating (the naive baseline of
+        ``docs/performance.md``); ``"auto"`` (default): compiled where it applies, else numpy.  Same
+        iteration and decisions either way; the residuals differ by round-off (about 1e-10 px).
+        Traces (``trace=True``) and ``derivative="central"`` always use the numpy loop.
     """
 
     name: ClassVar[str] = "nr"
@@ -185,10 +204,10 @@ class NewtonRaphson(BestScanlineMethod):
         margin_px: float = 1.0,
         derivative: str = "analytic",
         fd_step_px: float = 0.5,
-        evaluator: str = "numpy",
+        evaluator: str = "auto",
     ) -> None:
-        if evaluator not in ("numpy", "compiled"):
-            raise ValueError(f"evaluator must be 'numpy' or 'compiled', got {evaluator!r}")
+        if evaluator not in ("auto", "compiled", "numpy"):
+            raise ValueError(f"evaluator must be 'auto', 'compiled' or 'numpy', got {evaluator!r}")
         if evaluator == "compiled" and derivative != "analytic":
             raise ValueError("the compiled evaluator gives the analytic derivative only")
         if derivative not in DERIVATIVES:
@@ -200,6 +219,9 @@ class NewtonRaphson(BestScanlineMethod):
         super().__init__(scene, start=start, tol_px=tol_px, max_iter=max_iter, margin_px=margin_px,
                          derivative=derivative, fd_step_px=fd_step_px, evaluator=evaluator)
         self.evaluator = evaluator
+        self.kernel_params = None
+        if evaluator != "numpy" and derivative == "analytic":
+            self.kernel_params = _kernel_params(scene, required=evaluator == "compiled")
         self.start = start
         self.tol_px = float(tol_px)
         self.max_iter = int(max_iter)
@@ -223,11 +245,11 @@ class NewtonRaphson(BestScanlineMethod):
 
     def _evaluate(self, ground: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """Residual (px), derivative (px/row), column and the CE spent per point."""
-        if self.evaluator == "compiled":
+        if self.kernel_params is not None:  # compiled evaluation inside the numpy loop (traces)
             from explorer.geometry.kernels import residual_and_rate
 
             sc = self.scene
-            g, g_t, c = residual_and_rate(sc, ground, sc.scanline_time(rows))
+            g, g_t, c = residual_and_rate(self.kernel_params, ground, sc.scanline_time(rows))
             return g / sc.pixel_size_m, g_t * (sc.timing.line_period_s / sc.pixel_size_m), c, 1
         if self.derivative == "analytic":
             f, d, c = residual_and_derivative(self.scene, ground, rows)
@@ -245,6 +267,15 @@ class NewtonRaphson(BestScanlineMethod):
         start = self.start_row
         if not lo0 <= start <= hi0:
             raise ValueError(f"start row {start} is outside the bracket [{lo0}, {hi0}]")
+        if self.kernel_params is not None and not trace:
+            from explorer.geometry.newton_kernel import solve_newton_raphson
+
+            row, col, converged, ce = solve_newton_raphson(
+                self.kernel_params, ground, start_row=start, bracket=(lo0, hi0), tol=self.tol_px,
+                max_iter=self.max_iter,
+            )
+            info = {"iterations": ce, "start_row": start, "bracket": (lo0, hi0), "evaluator": "compiled"}
+            return self._result(ground, row, converged, ce, col=col, info=info)
         row_out = np.full(n, np.nan)
         col_out = np.full(n, np.nan)
         converged = np.zeros(n, dtype=bool)
@@ -302,5 +333,5 @@ class NewtonRaphson(BestScanlineMethod):
             t, lo, hi = t_next[keep], lo[keep], hi[keep]
             lo_known, hi_known, f_prev = lo_known[keep], hi_known[keep], np.abs(f[keep])
         # points still active hit max_iter: last iterate, converged False (already stored)
-        info = {"iterations": iterations, "start_row": start, "bracket": (lo0, hi0)}
+        info = {"iterations": iterations, "start_row": start, "bracket": (lo0, hi0), "evaluator": "numpy"}
         return self._result(ground, row_out, converged, ce, col=col_out, trace=tr, info=info)

@@ -125,13 +125,14 @@ def test_central_difference_variant_costs_three_ce_per_iteration():
     np.testing.assert_array_equal(res.ce_evaluations, 3 * res.info["iterations"])
 
 
-def test_out_of_image_points_are_flagged():
+@pytest.mark.parametrize("evaluator", ["numpy", "compiled"])
+def test_out_of_image_points_are_flagged(evaluator):
     scene = _scene("WSU")
     rows, cols = scene.n_rows, scene.n_columns
     r = np.array([-50.0, rows + 50.0, 1000.3, 900.6, -0.7, -0.3, rows - 0.7, rows - 0.2, rows + 0.4])
     c = np.array([100.0, 100.0, -100.0, cols + 100.0, 50.0, 50.0, 60.0, 60.0, 70.0])
     ground = scene.image_to_ground(r, c, height=scene.terrain.mean_height)
-    res = create("nr", scene).ground_to_image(ground)
+    res = create("nr", scene, evaluator=evaluator).ground_to_image(ground)
     # beyond the bracket [-1.5, rows + 0.5]: no root, converged False, row NaN, found in <= 3 CE
     np.testing.assert_array_equal(res.converged, [False, False] + [True] * 7)
     np.testing.assert_array_equal(res.inside, [False, False, False, False, False, True, True, False, False])
@@ -141,7 +142,7 @@ def test_out_of_image_points_are_flagged():
     np.testing.assert_allclose(res.row[2:], r[2:], atol=1e-9)
     np.testing.assert_allclose(res.col[2:], c[2:], atol=1e-8)
     # a wider margin finds the far points too (and still flags them)
-    wide = create("nr", scene, margin_px=60.0).ground_to_image(ground[:2])
+    wide = create("nr", scene, margin_px=60.0, evaluator=evaluator).ground_to_image(ground[:2])
     assert np.all(wide.converged) and not np.any(wide.inside)
     np.testing.assert_allclose(wide.row, r[:2], atol=1e-9)
 
@@ -163,24 +164,26 @@ def test_trace_converges_to_the_exact_row():
         assert np.all(np.isnan(tr[e.size:, j]))
 
 
-def test_max_iter_gives_not_converged_best_estimate():
+@pytest.mark.parametrize("evaluator", ["numpy", "compiled"])
+def test_max_iter_gives_not_converged_best_estimate(evaluator):
     scene = _scene("WSU")
     row, col, ground = _points(scene, 100, seed=8)
-    res = create("nr", scene, max_iter=1).ground_to_image(ground)
+    res = create("nr", scene, max_iter=1, evaluator=evaluator).ground_to_image(ground)
     assert not np.any(res.converged)
     np.testing.assert_array_equal(res.row, scene.timing.reference_row)
     np.testing.assert_array_equal(res.ce_evaluations, 1)
-    res2 = create("nr", scene, max_iter=2).ground_to_image(ground)
+    res2 = create("nr", scene, max_iter=2, evaluator=evaluator).ground_to_image(ground)
     assert not np.any(res2.converged)
     # one Newton step from the centre of a near-linear x(t): already within half a pixel
     assert np.all(np.abs(res2.row - row) < 0.5)
 
 
+@pytest.mark.parametrize("evaluator", ["numpy", "compiled"])
 @pytest.mark.parametrize("start", ["centre", 0.0, 3000.5])
-def test_start_row_does_not_change_the_answer(start):
+def test_start_row_does_not_change_the_answer(start, evaluator):
     scene = _scene("WSU")
     row, col, ground = _points(scene, 500, seed=9)
-    res = create("nr", scene, start=start).ground_to_image(ground)
+    res = create("nr", scene, start=start, evaluator=evaluator).ground_to_image(ground)
     assert np.all(res.valid)
     assert np.max(np.abs(res.row - row)) < 1e-9
 
@@ -190,23 +193,53 @@ def test_chunked_evaluation_gives_identical_results(monkeypatch):
 
     scene = _scene("agile")
     row, col, ground = _points(scene, 700, seed=10)
-    ref = create("nr", scene).ground_to_image(ground)
+    ref = create("nr", scene, evaluator="numpy").ground_to_image(ground)
     monkeypatch.setattr(newton, "CHUNK", 256)
-    res = create("nr", scene).ground_to_image(ground)
+    res = create("nr", scene, evaluator="numpy").ground_to_image(ground)
     np.testing.assert_array_equal(res.row, ref.row)
     np.testing.assert_array_equal(res.col, ref.col)
 
 
-@pytest.mark.parametrize("preset", ["WSU", "agile"])
+@pytest.mark.parametrize("preset", ["WSU", "agile", "ISB"])
 def test_compiled_evaluator_gives_the_same_rows(preset):
-    """The compiled residual kernel changes the speed of NR, not its answer (exact SCP rows as truth)."""
+    """The compiled iteration changes the speed of NR, not its answer (exact SCP rows as truth)."""
     scene = build_scene(preset, relief_m=500.0, relief_seed=1)
     pts = simulate_points(scene, 2000, kind="scp")
-    plain = create("nr", scene).ground_to_image(pts.ground)
+    plain = create("nr", scene, evaluator="numpy").ground_to_image(pts.ground)
     fast = create("nr", scene, evaluator="compiled").ground_to_image(pts.ground)
+    assert fast.info["evaluator"] == "compiled" and plain.info["evaluator"] == "numpy"
     assert np.max(np.abs(fast.row - pts.row)) < 1e-9
+    assert np.max(np.abs(fast.col - pts.col)) < 1e-8
     assert np.max(np.abs(fast.row - plain.row)) < 1e-9
+    assert np.max(np.abs(fast.col - plain.col)) < 1e-9
+    np.testing.assert_array_equal(fast.converged, plain.converged)
     # the same iteration: round-off in the stopping test may move a point by one iteration at most
     assert np.max(np.abs(fast.ce_evaluations - plain.ce_evaluations)) <= 1
+    assert np.mean(fast.ce_evaluations == plain.ce_evaluations) > 0.9
     with pytest.raises(ValueError, match="evaluator"):
         create("nr", scene, evaluator="gpu")
+
+
+def test_compiled_evaluator_on_a_curved_detector_and_without_numba_support(monkeypatch):
+    """The general (non branch-free) evaluator inside the compiled loop, and the fallback to numpy."""
+    import explorer.geometry.kernels as kernels
+
+    base = _curved_scene()
+    inner = base.interior
+    interior = InteriorOrientation(
+        inner.focal_length_m, inner.detector_pitch_m, base.n_columns, principal_column=inner.principal_column,
+        along_track_offset_m=inner.along_track_offset_m, line_curvature=(2e-4, 3e-3, 1e-2, 5e-2, 0.0, 0.0, 0.0, 0.0, 1e3),  # 9 > FIXED_MAX_TERMS
+        radial_distortion=inner.radial_distortion,
+    )
+    scene = Scene("curved4", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
+    fast_nr = create("nr", scene, evaluator="compiled")
+    assert fast_nr.kernel_params.fixed_model(fast_nr.bracket) is None  # the general evaluator runs
+    row, col, ground = _points(scene, 1000, seed=11)
+    fast = fast_nr.ground_to_image(ground)
+    assert np.all(fast.valid)
+    assert np.max(np.abs(fast.row - row)) < 1e-9 and np.max(np.abs(fast.col - col)) < 1e-8
+    monkeypatch.setattr(kernels, "NUMBA_AVAILABLE", False)
+    auto = create("nr", scene)
+    assert auto.kernel_params is None
+    with pytest.raises(ValueError, match="numba"):
+        create("nr", scene, evaluator="compiled")
