@@ -228,7 +228,8 @@ def test_compiled_evaluator_on_a_curved_detector_and_without_numba_support(monke
     inner = base.interior
     interior = InteriorOrientation(
         inner.focal_length_m, inner.detector_pitch_m, base.n_columns, principal_column=inner.principal_column,
-        along_track_offset_m=inner.along_track_offset_m, line_curvature=(2e-4, 3e-3, 1e-2, 5e-2, 0.0, 0.0, 0.0, 0.0, 1e3),  # 9 > FIXED_MAX_TERMS
+        along_track_offset_m=inner.along_track_offset_m,
+        line_curvature=(2e-4, 3e-3, 1e-2, 5e-2, 0.0, 0.0, 0.0, 0.0, 1e3),  # 9 terms > FIXED_MAX_TERMS
         radial_distortion=inner.radial_distortion,
     )
     scene = Scene("curved4", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
