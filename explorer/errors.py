@@ -48,10 +48,12 @@ def as_points(ground: np.ndarray, name: str = "ground") -> np.ndarray:
 def check_finite(values: np.ndarray, name: str) -> np.ndarray:
     """Raise :class:`InputError` naming ``name`` and the first bad index if any value is not finite."""
     arr = np.asarray(values, dtype=np.float64)
+    if arr.size and np.isfinite(np.add.reduce(arr, axis=None)):
+        return arr  # a NaN or an infinity makes the sum non-finite; the element check runs otherwise
     bad = ~np.isfinite(arr)
     if bad.any():
-        first = np.argwhere(bad)[0]
+        first = tuple(int(v) for v in np.argwhere(bad)[0])
         raise InputError(
-            f"{name} contains {int(bad.sum())} NaN/infinite value(s); first at index {tuple(first)}"
+            f"{name} contains {int(bad.sum())} NaN/infinite value(s); first at index {first}"
         )
     return arr

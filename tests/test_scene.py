@@ -153,6 +153,17 @@ def test_nan_inputs_raise():
         scene.rays(np.array([1.0]), np.array([np.inf]))
 
 
+def test_finite_check_names_nan_and_inf_and_passes_huge_finite_values():
+    from explorer.errors import as_points, check_finite
+
+    with pytest.raises(InputError, match=r"2 NaN/infinite value\(s\); first at index \(1, 0\)"):
+        as_points(np.array([[1.0, 2.0, 3.0], [np.nan, 0.0, 0.0], [0.0, -np.inf, 0.0]]))
+    with pytest.raises(InputError, match="ground"):
+        as_points(np.array([[np.inf, -np.inf, 0.0]]))  # the sum is NaN, not inf
+    huge = np.full((4, 3), 1e308)  # the fast path's sum overflows; the values are finite
+    assert as_points(huge) is not None and check_finite(huge, "x") is not None
+
+
 def test_mpc_polynomials_any_degree_and_jitter_derivative():
     pos = np.array([[1.0, 2.0, 0.5, 0.1], [0.0, 1.0, 0.0, 0.0], [700e3, 0.0, -4.0, 0.0]])
     att = np.array([[0.01, 1e-3, 1e-4, 1e-5], [0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 2e-6]])

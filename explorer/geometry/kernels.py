@@ -785,6 +785,78 @@ def residual_and_rate(
     return g, gt, p.to_columns(yd / p.pitch + p.principal_column)
 
 
+# --------------------------------------------------------------------------- column at given rows
+COLUMN_WINDOW_MARGIN = 64.0  # rows beyond the image where the column kernel uses the fixed evaluator
+
+
+@njit(parallel=True, fastmath=False, cache=True)
+def _column_fixed_nb(ground, rows, fx, focal, offset, pitch, pc, line_period, ref_row, r_lo, r_hi, col_out):
+    # pragma: no cover - compiled
+    P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
+    n_out = 0
+    for i in prange(ground.shape[0]):
+        r = rows[i]
+        inside = (r >= r_lo) & (r <= r_hi)  # False for NaN
+        rr = r if inside else r_lo
+        _, _, yd, _, _ = _ce_fixed(
+            ground[i, 0], ground[i, 1], ground[i, 2], (rr - ref_row) * line_period, P, V, A, AR, sc0f, jn, jp, jt,
+            js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset,
+        )
+        col_out[i] = yd / pitch + pc if inside else np.nan
+        n_out += 0 if inside or not np.isfinite(r) else 1
+    return n_out
+
+
+def collinearity_params_or_none(scene: Scene) -> CollinearityParams | None:
+    """:meth:`CollinearityParams.from_scene`, or None where the compiled kernels do not apply (numba
+    missing or disabled, or a scene without MPC polynomials such as a rigorous line-scan model)."""
+    if not NUMBA_AVAILABLE:
+        return None
+    try:
+        return CollinearityParams.from_scene(scene)
+    except AttributeError:
+        return None
+
+
+def columns_at_rows(params: CollinearityParams, ground: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Image columns of ground points at given (fractional) rows: one CE per finite row, compiled.
+
+    The column of the learned methods, which predict the row only (``docs/conventions.md``).  Rows
+    within the image +-``COLUMN_WINDOW_MARGIN`` use the branch-free evaluator (vectorised), others the
+    reference evaluator; equal to :meth:`explorer.scene.Scene.column_at_row` to round-off.
+
+    Parameters
+    ----------
+    params : CollinearityParams
+    ground : ndarray, shape (N, 3)
+        Local ENU metres.
+    rows : ndarray, shape (N,)
+        Rows (NaN gives NaN).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    p = params
+    ground = np.ascontiguousarray(ground, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.float64)
+    window = (-0.5 - COLUMN_WINDOW_MARGIN, p.n_rows - 0.5 + COLUMN_WINDOW_MARGIN)
+    fm = p.fixed_model(window) if NUMBA_AVAILABLE else None
+    t = (rows - p.reference_row) * p.line_period
+    if fm is None:
+        return residual_and_rate(p, ground, t)[2]
+    col = np.empty(rows.shape[0])
+    n_out = _column_fixed_nb(
+        ground, rows, fm.args(), p.focal, p.offset, p.pitch, p.principal_column, p.line_period, p.reference_row,
+        window[0], window[1], col,
+    )
+    col = p.to_columns(col)
+    if n_out:  # rows far off the image: the reference evaluator
+        far = np.flatnonzero(np.isfinite(rows) & ~((rows >= window[0]) & (rows <= window[1])))
+        col[far] = residual_and_rate(p, ground[far], t[far])[2]
+    return col
+
+
 # --------------------------------------------------------------------------- seeds
 SEED_TERMS = 20  # cubic seed polynomial; lower degrees are zero-padded
 

@@ -460,6 +460,20 @@ class TrainedNetwork:
     target_scale: float
     device: torch.device
 
+    @property
+    def theta_numpy(self) -> np.ndarray:
+        """The parameters as a float64 host array (P,) (cached)."""
+        cached = self.__dict__.get("_theta_numpy")
+        if cached is None:
+            cached = self.theta.detach().cpu().numpy().astype(np.float64, copy=True)
+            self.__dict__["_theta_numpy"] = cached
+        return cached
+
+    @property
+    def layer_sizes(self) -> tuple[int, ...]:
+        """``(n_inputs, hidden..., 1)``."""
+        return (self.net.n_inputs, *self.net.hidden, 1)
+
     def predict(self, x: np.ndarray, chunk: int = 1 << 18) -> np.ndarray:
         """Target values (N,) of normalised inputs ``x`` (N, D): chunked, no autograd, float64."""
         out = np.empty(x.shape[0])

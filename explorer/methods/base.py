@@ -17,10 +17,13 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import NotFittedError, as_points
+from explorer.geometry.kernels import collinearity_params_or_none, columns_at_rows
+from explorer.methods._compiled import inside_flags
 from explorer.points import PointSet
 from explorer.scene import Scene
 
 _REGISTRY: dict[str, type[BestScanlineMethod]] = {}
+_UNSET = object()
 
 
 @dataclass
@@ -86,6 +89,7 @@ class BestScanlineMethod(ABC):
         self.params = params
         self._fitted = not self.needs_fit
         self.fit_info: dict = {}
+        self._kernel_params = _UNSET
 
     # ------------------------------------------------------------------ API
     def fit(self, control: PointSet) -> BestScanlineMethod:
@@ -114,11 +118,7 @@ class BestScanlineMethod(ABC):
         if not self._fitted:
             raise NotFittedError(f"method {self.name!r} must be fit on control points before use")
         ground = as_points(ground)
-        res = self._locate(ground, trace=trace)
-        res.inside = res.inside & self.scene.inside_image(res.row, res.col)
-        bad = ~np.isfinite(res.row) | ~np.isfinite(res.col)
-        res.inside &= ~bad
-        return res
+        return self._locate(ground, trace=trace)  # inside: set by _result from (row, col), NaN outside
 
     # ------------------------------------------------------------- helpers
     def _fit(self, control: PointSet) -> None:  # pragma: no cover - overridden by learned methods
@@ -138,17 +138,30 @@ class BestScanlineMethod(ABC):
         col: np.ndarray | None = None,
         trace: list[np.ndarray] | None = None,
         info: dict | None = None,
+        mask: np.ndarray | None = None,
     ) -> ScanlineResult:
         """Assemble a result; the column comes from the collinearity at ``row`` unless given
-        (that costs one more collinearity evaluation per point, counted here)."""
-        ce = np.asarray(ce_evaluations, dtype=np.int64).copy()
+        (that costs one more collinearity evaluation per point, counted here).  ``inside`` is
+        (row, col) on the image (:func:`explorer.methods._compiled.inside_flags`; NaN is outside)
+        and ``mask`` where given (e.g. a learned model's training domain)."""
+        ce = np.asarray(ce_evaluations, dtype=np.int64)
         if col is None:
-            col = np.full(row.shape, np.nan)
-            ok = np.isfinite(row)
-            col[ok] = self.scene.column_at_row(ground[ok], row[ok])
-            ce += ok
-        inside = self.scene.inside_image(row, col)
+            col = self._column_at_row(ground, row)
+            ce = ce + np.isfinite(row)  # a new array: the caller's is left as it was
+        inside = inside_flags(row, col, self.scene.n_rows, self.scene.n_columns, mask)
         return ScanlineResult(row, col, np.asarray(converged, bool), inside, ce, trace, info or {})
+
+    def _column_at_row(self, ground: np.ndarray, row: np.ndarray) -> np.ndarray:
+        """Column (N,) of ground points at rows (N,) by the collinearity (NaN where the row is NaN):
+        the compiled evaluator for MPC scenes, :meth:`Scene.column_at_row` otherwise."""
+        if self._kernel_params is _UNSET:
+            self._kernel_params = collinearity_params_or_none(self.scene)
+        if self._kernel_params is not None:
+            return columns_at_rows(self._kernel_params, ground, row)
+        col = np.full(row.shape, np.nan)
+        ok = np.isfinite(row)
+        col[ok] = self.scene.column_at_row(ground[ok], row[ok])
+        return col
 
 
 def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from explorer.geometry.kernels import NUMBA_AVAILABLE
+from explorer.methods._compiled import mlp_predict
 from explorer.methods._lm import GroundFeatures, fit_network, take_params
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
@@ -128,14 +130,17 @@ class MLPMethod(BestScanlineMethod):
         network_verdict(self.name, info, p["max_val_rmse_px"])
 
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
-        f, ok = self.features(ground)
-        row = self.network.predict(f)
+        net = self.network
+        if NUMBA_AVAILABLE and net.device.type == "cpu":  # one compiled pass (same network, float64)
+            row, ok = mlp_predict(self.features, ground, net.theta_numpy, net.layer_sizes, net.target_scale,
+                                  net.target_offset)
+        else:  # torch on the network's device
+            f, ok = self.features(ground)
+            row = net.predict(f)
         converged = ok & bool(self.fit_info["converged"])
         ce = np.zeros(row.shape, dtype=np.int64)
-        res = self._result(ground, row, converged, ce, trace=[row.copy()] if trace else None,
-                           info={"in_domain": ok})
-        res.inside &= ok
-        return res
+        return self._result(ground, row, converged, ce, trace=[row.copy()] if trace else None,
+                            info={"in_domain": ok}, mask=ok)
 
 
 @dataclass

@@ -137,16 +137,11 @@ def residual_and_derivative(
 def _kernel_params(scene: Scene, *, required: bool):
     """The scene packed for the compiled kernels, or None where they do not apply (no numba, not an
     MPC scene) and ``required`` is False."""
-    from explorer.geometry.kernels import NUMBA_AVAILABLE, CollinearityParams
+    from explorer.geometry.kernels import NUMBA_AVAILABLE, collinearity_params_or_none
 
-    reason = None if NUMBA_AVAILABLE else "numba is not available"
-    params = None
-    if reason is None:
-        try:
-            params = CollinearityParams.from_scene(scene)
-        except AttributeError:
-            reason = f"{scene.name} is not an MPC scene (no orbit and attitude polynomials)"
+    params = collinearity_params_or_none(scene)
     if params is None and required:
+        reason = "numba is not available" if not NUMBA_AVAILABLE else f"{scene.name} is not an MPC scene"
         raise ValueError(f"evaluator='compiled' does not apply: {reason}")
     return params
 

@@ -27,6 +27,8 @@ from itertools import product
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from explorer.geometry.kernels import NUMBA_AVAILABLE
+from explorer.methods._compiled import polynomial_predict
 from explorer.methods._lm import GroundFeatures, take_params
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
@@ -179,14 +181,18 @@ class _RegressionBase(BestScanlineMethod):
         return out
 
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
-        f, ok = self.features(ground)
-        row = self._predict(f, self.row_coef)
-        col = None if self.col_coef is None else self._predict(f, self.col_coef)
+        if NUMBA_AVAILABLE:  # one compiled pass: features, domain flags, row (and column) polynomials
+            coef = self.row_coef[:, None] if self.col_coef is None else np.stack([self.row_coef, self.col_coef], 1)
+            values, ok = polynomial_predict(self.features, ground, self.exponents, coef)
+            row = values[0]
+            col = None if self.col_coef is None else values[1]
+        else:
+            f, ok = self.features(ground)
+            row = self._predict(f, self.row_coef)
+            col = None if self.col_coef is None else self._predict(f, self.col_coef)
         ce = np.zeros(row.shape, dtype=np.int64)
-        res = self._result(ground, row, ok, ce, col=col, trace=[row.copy()] if trace else None,
-                           info={"in_domain": ok})
-        res.inside &= ok
-        return res
+        return self._result(ground, row, ok, ce, col=col, trace=[row.copy()] if trace else None,
+                            info={"in_domain": ok}, mask=ok)
 
 
 @register

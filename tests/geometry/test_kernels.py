@@ -160,3 +160,41 @@ def test_columns_with_non_uniform_detector_spacing():
         for backend in BACKENDS:
             _, _, col = residual_and_rate(scene, ground, t, evaluator=evaluator, backend=backend)
             np.testing.assert_allclose(col, scene.column_at_time(ground, t), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name, make", [c for c in CASES if c[0] in ("WSU", "agile", "curved-jitter")],
+                         ids=["WSU", "agile", "curved-jitter"])
+def test_columns_at_rows_match_the_scene(name, make):
+    """The learned methods' column: compiled, equal to Scene.column_at_row, including rows far off the image
+    (reference evaluator), NaN rows (NaN) and a non-uniform detector spacing."""
+    import dataclasses
+
+    from explorer.geometry.kernels import COLUMN_WINDOW_MARGIN, columns_at_rows
+
+    scene = make()
+    ground, _ = _points_and_times(scene, n=2000, seed=9)
+    rng = np.random.default_rng(4)
+    rows = rng.uniform(-0.5, scene.n_rows - 0.5, len(ground))
+    rows[:5] = [-3 * COLUMN_WINDOW_MARGIN, scene.n_rows + 2 * COLUMN_WINDOW_MARGIN, np.nan, -0.5, scene.n_rows - 0.5]
+    cases = [scene]
+    if "column_polynomial" in {f.name for f in dataclasses.fields(scene.interior)}:
+        spaced = dataclasses.replace(scene.interior, column_polynomial=(1e-5, -2e-9))
+        cases.append(Scene("spaced", spaced, scene.exterior, scene.timing, scene.n_rows, scene.terrain, scene.frame))
+    for sc in cases:
+        params = CollinearityParams.from_scene(sc)
+        col = columns_at_rows(params, ground, rows)
+        ok = np.isfinite(rows)
+        assert np.all(np.isnan(col[~ok])) and np.all(np.isfinite(col[ok]))
+        np.testing.assert_allclose(col[ok], sc.column_at_row(ground[ok], rows[ok]), rtol=0, atol=1e-9)
+
+
+def test_columns_at_rows_without_the_fixed_evaluator():
+    from explorer.geometry.kernels import columns_at_rows
+
+    scene = build_scene("WSU", extra_jitter=[Jitter("phi", 1e-6, 5000.0)])  # too fast for the fixed evaluator
+    params = CollinearityParams.from_scene(scene)
+    assert params.fixed_model((-64.5, scene.n_rows + 63.5)) is None
+    ground, _ = _points_and_times(scene, n=500, seed=2)
+    rows = np.random.default_rng(1).uniform(-0.5, scene.n_rows - 0.5, len(ground))
+    np.testing.assert_allclose(columns_at_rows(params, ground, rows), scene.column_at_row(ground, rows),
+                               rtol=0, atol=1e-9)
