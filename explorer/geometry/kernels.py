@@ -885,28 +885,38 @@ def _seed_row_py(X, Y, Z, mean, inv_scale, coef):
 _seed_row = njit(cache=True, fastmath=False, inline="always")(_seed_row_py) if NUMBA_AVAILABLE else None
 
 
-def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H):
-    """Seed row: the polynomial plus, when ``len(cs) > 1``, a correction ``H`` tabulated over rows
-    (linear interpolation at the polynomial's row; see :class:`SeedModel`).  Scalars or arrays."""
+def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half):
+    """Seed row: the polynomial plus, when ``len(cs) > 1``, a correction ``H`` (K, 3) tabulated over
+    the polynomial's rows at three columns (linear interpolation in the row, quadratic Lagrange in the
+    column given by the column polynomial ``ccoef``; see :class:`SeedModel`).  Scalars or arrays."""
     r = _seed_row_py(X, Y, Z, mean, inv_scale, coef)
     if len(cs) > 1:
         x = (r - c_r0) * c_inv
         k = _table_index(x, H.shape[0] - 2)
         f = x - k
-        r = r + (H[k] + f * (H[k + 1] - H[k]))
+        u = (_seed_row_py(X, Y, Z, mean, inv_scale, ccoef) - c_mid) * c_inv_half
+        h0 = H[k, 0] + f * (H[k + 1, 0] - H[k, 0])
+        h1 = H[k, 1] + f * (H[k + 1, 1] - H[k, 1])
+        h2 = H[k, 2] + f * (H[k + 1, 2] - H[k, 2])
+        r = r + (h1 + u * (0.5 * (h2 - h0) + u * (0.5 * (h0 + h2) - h1)))
     return r
 
 
 if NUMBA_AVAILABLE:
 
     @njit(cache=True, fastmath=False, inline="always")
-    def _seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H):  # pragma: no cover - compiled
+    def _seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half):
+        # pragma: no cover - compiled (same operations as _seed_full_py)
         r = _seed_row(X, Y, Z, mean, inv_scale, coef)
         if len(cs) > 1:
             x = (r - c_r0) * c_inv
             k = _table_index(x, H.shape[0] - 2)
             f = x - k
-            r = r + (H[k] + f * (H[k + 1] - H[k]))
+            u = (_seed_row(X, Y, Z, mean, inv_scale, ccoef) - c_mid) * c_inv_half
+            h0 = H[k, 0] + f * (H[k + 1, 0] - H[k, 0])
+            h1 = H[k, 1] + f * (H[k + 1, 1] - H[k, 1])
+            h2 = H[k, 2] + f * (H[k + 1, 2] - H[k, 2])
+            r = r + (h1 + u * (0.5 * (h2 - h0) + u * (0.5 * (h0 + h2) - h1)))
         return r
 
 
@@ -922,10 +932,15 @@ class SeedModel:
         Normalisation ``(P - mean) / scale``.
     coef : ndarray, shape (4|10|20,)
         Coefficients over :func:`seed_features`.
-    correction : ndarray, shape (K,) or None
-        Row correction at rows ``correction_row0 + k * correction_step``, added (interpolated
-        linearly at the polynomial's row) to the polynomial.
+    correction : ndarray, shape (K, 3) or (K,), or None
+        Row correction at polynomial rows ``correction_row0 + k * correction_step`` and at the
+        columns ``column_mid - column_half``, ``column_mid``, ``column_mid + column_half`` (one
+        column: the same correction everywhere), added to the polynomial: linear interpolation at
+        the polynomial's row, quadratic Lagrange interpolation at the column polynomial's column.
     correction_row0, correction_step : float
+    column_coef : ndarray, shape (4|10|20,) or None
+        Polynomial ``col(X, Y, Z)`` over :func:`seed_features` (needed with a 3-column correction).
+    column_mid, column_half : float
     """
 
     mean: np.ndarray
@@ -934,22 +949,38 @@ class SeedModel:
     correction: np.ndarray | None = None
     correction_row0: float = 0.0
     correction_step: float = 1.0
+    column_coef: np.ndarray | None = None
+    column_mid: float = 0.0
+    column_half: float = 1.0
 
     def args(self) -> tuple:
-        """``(mean, inv_scale, coef (20,), cs, c_r0, c_inv, H)`` for the kernels."""
-        coef = np.concatenate([np.asarray(self.coef, dtype=np.float64), np.zeros(SEED_TERMS - len(self.coef))])
+        """``(mean, inv_scale, coef (20,), cs, c_r0, c_inv, H (K, 3), ccoef (20,), c_mid, c_inv_half)``."""
+
+        def pad(c: np.ndarray | None) -> np.ndarray:
+            c = np.zeros(0) if c is None else np.asarray(c, dtype=np.float64)
+            return np.concatenate([c, np.zeros(SEED_TERMS - len(c))])
+
         if self.correction is None:
-            cs, H = (0,), np.zeros(2)
+            cs, H = (0,), np.zeros((2, 3))
         else:
-            cs, H = (0, 0), np.ascontiguousarray(self.correction, dtype=np.float64)
+            H = np.asarray(self.correction, dtype=np.float64)
+            H = np.ascontiguousarray(np.repeat(H[:, None], 3, axis=1) if H.ndim == 1 else H)
+            if H.shape[1] != 3 or H.shape[0] < 2:
+                raise ValueError(f"seed correction must have shape (K >= 2, 3) or (K,), got {H.shape}")
+            if not np.allclose(H[:, 0], H[:, 1]) and self.column_coef is None:
+                raise ValueError("a seed correction that varies with the column needs column_coef")
+            cs = (0, 0)
         return (
             np.asarray(self.mean, dtype=np.float64),
             1.0 / np.asarray(self.scale, dtype=np.float64),
-            coef,
+            pad(self.coef),
             cs,
             float(self.correction_row0),
             1.0 / float(self.correction_step),
             H,
+            pad(self.column_coef),
+            float(self.column_mid),
+            1.0 / float(self.column_half),
         )
 
     def rows(self, ground: np.ndarray) -> np.ndarray:
@@ -1038,13 +1069,14 @@ def _newton_first_nb(
     trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
-    mean, inv_scale, coef, cs, c_r0, c_inv, H = sx
+    mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half = sx
     n_trace = trace.shape[0]
     for i in prange(ground.shape[0]):
         X = ground[i, 0]
         Y = ground[i, 1]
         Z = ground[i, 2]
-        rr = min(max(_seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H), w_lo), w_hi)
+        rr = min(max(_seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half), w_lo),
+                 w_hi)
         for s in range(len(steps)):  # 1 or 2 unconditional Newton evaluations (unrolled)
             if s > 0:
                 rr = min(max(r[i], w_lo), w_hi)

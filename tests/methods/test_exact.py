@@ -35,6 +35,23 @@ def test_exact_rows_on_every_preset(preset):
     assert ev.ce_evals_per_point <= 3.0
 
 
+def test_jitter_seed_correction_reaches_one_evaluation_on_agile():
+    """agile's 41/67 Hz jitter moves the row by ~4.6 rows and differently across the columns: the seed's
+    correction table (3 columns, 0.25-row nodes over the polynomial's row) brings the seed within Newton's
+    acceptance step of the exact row, so almost every point costs one CE (it cost two before)."""
+    scene = build_scene("agile")
+    m = create("exact", scene)
+    check = simulate_points(scene, 20000, kind="scp", seed=5)
+    assert m.seed_correction_max_rows > 1.0 and m.seed.correction.shape[1] == 3
+    seed_err = np.abs(m.seed.rows(check.ground) - check.row)
+    poly_err = np.abs(type(m.seed)(m.seed.mean, m.seed.scale, m.seed.coef).rows(check.ground) - check.row)
+    assert poly_err.max() > 1.0  # the polynomial alone is rows away
+    assert np.mean(seed_err <= m.accept_step) > 0.99
+    assert m.first_evaluations == 1
+    ev, res = _check_exact(m, check)
+    assert ev.ce_evals_per_point < 1.02
+
+
 @pytest.mark.parametrize("preset", ["PMA", "agile"])
 def test_exact_rows_with_relief(preset):
     scene = build_scene(preset, relief_m=1000.0, relief_seed=4)
