@@ -47,8 +47,30 @@ RECHECK = ROOT / "benchmarks" / "results" / "perf_recheck.json"
 # MLP 3.29 s; LRM: Ahooei Nezhad et al. 2024 (Sensors 24:5594) Table 4, 2.00 s on the first image
 # (1.94-3.11 s over the ten).
 PAPER_SECONDS = {"nr": 511.919, "bws": 1490.505, "ann": 3.295, "ogp": 6.812, "mlp": 3.29, "lrm": 2.0}
-CANDIDATES = ("exact", "csm-secant", "nr", "bws", "lrm", "prm", "mlp", "ann", "ogp")
+# (label, registry name, parameters): every registered method with its defaults, plus the variants the
+# targets of issue 7 name.  "nr (numpy)" is the plain vectorised Newton-Raphson, the "naive nr" baseline.
+VARIANTS = (
+    ("exact", "exact", {}),
+    ("csm-secant", "csm-secant", {}),
+    ("nr", "nr", {}),
+    ("nr (numpy)", "nr", {"evaluator": "numpy"}),
+    ("lrm", "lrm", {}),
+    ("lrm, column by regression", "lrm", {"column": "regression"}),
+    ("prm", "prm", {}),
+    ("prm, column by regression", "prm", {"column": "regression"}),
+    ("mlp", "mlp", {}),
+    ("ann", "ann", {}),
+    ("ogp", "ogp", {}),
+    ("bws", "bws", {}),
+)
+CANDIDATES = tuple(dict.fromkeys(v[1] for v in VARIANTS))
+NAIVE = "nr (numpy)"
 SCENES = ("WSU", "agile")
+TARGETS = {  # label -> seconds per 5,000,000 points (issue 7)
+    "exact": 0.5, "nr": 2.0, "lrm": 0.1, "prm": 0.1, "lrm, column by regression": 0.1,
+    "prm, column by regression": 0.1, "mlp": 0.5,
+}
+RPC_SECTION = "## RPC projection"  # appended by benchmarks/rpc_perf.py; kept when this report is rewritten
 N_SCOPS = 100
 
 
@@ -106,7 +128,7 @@ def worker(cfg: dict) -> dict:
     t0 = time.perf_counter()
     check = simulate_points(scene, n, kind="scp")
     sim_s = time.perf_counter() - t0
-    method = create(name, scene)
+    method = create(name, scene, **cfg.get("params", {}))
     fit_s = 0.0
     if method.needs_fit:
         scops = simulate_points(scene, N_SCOPS, kind="scop")
@@ -123,15 +145,15 @@ def worker(cfg: dict) -> dict:
         n_timed = int(min(len(check), max(pilot_n, len(check) * cfg["slow_seconds"] / predicted)))
     sub = ground[:n_timed]
     rss_before = _maxrss_mb()
-    first_walls, first_cpus = _timed(lambda: method.ground_to_image(sub), 1)
-    repeats = 4 if first_walls[0] < 2.0 else 2
+    warm_walls, _ = _timed(lambda: method.ground_to_image(sub), 1)  # full-size warm-up, not timed
+    repeats = 5 if warm_walls[0] < 2.0 else 3
     walls, cpus = _timed(lambda: method.ground_to_image(sub), repeats)
-    walls, cpus = first_walls + walls, first_cpus + cpus
     res = method.ground_to_image(sub)
     dr = np.where(res.valid, res.row - check.row[:n_timed], np.nan)
     ok = np.isfinite(dr)
     scale = len(check) / n_timed
     out.update(
+        label=cfg.get("label", name), params=cfg.get("params", {}), warmup_s=warm_walls[0],
         method=name, n=len(check), n_timed=n_timed, scaled=n_timed < len(check), simulate_s=sim_s, fit_s=fit_s,
         wall_s=walls, cpu_s=cpus, median_s=statistics.median(walls) * scale,
         median_cpu_s=statistics.median(cpus) * scale, ce_per_point=float(res.ce_evaluations.mean()),

@@ -54,8 +54,10 @@ evaluation, moved to the returned row by its analytic rate (``|delta| <= accept_
 error is far below 1e-12 px), at no extra CE.
 
 Everything runs in numba ``prange`` kernels (parallel over points, no per-point Python); without
-numba the same algorithm runs vectorised in numpy with identical decisions.  Only
-``device="cpu"`` is supported.  Timings: ``docs/performance.md``.
+numba the same algorithm runs vectorised in numpy with identical decisions.  ``device="cuda"`` (or
+``backend="torch"`` on the CPU) runs the seed and the Newton passes through torch on that device
+(:mod:`explorer.geometry.torch_solver`), the rare safeguarded points on the host.  Timings:
+``docs/performance.md``.
 
 References: Chen, L.-C., Rau, J.-Y. (1993), IEEE TGRS 31(6):1243-1252; Ahooei Nezhad, S.S.,
 Valadan Zoej, M.J., Jannati, M. (2020), J. Geospatial Information Technology 8(1):23-38;
@@ -98,6 +100,20 @@ def check_device(name: str, device: str) -> str:
     return "cpu"
 
 
+def check_torch_device(name: str, device: str) -> str:
+    """A torch device string ("cpu", "cuda", "cuda:1") that exists on this machine, else ``ValueError``."""
+    dev = str(device).lower()
+    if dev == "cpu":
+        return dev
+    if not (dev == "cuda" or dev.startswith("cuda:")):
+        raise ValueError(f"method {name!r}: device must be 'cpu' or 'cuda[:index]', got {device!r}")
+    import torch
+
+    if not torch.cuda.is_available():
+        raise ValueError(f"method {name!r}: device {device!r} requested but torch sees no CUDA device here")
+    return dev
+
+
 @register
 class Exact(BestScanlineMethod):
     """Seeded, safeguarded Newton on the along-track residual (see the module docstring).
@@ -116,10 +132,12 @@ class Exact(BestScanlineMethod):
         Evaluations per point before giving up with ``converged=False`` (default 100).
     margin_rows : float
         The search window extends this many rows beyond the image (default 50).
-    backend : {"auto", "numba", "numpy"}
-        Compiled kernel (default when numba is installed) or the numpy fallback.
+    backend : {"auto", "numba", "numpy", "torch"}
+        Compiled kernel (default when numba is installed), the numpy fallback, or torch
+        (:func:`explorer.geometry.torch_solver.solve_exact_torch`: the seed and the Newton passes on
+        ``device``, the few safeguarded points on the host; same decisions as numpy).
     device : str
-        Only "cpu".
+        "cpu" (default) or "cuda[:index]"; a CUDA device implies ``backend="torch"``.
     """
 
     name: ClassVar[str] = "exact"
@@ -152,12 +170,17 @@ class Exact(BestScanlineMethod):
             raise ValueError(f"seed_grid must be (rows, cols, layers) with rows*cols >= 4, got {seed_grid}")
         super().__init__(scene, seed_degree=seed_degree, seed_grid=tuple(seed_grid), tol=tol, max_iter=max_iter,
                          margin_rows=margin_rows, backend=backend, device=device)
-        self.device = check_device(self.name, device)
+        if backend not in ("auto", "numba", "numpy", "torch"):
+            raise ValueError(f"backend must be 'auto', 'numba', 'numpy' or 'torch', got {backend!r}")
+        self.device = check_torch_device(self.name, device)
+        if self.device != "cpu":
+            backend = "torch"
         self.seed_degree = int(seed_degree)
         self.tol = float(tol)
         self.max_iter = int(max_iter)
         self.margin_rows = float(margin_rows)
         self.backend = backend
+        self.host_backend = "auto" if backend == "torch" else backend  # setup, traces, safeguarded points
         self.kernel_params = CollinearityParams.from_scene(scene)
         self.window = (-0.5 - self.margin_rows, scene.n_rows - 0.5 + self.margin_rows)
         self.setup_ce = 0
@@ -184,7 +207,7 @@ class Exact(BestScanlineMethod):
         n = len(grid)
         rows = (grid.row[None, :] + CURVATURE_OFFSETS[:, None]).ravel()
         pts = np.tile(ground, (CURVATURE_OFFSETS.size, 1))
-        g, g_t, _ = residual_and_rate(p, pts, scene.scanline_time(rows), backend=self.backend)
+        g, g_t, _ = residual_and_rate(p, pts, scene.scanline_time(rows), backend=self.host_backend)
         self.setup_ce += rows.size
         g_r = (g_t * p.line_period).reshape(CURVATURE_OFFSETS.size, n)
         signs = np.sign(g_r)
@@ -231,11 +254,17 @@ class Exact(BestScanlineMethod):
 
     # ------------------------------------------------------------------ locate
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
-        row, col, status, ce, rows_trace = solve_exact(
-            self.kernel_params, ground, self.seed, window=self.window, orient=self.orient, tol=self.tol,
-            accept_step=self.accept_step, max_iter=self.max_iter, first_evaluations=self.first_evaluations,
-            trace=trace, backend=self.backend,
-        )
+        kw = {"window": self.window, "orient": self.orient, "tol": self.tol, "accept_step": self.accept_step,
+              "max_iter": self.max_iter, "first_evaluations": self.first_evaluations}
+        if self.backend == "torch" and not trace:
+            from explorer.geometry.torch_solver import solve_exact_torch
+
+            row, col, status, ce = solve_exact_torch(self.kernel_params, ground, self.seed, device=self.device, **kw)
+            rows_trace = None
+        else:  # traces come from the numpy / numba solver
+            row, col, status, ce, rows_trace = solve_exact(
+                self.kernel_params, ground, self.seed, trace=trace, backend=self.host_backend, **kw
+            )
         converged = status == STATUS_CONVERGED
         counts = {STATUS_NAMES[k]: int(np.count_nonzero(status == k)) for k in STATUS_NAMES}
         info = {"status": status, "status_counts": counts, "setup_ce": self.setup_ce,

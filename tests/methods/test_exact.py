@@ -166,11 +166,32 @@ def test_setup_cost_and_parameters():
     assert "exact" in available()
     assert m.setup_ce >= 75
     assert m.accept_step > 0 and m.orient in (-1.0, 1.0)
-    with pytest.raises(ValueError, match="device='cpu'"):
-        create("exact", scene, device="cuda")
+    with pytest.raises(ValueError, match="device"):
+        create("exact", scene, device="tpu")
+    with pytest.raises(ValueError, match="backend"):
+        create("exact", scene, backend="fortran")
     with pytest.raises(ValueError, match="seed_degree"):
         create("exact", scene, seed_degree=5)
     assert create("exact", scene, device="cpu").device == "cpu"
+
+
+def test_torch_backend_equals_the_compiled_path_and_cuda_is_checked():
+    """The torch path (device 'cpu' here; 'cuda' where a GPU exists) through the method interface."""
+    torch = pytest.importorskip("torch")
+    scene = build_scene("agile", relief_m=600.0, relief_seed=2)
+    check = simulate_points(scene, 5000, kind="scp", seed=3)
+    ref = create("exact", scene).ground_to_image(check.ground)
+    tor = create("exact", scene, backend="torch").ground_to_image(check.ground)
+    assert np.max(np.abs(tor.row - ref.row)) < 1e-9 and np.max(np.abs(tor.col - ref.col)) < 1e-9
+    np.testing.assert_array_equal(tor.ce_evaluations, ref.ce_evaluations)
+    np.testing.assert_array_equal(tor.valid, ref.valid)
+    assert np.max(np.abs(tor.row - check.row)) < 1e-7
+    if torch.cuda.is_available():
+        gpu = create("exact", scene, device="cuda").ground_to_image(check.ground)
+        assert np.max(np.abs(gpu.row - ref.row)) < 1e-6 and np.max(np.abs(gpu.col - ref.col)) < 1e-6
+    else:
+        with pytest.raises(ValueError, match="no CUDA device"):
+            create("exact", scene, device="cuda")
 
 
 def test_columns_with_non_uniform_detector_spacing(name="exact"):
