@@ -83,6 +83,9 @@ class BestScanlineMethod(ABC):
     family: ClassVar[str] = "search"
     needs_fit: ClassVar[bool] = False
     exactness: ClassVar[str] = "exact"  # "exact", "pixel" or "approximate"
+    # points per _locate call when the method's working arrays grow with N (numpy active-set loops keep
+    # several (N,) and (N, 3) arrays per iteration); None: all at once.  Results do not depend on it.
+    chunk_points: int | None = None
 
     def __init__(self, scene: Scene, **params) -> None:
         self.scene = scene
@@ -118,6 +121,10 @@ class BestScanlineMethod(ABC):
         if not self._fitted:
             raise NotFittedError(f"method {self.name!r} must be fit on control points before use")
         ground = as_points(ground)
+        step = self.chunk_points
+        if step and len(ground) > step and not trace:  # bound the working memory of numpy loops
+            return concatenate_results([self._locate(ground[a:a + step], trace=False)
+                                        for a in range(0, len(ground), step)])
         return self._locate(ground, trace=trace)  # inside: set by _result from (row, col), NaN outside
 
     # ------------------------------------------------------------- helpers
@@ -162,6 +169,26 @@ class BestScanlineMethod(ABC):
         ok = np.isfinite(row)
         col[ok] = self.scene.column_at_row(ground[ok], row[ok])
         return col
+
+
+def concatenate_results(parts: list[ScanlineResult]) -> ScanlineResult:
+    """One result from results of consecutive point chunks (no traces).  ``info`` entries that are
+    per-point arrays are concatenated; others are taken from the first chunk, except ``status_counts``
+    (summed)."""
+    first = parts[0]
+    info: dict = {}
+    for key, value in first.info.items():
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == len(first):
+            info[key] = np.concatenate([p.info[key] for p in parts])
+        elif key == "status_counts":
+            info[key] = {k: sum(p.info[key][k] for p in parts) for k in value}
+        else:
+            info[key] = value
+    return ScanlineResult(
+        *(np.concatenate([getattr(p, f) for p in parts]) for f in ("row", "col", "converged", "inside",
+                                                                  "ce_evaluations")),
+        None, info,
+    )
 
 
 def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:

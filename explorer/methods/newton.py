@@ -217,6 +217,8 @@ class NewtonRaphson(BestScanlineMethod):
         self.kernel_params = None
         if evaluator != "numpy" and derivative == "analytic":
             self.kernel_params = _kernel_params(scene, required=evaluator == "compiled")
+        if self.kernel_params is None:
+            self.chunk_points = 1_000_000  # the numpy active-set loop keeps several (N,) arrays per iteration
         self.start = start
         self.tol_px = float(tol_px)
         self.max_iter = int(max_iter)

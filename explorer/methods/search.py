@@ -165,6 +165,8 @@ class _IntegerRowSearch(BestScanlineMethod):
         methods.
     """
 
+    chunk_points = 1_000_000  # the active-set loop keeps several (N,) arrays per iteration
+
     family: ClassVar[str] = "search"
     needs_fit: ClassVar[bool] = False
     interpolate: ClassVar[bool] = False

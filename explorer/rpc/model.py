@@ -18,6 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from explorer.errors import ConvergenceError
+from explorer.rpc import _kernels
+from explorer.rpc._kernels import horner_rpc00b
 
 __all__ = [
     "ConvergenceError",
@@ -51,9 +53,15 @@ def _as_float_array(value: ArrayLike, name: str) -> FloatArray:
     return array
 
 
-def evaluate_rpc00b_polynomial(
-    coefficients: ArrayLike, x: FloatArray, y: FloatArray, z: FloatArray
-) -> FloatArray:
+def _use_numba(backend: str) -> bool:
+    if backend not in ("auto", "numba", "numpy"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'numpy', got {backend!r}")
+    if backend == "numba" and not _kernels.NUMBA_AVAILABLE:
+        raise RuntimeError("backend='numba' requested but numba is not available")
+    return _kernels.NUMBA_AVAILABLE and backend != "numpy"
+
+
+def evaluate_rpc00b_polynomial(coefficients: ArrayLike, x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
     """Evaluate a cubic RPC00B polynomial with a Horner-like grouping.
 
     Parameters
@@ -69,13 +77,8 @@ def evaluate_rpc00b_polynomial(
     ndarray
         Polynomial values, broadcast shape of ``x, y, z``.
     """
-    c = np.asarray(coefficients, dtype=np.float64)
-    a0 = c[0] + y * (c[2] + z * (c[6] + c[16] * z) + y * (c[8] + c[18] * z + c[15] * y)) + z * (
-        c[3] + z * (c[9] + c[19] * z)
-    )
-    a1 = c[1] + y * (c[4] + c[10] * z + c[12] * y) + z * (c[5] + c[13] * z)
-    a2 = c[7] + c[14] * y + c[17] * z
-    return a0 + x * (a1 + x * (a2 + c[11] * x))
+    # the same function is compiled for the numba path of projection (explorer/rpc/_kernels.py)
+    return horner_rpc00b(np.asarray(coefficients, dtype=np.float64), x, y, z)
 
 
 def _rpc00b_polynomial_and_gradient(
@@ -274,9 +277,7 @@ class RationalFunctionModel:
     def in_domain(self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike) -> NDArray[np.bool_]:
         """Boolean mask of ground points inside :attr:`domain` (bounds included)."""
         d = self.domain
-        lon_a, lat_a, h_a = np.broadcast_arrays(
-            np.asarray(lon, float), np.asarray(lat, float), np.asarray(h, float)
-        )
+        lon_a, lat_a, h_a = np.broadcast_arrays(np.asarray(lon, float), np.asarray(lat, float), np.asarray(h, float))
         return (
             (lon_a >= d.lon_min) & (lon_a <= d.lon_max)
             & (lat_a >= d.lat_min) & (lat_a <= d.lat_max)
@@ -297,20 +298,14 @@ class RationalFunctionModel:
             (h - self.height_offset) / self.height_scale,
         )
 
-    def normalized_projection(
-        self, x: FloatArray, y: FloatArray, z: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
+    def normalized_projection(self, x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Normalised (row, col) of normalised (L, P, H); no offsets or scales applied."""
-        row_n = evaluate_rpc00b_polynomial(self.row_num, x, y, z) / evaluate_rpc00b_polynomial(
-            self.row_den, x, y, z
-        )
-        col_n = evaluate_rpc00b_polynomial(self.col_num, x, y, z) / evaluate_rpc00b_polynomial(
-            self.col_den, x, y, z
-        )
+        row_n = evaluate_rpc00b_polynomial(self.row_num, x, y, z) / evaluate_rpc00b_polynomial(self.row_den, x, y, z)
+        col_n = evaluate_rpc00b_polynomial(self.col_num, x, y, z) / evaluate_rpc00b_polynomial(self.col_den, x, y, z)
         return row_n, col_n
 
     def projection(
-        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto"
     ) -> tuple[FloatArray, FloatArray]:
         """Ground to image.
 
@@ -320,6 +315,11 @@ class RationalFunctionModel:
             Degrees (WGS84), any broadcastable shapes.
         h : array_like
             Metres above the ellipsoid.
+        backend : {"auto", "numba", "numpy"}
+            ``"auto"``: one compiled loop (normalisation, four polynomials, divisions and
+            denormalisation fused per point; ``prange`` on both cores from 200,000 points) when numba
+            is available, else numpy.  Both perform the same floating-point operations in the same
+            order (bit-identical results where measured; the tests allow 1e-12 px).
 
         Returns
         -------
@@ -336,6 +336,10 @@ class RationalFunctionModel:
         Points outside :attr:`domain` are evaluated (extrapolated) without warning; use
         :meth:`in_domain` to mask them.
         """
+        if _use_numba(backend):
+            compiled = self._projection_compiled(lon, lat, h)
+            if compiled is not None:
+                return compiled
         lon_a = _as_float_array(lon, "lon")
         lat_a = _as_float_array(lat, "lat")
         h_a = _as_float_array(h, "h")
@@ -343,9 +347,29 @@ class RationalFunctionModel:
         row_n, col_n = self.normalized_projection(x, y, z)
         return row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset
 
-    def inverse_localization(
-        self, row: ArrayLike, col: ArrayLike, h: ArrayLike
-    ) -> tuple[FloatArray, FloatArray]:
+    def _projection_compiled(
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike
+    ) -> tuple[FloatArray, FloatArray] | None:
+        """:meth:`projection` by the compiled loop; None (use numpy) when the shapes do not broadcast."""
+        arrays = [np.asarray(v, dtype=np.float64) for v in (lon, lat, h)]
+        try:
+            shape = np.broadcast_shapes(*(a.shape for a in arrays))
+        except ValueError:
+            return None  # the numpy path raises its own error (after its NaN checks)
+        flat = [a.ravel() if a.shape == shape else np.broadcast_to(a, shape).ravel() for a in arrays]
+        norm = (
+            self.lon_offset, self.lon_scale, self.lat_offset, self.lat_scale, self.height_offset,
+            self.height_scale, self.row_offset, self.row_scale, self.col_offset, self.col_scale,
+        )  # fmt: skip
+        row, col, nan_counts = _kernels.project(*flat, (self.row_num, self.row_den, self.col_num, self.col_den), norm)
+        if any(nan_counts):  # the numpy path's error, naming the first argument with NaN
+            for value, name in zip(arrays, ("lon", "lat", "h"), strict=True):
+                _as_float_array(value, name)
+        if shape == ():
+            return row[0], col[0]
+        return row.reshape(shape), col.reshape(shape)
+
+    def inverse_localization(self, row: ArrayLike, col: ArrayLike, h: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Evaluate the file's image-to-ground functions (approximate; DIMAP only).
 
         Returns
@@ -517,9 +541,7 @@ class RationalFunctionModel:
         ok = ok.reshape(shape)
         if raise_on_failure and not ok.all():
             n_failed = int((~ok).sum())
-            raise ConvergenceError(
-                f"localization did not converge for {n_failed} of {ok.size} point(s)"
-            )
+            raise ConvergenceError(f"localization did not converge for {n_failed} of {ok.size} point(s)")
         return lon, lat, ok
 
     def localization_strict(
@@ -624,8 +646,7 @@ class RationalFunctionModel:
         ok_b = np.ones(fi.size, dtype=bool)
         for _ in range(n_bisect):
             mid = 0.5 * (hi + lo)
-            lon_m, lat_m, ok_m = self.localization(row_f[fi], col_f[fi], mid, tol=tol,
-                                                   max_iter=max_iter)
+            lon_m, lat_m, ok_m = self.localization(row_f[fi], col_f[fi], mid, tol=tol, max_iter=max_iter)
             t_m = np.full(mid.shape, np.nan)
             if ok_m.any():
                 t_m[ok_m] = np.asarray(height_fn(lon_m[ok_m], lat_m[ok_m]), dtype=np.float64)
@@ -639,8 +660,7 @@ class RationalFunctionModel:
         lat_out = np.full(n, np.nan)
         if fi.size:
             h_fin = 0.5 * (hi + lo)
-            lon_f, lat_f, ok_f = self.localization(row_f[fi], col_f[fi], h_fin, tol=tol,
-                                                   max_iter=max_iter)
+            lon_f, lat_f, ok_f = self.localization(row_f[fi], col_f[fi], h_fin, tol=tol, max_iter=max_iter)
             good = ok_b & ok_f
             h_out[fi] = np.where(good, h_fin, np.nan)
             lon_out[fi] = np.where(good, lon_f, np.nan)

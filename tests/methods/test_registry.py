@@ -50,3 +50,22 @@ def test_far_outside_points_flagged_by_every_method(name):
                                 np.array([100.0, 100.0, scene.n_columns + 300.0]))
     res = method.ground_to_image(far)
     assert not res.valid.any()
+
+
+@pytest.mark.parametrize("name, params", [("nr", {"evaluator": "numpy"}), ("bws", {}), ("exact", {})])
+def test_chunked_ground_to_image_equals_one_call(name, params):
+    """Methods that bound their working memory by chunking give the same arrays as one call."""
+    scene = build_scene("WSU")
+    pts = simulate_points(scene, 3000, kind="scp", seed=4)
+    ground = np.vstack([pts.ground, [[0.0, 0.0, 9e6]]])  # one point above the satellite: not converged
+    whole = create(name, scene, **params).ground_to_image(ground)
+    m = create(name, scene, **params)
+    m.chunk_points = 700
+    parts = m.ground_to_image(ground)
+    for field in ("row", "col", "converged", "inside", "ce_evaluations"):
+        np.testing.assert_array_equal(getattr(parts, field), getattr(whole, field))
+    for key, value in whole.info.items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(parts.info[key], value)
+        elif key == "status_counts":
+            assert parts.info[key] == value
