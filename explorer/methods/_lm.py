@@ -26,9 +26,11 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
+from explorer._lazy import LazyModule
 from explorer.points import PointSet
+
+torch = LazyModule("torch")  # imported on first use (about 2 s)
 
 # ------------------------------------------------------------------- parameters
 

@@ -37,17 +37,15 @@ import warnings
 from collections.abc import Sequence
 
 import numpy as np
-import torch
 
 from explorer.errors import InputError, NotFittedError, check_finite
-from explorer.methods._lm import torch_threads
+from explorer.methods._lm import torch, torch_threads
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
 
 __all__ = ["BPNetworkGeometryModel", "BPNNMethod", "MLPRegressor", "compare_bpnn_rfm", "torch_threads"]
 
-_DTYPE = torch.float64
 
 
 def _normaliser(values: np.ndarray, min_scale: float) -> tuple[float, float, bool]:
@@ -187,9 +185,9 @@ class MLPRegressor:
                 acts.append(h)
         n = u.shape[0]
         n_out = self._shapes[-1][0]
-        jac = torch.empty((n, n_out, self.n_parameters), dtype=_DTYPE)
+        jac = torch.empty((n, n_out, self.n_parameters), dtype=torch.float64)
         for out in range(n_out):
-            delta = torch.zeros((n, n_out), dtype=_DTYPE)
+            delta = torch.zeros((n, n_out), dtype=torch.float64)
             delta[:, out] = 1.0
             blocks = []
             for layer in range(last, -1, -1):
@@ -215,7 +213,7 @@ class MLPRegressor:
             k += o * i
             h = self._act(h @ w.T + theta[k:k + o])
             k += o
-        design = torch.cat([h, torch.ones((h.shape[0], 1), dtype=_DTYPE)], dim=1)
+        design = torch.cat([h, torch.ones((h.shape[0], 1), dtype=torch.float64)], dim=1)
         sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1, 2)
         o, i = self._shapes[-1]
         theta = theta.clone()
@@ -228,16 +226,17 @@ class MLPRegressor:
         last = len(self._shapes) - 1
         for layer, (o, i) in enumerate(self._shapes):
             a = np.sqrt(6.0 / (o + i)) * (4.0 if (self.activation == "sigmoid" and layer < last) else 1.0)
-            parts.append((torch.rand(o * i, generator=gen, dtype=_DTYPE) * 2 - 1) * a)
+            parts.append((torch.rand(o * i, generator=gen, dtype=torch.float64) * 2 - 1) * a)
             if layer < last:
-                parts.append(torch.rand(o, generator=gen, dtype=_DTYPE) * 2 - 1)
+                parts.append(torch.rand(o, generator=gen, dtype=torch.float64) * 2 - 1)
             else:
-                parts.append(torch.zeros(o, dtype=_DTYPE))
+                parts.append(torch.zeros(o, dtype=torch.float64))
         return torch.cat(parts)
 
     # ------------------------------------------------------------ normalisation
     def _normalise_inputs(self, inputs: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor((np.asarray(inputs, dtype=np.float64) - self._in_off) / self._in_scale, dtype=_DTYPE)
+        u = (np.asarray(inputs, dtype=np.float64) - self._in_off) / self._in_scale
+        return torch.as_tensor(u, dtype=torch.float64)
 
     # ------------------------------------------------------------ training
     def _levenberg_marquardt(
@@ -255,7 +254,7 @@ class MLPRegressor:
         def jac(th: torch.Tensor) -> torch.Tensor:
             return self._jacobian(th, u)
 
-        eye = torch.eye(theta.numel(), dtype=_DTYPE)
+        eye = torch.eye(theta.numel(), dtype=torch.float64)
         mu = 1e-3
         r = residual(theta)
         loss = objective(r, theta)
@@ -352,7 +351,7 @@ class MLPRegressor:
         self._out_off = np.array([o[0] for o in outs])
         self._out_scale = np.array([o[1] for o in outs])
         u = self._normalise_inputs(x)
-        t = torch.as_tensor((t_np - self._out_off) / self._out_scale, dtype=_DTYPE)
+        t = torch.as_tensor((t_np - self._out_off) / self._out_scale, dtype=torch.float64)
         rng = np.random.default_rng(self.seed)
         u_val = t_val = None
         if self.validation_fraction > 0:

@@ -69,3 +69,16 @@ def test_chunked_ground_to_image_equals_one_call(name, params):
             np.testing.assert_array_equal(parts.info[key], value)
         elif key == "status_counts":
             assert parts.info[key] == value
+
+
+def test_registry_import_does_not_import_torch():
+    """torch (about 2 s to import) loads on the first use of a torch-trained method, not with the registry."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from explorer.methods import available, create; from explorer.presets import build_scene; "
+            "names = available(); create('exact', build_scene('WSU')); assert 'mlp' in names; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
