@@ -735,7 +735,8 @@ def header(args, runner: Runner, elapsed: float) -> str:
         "",
         "**Timings are noisy:** the machine was shared with other engineers while this ran, so seconds are "
         "indicative only (accuracies and CE counts are not affected). The papers' times are for 5,000,000 SCPs on "
-        "an Intel i7-7500U; ours are fit + locate time scaled to all the SCPs.",
+        "an Intel i7-7500U; ours are fit + locate time scaled to all the SCPs. The ground-to-image speed of each "
+        "method, measured warm and alone, is in [performance.md](performance.md).",
         "",
         "Metrics (`explorer.evaluate`): RMSE and dr_max of the row (papers' Eqs. 4-5) over the valid points, "
         "column RMSE, collinearity evaluations (CE) per point. The papers' numbers are transcribed in "
