@@ -28,7 +28,7 @@ python_packages() {
   "$PY" -m pip install -q --upgrade pip
   # torch first: 2.13.0 is the CPU build on machines without a GPU (a bare "torch" pulls CUDA wheels)
   "$PY" -m pip install -q "torch==2.13.0"
-  "$PY" -m pip install -q -e ".[test]"
+  "$PY" -m pip install -q -e ".[test,bench]"
   touch "$stamp"
 }
 
