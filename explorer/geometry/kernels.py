@@ -46,32 +46,12 @@ algorithms vectorised over points, one Python step per iteration.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from explorer._numba import NUMBA_AVAILABLE, njit, numba, overload, prange  # noqa: F401 - re-exported
 from explorer.scene import Scene
-
-_DISABLED = os.environ.get("EXPLORER_DISABLE_NUMBA", "").strip() not in ("", "0")
-try:
-    if _DISABLED:
-        raise ImportError("numba disabled by EXPLORER_DISABLE_NUMBA")
-    import numba
-    from numba import njit, prange
-    from numba.extending import overload
-
-    NUMBA_AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    numba = None
-    NUMBA_AVAILABLE = False
-    prange = range
-
-    def njit(*args, **kwargs):  # noqa: D103 - identity decorator when numba is missing
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
-
 
 # Solver status codes (per point).
 STATUS_CONVERGED = 0

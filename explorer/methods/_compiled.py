@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from explorer.geometry.kernels import NUMBA_AVAILABLE, njit, prange
+from explorer._numba import NUMBA_AVAILABLE, njit, prange
 
 BLOCK = 2048  # points per block buffer
 

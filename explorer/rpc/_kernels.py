@@ -17,25 +17,10 @@ its numpy path.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
-_DISABLED = os.environ.get("EXPLORER_DISABLE_NUMBA", "").strip() not in ("", "0")
-try:
-    if _DISABLED:
-        raise ImportError("numba disabled by EXPLORER_DISABLE_NUMBA")
-    from numba import njit, prange
-
-    NUMBA_AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    NUMBA_AVAILABLE = False
-    prange = range
-
-    def njit(*args, **kwargs):  # noqa: D103 - identity decorator when numba is missing
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from explorer._numba import NUMBA_AVAILABLE, njit, prange
 
 
 def horner_rpc00b(c, x, y, z):
@@ -76,37 +61,28 @@ if NUMBA_AVAILABLE:
     _horner = njit(cache=True, fastmath=False, inline="always")(horner_rpc00b)
     _point = njit(cache=True, fastmath=False, inline="always", error_model="numpy")(_point_py)
 
+
+def _project_loop_py(lon, lat, h, row_num, row_den, col_num, col_den, norm, row_out, col_out):
+    """The per-point loop (compiled twice below: ``prange`` parallel, and serial where it is ``range``)."""
+    n_lon = 0
+    n_lat = 0
+    n_h = 0
+    for i in prange(lon.shape[0]):
+        lo = lon[i]
+        la = lat[i]
+        hh = h[i]
+        n_lon += math.isnan(lo)
+        n_lat += math.isnan(la)
+        n_h += math.isnan(hh)
+        row_out[i], col_out[i] = _point(lo, la, hh, row_num, row_den, col_num, col_den, norm)
+    return n_lon, n_lat, n_h
+
+
+if NUMBA_AVAILABLE:
     # Coefficients (4 x 20) and norm (lon_off, lon_scale, lat_off, lat_scale, h_off, h_scale, row_off,
     # row_scale, col_off, col_scale) are tuples of floats: constants in registers, LLVM vectorises the loop.
-    @njit(parallel=True, fastmath=False, cache=True, error_model="numpy")
-    def _project_parallel(lon, lat, h, row_num, row_den, col_num, col_den, norm, row_out, col_out):  # pragma: no cover
-        n_lon = 0
-        n_lat = 0
-        n_h = 0
-        for i in prange(lon.shape[0]):
-            lo = lon[i]
-            la = lat[i]
-            hh = h[i]
-            n_lon += math.isnan(lo)
-            n_lat += math.isnan(la)
-            n_h += math.isnan(hh)
-            row_out[i], col_out[i] = _point(lo, la, hh, row_num, row_den, col_num, col_den, norm)
-        return n_lon, n_lat, n_h
-
-    @njit(fastmath=False, cache=True, error_model="numpy")
-    def _project_serial(lon, lat, h, row_num, row_den, col_num, col_den, norm, row_out, col_out):  # pragma: no cover
-        n_lon = 0
-        n_lat = 0
-        n_h = 0
-        for i in range(lon.shape[0]):
-            lo = lon[i]
-            la = lat[i]
-            hh = h[i]
-            n_lon += math.isnan(lo)
-            n_lat += math.isnan(la)
-            n_h += math.isnan(hh)
-            row_out[i], col_out[i] = _point(lo, la, hh, row_num, row_den, col_num, col_den, norm)
-        return n_lon, n_lat, n_h
+    _project_parallel = njit(parallel=True, fastmath=False, cache=True, error_model="numpy")(_project_loop_py)
+    _project_serial = njit(parallel=False, fastmath=False, cache=True, error_model="numpy")(_project_loop_py)
 
 
 def project(
