@@ -9,8 +9,8 @@ Usage::
 
 Each (scene, method variant) runs in its own subprocess (``--worker``) so its peak memory
 (``resource.getrusage(RUSAGE_SELF).ru_maxrss``) is its own: the process simulates the SCPs, builds
-(and for learned methods fits on 100 SCOPs) the method, warms it up on 10,000 points (numba
-compiles or loads its cache here), times a 20,000-point pilot, runs ``ground_to_image`` once on all
+(and for learned methods fits on 100 SCOPs) the method, warms it up on 1,000 points (numba
+compiles or loads its cache here), times a 2,000-point pilot, runs ``ground_to_image`` once on all
 points untimed, then times it -- the median of 5 runs (3 when a run exceeds 2 s) -- and records the
 peak RSS.  Methods whose pilot predicts more than ``--slow-seconds`` per full run are timed on a
 subsample and scaled linearly (stated in the table).  The variants (``VARIANTS``) add the naive
@@ -70,6 +70,10 @@ TARGETS = {  # label -> seconds per 5,000,000 points (issue 7)
     "exact": 0.5, "nr": 2.0, "lrm": 0.1, "prm": 0.1, "lrm, column by regression": 0.1,
     "prm, column by regression": 0.1, "mlp": 0.5,
 }
+# The sequential searches scan up to every row for every point: their cost is rows x points plus a
+# per-row overhead that a small pilot cannot extrapolate (a 2,000-point pilot predicts minutes, a 15,000-point
+# run takes more than 15).  docs/results.md times them on a 20,000-point subsample.
+NOT_TIMED = {"ss": "sequential search", "ss-interp": "sequential search + eq. 4"}
 RPC_SECTION = "## RPC projection"  # appended by benchmarks/rpc_perf.py; kept when this report is rewritten
 N_SCOPS = 100
 
@@ -101,7 +105,7 @@ def worker(cfg: dict) -> dict:
     threads = set_threads(None)
     scene = build_scene(cfg["scene"])
     out: dict = {"kind": cfg["kind"], "scene": cfg["scene"], "numba_threads": threads,
-                 "load_before": os.getloadavg()}
+                 "load_before": os.getloadavg(), "measured_at": _dt.datetime.now().isoformat(timespec="seconds")}
     if cfg["kind"] == "simulate":
         n = cfg["n"]
         walls, cpus = _timed(lambda: simulate_points(scene, n, kind="scp"), cfg.get("repeats", 3))
@@ -136,8 +140,8 @@ def worker(cfg: dict) -> dict:
         method.fit(scops)
         fit_s = time.perf_counter() - t0
     ground = np.ascontiguousarray(check.ground)
-    method.ground_to_image(ground[:10_000])  # warm-up (numba compile / cache load, torch init)
-    pilot_n = min(20_000, len(check))
+    method.ground_to_image(ground[:1_000])  # warm-up (numba compile / cache load, torch init)
+    pilot_n = min(2_000, len(check))  # small: the pixel-level sequential search takes ~1 ms a point
     pilot_walls, _ = _timed(lambda: method.ground_to_image(ground[:pilot_n]), 1)
     predicted = pilot_walls[0] * len(check) / pilot_n
     n_timed = len(check)
@@ -251,8 +255,10 @@ def write_doc(data: dict) -> None:
         "# Performance: exact ground-to-image for millions of points",
         "",
         f"Measured by `python benchmarks/perf.py{' --quick' if data['quick'] else ''}` on {data['date']} "
-        f"({data['machine']}; numba threads: {data.get('threads', '?')}).  Raw records: "
-        "`benchmarks/results/perf.json`.",
+        f"({data['machine']}; numba threads: {data.get('threads', '?')})"
+        + (f"; the target methods re-measured with `--update` on {data['updated']} (quieter machine)"
+           if data.get("updated") else "")
+        + ".  Raw records (each with its own time and load): `benchmarks/results/perf.json`.",
         "",
         "Protocol: every (scene, method) runs in its own fresh process, which simulates the SCPs, builds the "
         "method (learned ones fit on 100 SCOPs), runs `ground_to_image` once on all the points untimed (numba "
@@ -312,6 +318,8 @@ def write_doc(data: dict) -> None:
         "`column='regression'` (a second regression, no CE).",
         "",
     ]
+    lines += [f"Not timed here: {', '.join(f'`{m}` ({why})' for m, why in NOT_TIMED.items())} -- the scan costs "
+              "rows x points; [results.md](results.md) times them on a 20,000-point subsample.", ""]
     sc = data.get("scaling")
     if sc and "error" not in sc:
         lines += [f"## Scaling of `{sc['method']}` ({sc['scene']})", "",
@@ -390,10 +398,26 @@ def main() -> None:
     ap.add_argument("--methods", default="",
                     help="comma-separated registry names or variant labels (default: every registered method)")
     ap.add_argument("--report", action="store_true", help="only rewrite docs/performance.md from perf.json")
+    ap.add_argument("--update", action="store_true",
+                    help="re-measure only --methods (registry names or variant labels) on both scenes and replace "
+                         "their records in perf.json (each record keeps its own time and load)")
     args = ap.parse_args()
     if args.worker:
         print(json.dumps(worker(json.loads(args.worker))))
         return
+    if args.update:
+        data = json.loads(RESULTS.read_text())
+        wanted = args.methods.split(",")
+        for scene in SCENES:
+            for label, name, params in [v for v in VARIANTS if v[0] in wanted or v[1] in wanted]:
+                rec = run_worker({"kind": "method", "scene": scene, "method": name, "params": params, "label": label,
+                                  "n": data["n"], "slow_seconds": args.slow_seconds}, timeout=900)
+                print(f"{scene} {label}: {rec.get('median_s', rec.get('error'))}", flush=True)
+                data["methods"] = [r if not (r.get("scene") == scene and _label(r) == label) else rec
+                                   for r in data["methods"]]
+        data["updated"] = _dt.datetime.now().isoformat(timespec="seconds")
+        RESULTS.write_text(json.dumps(data, indent=1))
+        args.report = True
     if args.report:
         data = json.loads(RESULTS.read_text())
         if data.get("scaling") and "error" not in data["scaling"]:
@@ -409,7 +433,8 @@ def main() -> None:
     avail = available()
     wanted = args.methods.split(",") if args.methods else None
     variants = [v for v in VARIANTS if v[1] in avail and (wanted is None or v[1] in wanted or v[0] in wanted)]
-    variants += [(m, m, {}) for m in avail if m not in CANDIDATES and (wanted is None or m in wanted)]
+    variants += [(m, m, {}) for m in avail if m not in CANDIDATES and m not in NOT_TIMED
+                 and (wanted is None or m in wanted)]
     data = {
         "date": _dt.datetime.now().isoformat(timespec="seconds"), "quick": args.quick, "n": n,
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
@@ -422,10 +447,11 @@ def main() -> None:
         data["simulate"].append(rec)
         for label, name, params in variants:
             rec = run_worker({"kind": "method", "scene": scene, "method": name, "params": params, "label": label,
-                              "n": n, "slow_seconds": args.slow_seconds}, timeout=1800)
+                              "n": n, "slow_seconds": args.slow_seconds}, timeout=900)
             data["threads"] = rec.get("numba_threads", data.get("threads"))
             print(f"{scene} {label}: {rec.get('median_s', rec.get('error'))}", flush=True)
             data["methods"].append(rec)
+            RESULTS.write_text(json.dumps(data, indent=1))  # partial results survive an interrupted run
     if not args.no_scaling and "exact" in avail:
         data["scaling"] = run_worker({"kind": "scaling", "scene": "WSU", "method": "exact", "sizes": sizes},
                                      timeout=1800)
