@@ -576,6 +576,8 @@ class BPNNMethod(BestScanlineMethod):
     seed : int
     """
 
+    chunk_points = 1_000_000  # per-point work arrays (network layers / window search) grow with N
+
     name = "bpnn"
     label = "BP neural network IGM"
     reference = "Yue, Sun & Xie, The remote sensing image geometrical model of BP neural network, ISPRS Archives"

@@ -58,6 +58,8 @@ class GeneralDistancePrediction(BestScanlineMethod):
         Extra one-line widening steps allowed when the neighbour does not bracket the root.
     """
 
+    chunk_points = 1_000_000  # per-point work arrays (network layers / window search) grow with N
+
     name: ClassVar[str] = "gdp"
     label: ClassVar[str] = "General distance prediction (GDP)"
     reference: ClassVar[str] = (

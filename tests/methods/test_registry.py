@@ -52,14 +52,17 @@ def test_far_outside_points_flagged_by_every_method(name):
     assert not res.valid.any()
 
 
-@pytest.mark.parametrize("name, params", [("nr", {"evaluator": "numpy"}), ("bws", {}), ("exact", {})])
+@pytest.mark.parametrize("name, params", [("nr", {"evaluator": "numpy"}), ("bws", {}), ("exact", {}), ("gdp", {}),
+                                          ("bpnn", {})])
 def test_chunked_ground_to_image_equals_one_call(name, params):
     """Methods that bound their working memory by chunking give the same arrays as one call."""
     scene = build_scene("WSU")
     pts = simulate_points(scene, 3000, kind="scp", seed=4)
     ground = np.vstack([pts.ground, [[0.0, 0.0, 9e6]]])  # one point above the satellite: not converged
-    whole = create(name, scene, **params).ground_to_image(ground)
     m = create(name, scene, **params)
+    if m.needs_fit:
+        m.fit(simulate_points(scene, 100, kind="scop", seed=1))
+    whole = m.ground_to_image(ground)
     m.chunk_points = 700
     parts = m.ground_to_image(ground)
     for field in ("row", "col", "converged", "inside", "ce_evaluations"):
