@@ -108,21 +108,3 @@ def test_device_and_registry():
     assert create("csm-secant", scene, device="cpu").setup_ce == 18
     with pytest.raises(ValueError, match="device='cpu'"):
         create("csm-secant", scene, device="cuda")
-
-
-def test_columns_with_non_uniform_detector_spacing(name="csm-secant"):
-    import dataclasses
-
-    from explorer.scene import Scene
-
-    base = build_scene("PAU")
-    if "column_polynomial" not in {f.name for f in dataclasses.fields(base.interior)}:
-        pytest.skip("InteriorOrientation has no column_polynomial")
-    interior = dataclasses.replace(base.interior, column_polynomial=(1e-5, -2e-9))
-    scene = Scene("spaced", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
-    rng = np.random.default_rng(9)
-    row, col = rng.uniform(0, scene.n_rows - 1, 300), rng.uniform(0, scene.n_columns - 1, 300)
-    res = create(name, scene).ground_to_image(scene.image_to_ground(row, col))
-    assert res.valid.all()
-    np.testing.assert_allclose(res.row, row, atol=1e-7)
-    np.testing.assert_allclose(res.col, col, atol=1e-7)

@@ -85,3 +85,22 @@ def test_registry_import_does_not_import_torch():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("name, params",
+                         [("exact", {}), ("csm-secant", {}), ("nr", {}), ("nr", {"evaluator": "numpy"})])
+def test_columns_with_non_uniform_detector_spacing(name, params):
+    """The compiled solvers map their evenly spaced kernel column through the camera's column polynomial."""
+    import dataclasses
+
+    from explorer.scene import Scene
+
+    base = build_scene("PAU")
+    interior = dataclasses.replace(base.interior, column_polynomial=(1e-5, -2e-9))
+    scene = Scene("spaced", interior, base.exterior, base.timing, base.n_rows, base.terrain, base.frame)
+    rng = np.random.default_rng(9)
+    row, col = rng.uniform(0, scene.n_rows - 1, 300), rng.uniform(0, scene.n_columns - 1, 300)
+    res = create(name, scene, **params).ground_to_image(scene.image_to_ground(row, col))
+    assert res.valid.all()
+    np.testing.assert_allclose(res.row, row, atol=1e-7)
+    np.testing.assert_allclose(res.col, col, atol=1e-7)
