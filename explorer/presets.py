@@ -16,10 +16,10 @@ from __future__ import annotations
 import copy
 import json
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
+from explorer._resources import asset_path
 from explorer.errors import SceneFileError
 from explorer.geometry.exterior import ExteriorOrientation, Jitter, LineTiming
 from explorer.geometry.frames import WGS84_A, WGS84_E2, LocalFrame
@@ -29,8 +29,6 @@ from explorer.geometry.terrain import FlatTerrain, synthetic_relief
 from explorer.scene import Scene
 
 GM_EARTH = 3.986004418e14  # m^3 s^-2 (WGS84)
-ASSETS = Path(__file__).resolve().parent.parent / "assets"
-PRESETS_FILE = ASSETS / "presets.json"
 REQUIRED_FIELDS = (
     "id", "sensor", "region", "rows", "columns", "gsd_m", "lat_deg", "lon_deg", "mean_height_m",
     "altitude_m", "focal_length_m", "native_detector_pitch_m", "inclination_deg", "pass",
@@ -38,18 +36,9 @@ REQUIRED_FIELDS = (
 )
 
 
-def _find_presets_file() -> Path:
-    if PRESETS_FILE.exists():
-        return PRESETS_FILE
-    packaged = Path(__file__).resolve().parent / "assets" / "presets.json"
-    if packaged.exists():
-        return packaged
-    raise FileNotFoundError(f"presets file not found at {PRESETS_FILE}")
-
-
 @lru_cache(maxsize=1)
 def _load_table() -> dict:
-    path = _find_presets_file()
+    path = asset_path("presets.json")
     doc = json.loads(path.read_text())
     if doc.get("format") != "pushbroom-explorer presets":
         raise SceneFileError(f"{path}: not a presets file")

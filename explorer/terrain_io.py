@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from explorer._resources import assets_dir
+
 __all__ = [
     "DEFAULT_ASSETS_DIR",
     "GeoDEM",
@@ -31,8 +33,8 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Folder of the DEM/geoid assets shipped with the repository (``assets/dem``).
-DEFAULT_ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets" / "dem"
+#: Folder of the DEM/geoid assets shipped with the package (the checkout's ``assets/dem``).
+DEFAULT_ASSETS_DIR = assets_dir("dem")
 
 _SNAP = 1e-9  # fractional indices this close to an integer are snapped to it (node exactness)
 

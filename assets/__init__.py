@@ -1,0 +1,1 @@
+"""Package data of pushbroom-explorer, installed as ``explorer.assets`` (see ``explorer/_resources.py``)."""
