@@ -5,20 +5,68 @@ from __future__ import annotations
 import numpy as np
 
 
-class InputError(ValueError):
-    """Bad numeric input: wrong shape, NaN or infinite values."""
+class ExplorerError(Exception):
+    """Base of every error the package raises on purpose (bad input, bad file, no convergence).
+
+    The command line turns any of them into one line on stderr and exit status 2; anything else is a bug.
+    """
 
 
-class SceneFileError(ValueError):
-    """A scene or preset file that is malformed or misses a required field."""
+class InputError(ExplorerError, ValueError):
+    """Bad numeric input: wrong shape, NaN or infinite values, a value out of its range."""
 
 
-class ConvergenceError(RuntimeError):
+class SceneFileError(ExplorerError, ValueError):
+    """A scene, preset or data file that is malformed, unreadable or misses a required field."""
+
+
+class ConvergenceError(ExplorerError, RuntimeError):
     """An iterative solver that did not converge for some points."""
 
 
-class NotFittedError(RuntimeError):
+class NotFittedError(ExplorerError, RuntimeError):
     """A learned method asked to predict before ``fit`` was called."""
+
+
+class OutputError(ExplorerError, OSError):
+    """An output path that cannot be written (a directory, a missing folder, no permission)."""
+
+
+class MissingExtraError(ExplorerError, ImportError):
+    """A feature needs an optional dependency group (an extra) that is not installed.
+
+    Parameters
+    ----------
+    feature : str
+        What the user asked for, e.g. ``"the notebook widgets"``.
+    extra : str
+        The extra of ``pushbroom-explorer`` that provides it, e.g. ``"notebooks"``.
+    module : str
+        The module that failed to import.
+    """
+
+    def __init__(self, feature: str, extra: str, module: str) -> None:
+        super().__init__(
+            f"{feature} needs the optional dependency {module!r}: "
+            f"pip install 'pushbroom-explorer[{extra}]'"
+        )
+        self.feature, self.extra, self.module = feature, extra, module
+
+
+def require(module: str, feature: str, extra: str):
+    """Import ``module`` for ``feature`` or raise :class:`MissingExtraError` naming the extra to install.
+
+    Returns
+    -------
+    module
+        The imported module.
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise MissingExtraError(feature, extra, module) from exc
 
 
 def as_points(ground: np.ndarray, name: str = "ground") -> np.ndarray:

@@ -19,6 +19,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
+from explorer.errors import SceneFileError
 from explorer.rpc.model import InverseRFM, RationalFunctionModel, ValidityDomain
 
 __all__ = [
@@ -41,7 +42,7 @@ _SCALAR_KEYS = (
 _COEFF_KEYS = ("LINE_NUM_COEFF", "LINE_DEN_COEFF", "SAMP_NUM_COEFF", "SAMP_DEN_COEFF")
 
 
-class RPCFormatError(ValueError):
+class RPCFormatError(SceneFileError):
     """A file is not a supported RPC, or is incomplete; the message names the file and the fault."""
 
 
