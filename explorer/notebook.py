@@ -1,0 +1,473 @@
+"""The explorer inside a Jupyter notebook: an inline 3D view and interactive residual panels.
+
+Two calls, both built from the explorer's own parts:
+
+* :func:`scene_view` -- the explorer's 3D scene of one image, drawn by the SAME viser builders
+  (:mod:`explorer.scene3d.builders`: ground footprint, satellite track and sensor frames,
+  scanline planes, SCPs coloured by a method's residual, SCOPs, and the ray and search trace of
+  a chosen point), serialised with viser's scene serialiser and shown inline through viser's
+  static viewer.  The output is a self-contained HTML document in an ``<iframe srcdoc>``, so it
+  works in JupyterLab, in VS Code and in a notebook exported to HTML (no server, no kernel).
+* :func:`residual_panel` -- the explorer's residual maps
+  (:func:`explorer.panels.figures.residual_maps`) as a Plotly ``FigureWidget`` under ipywidgets
+  controls (SCOP density on the papers' marks, methods, relief, attitude rate, colour scale).
+  Every change recomputes through the model layer the explorer uses
+  (:func:`explorer.presets.build_scene`, :func:`explorer.points.simulate_points`,
+  :func:`explorer.methods.create`, :func:`explorer.evaluate.evaluate_method`) and updates the
+  figure in place.  Displayed, the panel carries a static HTML copy of the current figure as
+  well, which is what a notebook exported to HTML shows.
+
+Usage (``pip install -e ".[notebooks]"`` for ipywidgets and anywidget)::
+
+    from explorer.notebook import residual_panel, scene_view
+    scene_view("WSU", method="nr")          # inline 3D view with the NR search trace
+    panel = residual_panel("WSU", methods=("lrm", "prm"))
+    panel                                    # controls + live figure
+    panel.controls["scop_density"].value = 30  # the figure follows
+
+This module imports viser, plotly and ipywidgets lazily (only when a view or panel is made).
+Conventions: ``docs/conventions.md``; the explorer: ``docs/explorer.md``; the course built on
+this module: ``docs/course.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import html
+import io
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from explorer.errors import InputError
+from explorer.evaluate import Evaluation, evaluate_method
+from explorer.methods import available, create, registry
+from explorer.methods.base import BestScanlineMethod
+from explorer.points import PointSet, simulate_points
+from explorer.presets import build_scene, preset_ids
+from explorer.scene import Scene
+
+SCOP_MARKS = (10, 20, 30, 50, 100, 300, 500, 1000)
+"""SCOP counts of the papers' experiments (the density control's stops)."""
+COLOUR_LIMITS_PX = (0.01, 0.1, 0.5, 1.0, 2.0, 5.0, 20.0)
+"""Colour-scale limits offered, pixels (the map spans ``[-limit, +limit]``)."""
+
+
+# ============================================================================ 3D view
+@dataclass
+class SceneView:
+    """An inline 3D view: viser's static viewer with one serialised explorer scene.
+
+    Attributes
+    ----------
+    html : str
+        Self-contained HTML document (viser's static client with the scene embedded).
+    nodes : list of str
+        Scene node names drawn (``/ground/surface``, ``/orbit/track``, ``/scanlines/planes``, ...).
+    best_row : float
+        Exact best scanline of the chosen point, pixels.
+    trace_rows : ndarray, shape (K,) or None
+        Rows the chosen method visited, in order (None without a method).
+    height : int
+        Display height, CSS pixels.
+    """
+
+    html: str
+    nodes: list[str]
+    best_row: float
+    trace_rows: np.ndarray | None = None
+    height: int = 480
+
+    def _repr_html_(self) -> str:
+        doc = html.escape(self.html, quote=True)
+        return (f'<div style="border:1px solid #ddd"><iframe srcdoc="{doc}" width="100%" '
+                f'height="{int(self.height)}" style="border:none;display:block"></iframe></div>')
+
+    def save(self, path: str) -> None:
+        """Write the standalone HTML document (open it in any browser)."""
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(self.html)
+
+
+def _scene_of(scene: Scene | str) -> Scene:
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, str):
+        return build_scene(scene)
+    raise InputError(f"scene must be a Scene or a preset id ({', '.join(preset_ids())}), got {type(scene).__name__}")
+
+
+def _ground_of_image_point(scene: Scene, row: float, col: float) -> np.ndarray:
+    g = scene.image_to_ground(np.array([row]), np.array([col]))[0]
+    if not np.isfinite(g).all():  # off the DEM: the mean-height plane, as the explorer does
+        g = scene.image_to_ground(np.array([row]), np.array([col]), height=scene.terrain.mean_height)[0]
+    return g
+
+
+def _method_of(method: str | BestScanlineMethod, scene: Scene, control: PointSet | None, seed: int
+               ) -> BestScanlineMethod:
+    if isinstance(method, BestScanlineMethod):
+        return method
+    if method not in available():
+        raise InputError(f"unknown method {method!r}; registered: {', '.join(available())}")
+    m = create(method, scene)
+    if m.needs_fit:
+        m.fit(control if control is not None else simulate_points(scene, 100, kind="scop", seed=seed))
+    return m
+
+
+def scene_view(
+    scene: Scene | str = "WSU",
+    *,
+    point: tuple[float, float] | None = None,
+    method: str | BestScanlineMethod | None = None,
+    check: PointSet | None = None,
+    residual_px: np.ndarray | None = None,
+    control: PointSet | None = None,
+    limit_px: float = 1.0,
+    sensor_distance: str = "compressed",
+    height_exaggeration: float = 1.0,
+    height: int = 480,
+    max_points: int = 20000,
+    seed: int = 0,
+) -> SceneView:
+    """The explorer's 3D view of a scene, for inline display in a notebook cell.
+
+    Draws, with :mod:`explorer.scene3d.builders`: the ground footprint (height-coloured with
+    relief), the satellite track with sensor frames, the scanline planes of the first, middle and
+    last rows and of the chosen point's best row, the chosen point with its ray to the
+    perspective centre of its best scanline, and (with ``method``) the scanlines the method
+    visited while searching for it.
+
+    Parameters
+    ----------
+    scene : Scene or str
+        A scene or a preset id.
+    point : (float, float), optional
+        Image (row, column) of the chosen point, pixels; default the image centre.  Its ground
+        point is on the terrain (the mean-height plane where a DEM does not cover it).
+    method : str or BestScanlineMethod, optional
+        Registered method name (fitted on ``control``, or on 100 simulated SCOPs, when it learns)
+        or a method instance; its ``ground_to_image(..., trace=True)`` rows are drawn.
+    check : PointSet, optional
+        SCPs drawn as a point cloud (grey, or coloured by ``residual_px``).
+    residual_px : ndarray, shape (len(check),), optional
+        Signed row residual per SCP, pixels (NaN: no valid row, drawn magenta).
+    control : PointSet, optional
+        SCOPs, drawn as gold diamonds.
+    limit_px : float
+        Colour scale ``[-limit_px, +limit_px]`` of the residuals (the explorer's diverging scale).
+    sensor_distance : {"compressed", "true"}
+        The explorer's display frame (``docs/explorer.md``).
+    height_exaggeration : float
+    height : int
+        Displayed height, CSS pixels.
+    max_points : int
+        At most this many SCPs are drawn (an evenly strided subset).
+    seed : int
+        Seed of the SCOPs simulated for a learned ``method`` when ``control`` is None.
+
+    Returns
+    -------
+    SceneView
+        Displays itself inline (``_repr_html_``); ``.html`` is the standalone document.
+    """
+    import viser
+
+    from explorer.panels import diverging_rgb
+    from explorer.panels.figures import decimation_index
+    from explorer.scene3d import builders as B  # noqa: N812
+
+    sc = _scene_of(scene)
+    row, col = point if point is not None else ((sc.n_rows - 1) / 2.0, (sc.n_columns - 1) / 2.0)
+    row, col = float(row), float(col)
+    if not (-0.5 <= row <= sc.n_rows - 0.5 and -0.5 <= col <= sc.n_columns - 0.5):
+        raise InputError(f"point (row {row}, col {col}) is outside the image {sc.shape}")
+    ground = _ground_of_image_point(sc, row, col)
+    trace_rows = None
+    if method is not None:
+        m = _method_of(method, sc, control, seed)
+        res = m.ground_to_image(ground[None, :], trace=True)
+        if res.trace:
+            trace_rows = np.array([float(np.asarray(a).ravel()[0]) for a in res.trace])
+    frame = B.DisplayFrame.for_scene(sc, sensor_distance=sensor_distance, height_exaggeration=height_exaggeration)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):  # start-up banner
+        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        api = server.scene
+        nodes: dict[str, Any] = {}
+        nodes.update(B.add_ground(api, sc, frame))
+        nodes.update(B.add_orbit(api, sc, frame))
+        h_mean = sc.terrain.mean_height
+        rows = np.array([0.0, (sc.n_rows - 1) / 2.0, sc.n_rows - 1.0, row])
+        names = ["first scanline (row 0)", "middle scanline", f"last scanline (row {sc.n_rows - 1})", ""]
+        nodes.update(B.add_scanline_planes(api, sc, frame, rows, np.array([h_mean, h_mean, h_mean, ground[2]]),
+                                           names))
+        if check is not None and len(check):
+            pos = decimation_index(len(check), max_points)
+            if residual_px is not None:
+                r = np.asarray(residual_px, dtype=np.float64)
+                if r.shape != (len(check),):
+                    raise InputError(f"residual_px has shape {r.shape}, expected ({len(check)},) like check")
+                colours = diverging_rgb(r[pos], limit_px)
+            else:
+                colours = np.full((pos.size, 3), 200, np.uint8)
+            nodes.update(B.add_points(api, "/points/scps", frame, check.ground[pos], colours,
+                                      size_km=B.point_size_km(frame, pos.size)))
+        if control is not None and len(control):
+            nodes.update(B.add_scops(api, frame, control.ground))
+        label = f"row {row:.2f}, col {col:.2f}"
+        if trace_rows is not None:
+            label += f" ({len(trace_rows)} rows visited)"
+        nodes.update(B.add_selection(api, sc, frame, ground, row, trace_rows, label=label))
+        diag = frame.diagonal_km
+        server.initial_camera.position = (-1.6 * diag, -1.9 * diag, 1.5 * diag)
+        server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        doc = api.as_html()
+    finally:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            server.stop()
+    return SceneView(doc, sorted(nodes), row, trace_rows, int(height))
+
+
+# ===================================================================== residual panel
+@dataclass
+class PanelState:
+    """What the residual panel's output depends on (one value per control)."""
+
+    preset: str = "WSU"
+    methods: tuple[str, ...] = ("lrm", "prm")
+    scop_density: int = 100
+    relief_m: float = 0.0
+    attitude_rate_scale: float = 1.0
+    limit_px: float = 1.0
+
+
+@dataclass
+class ResidualPanel:
+    """Interactive residual maps: ipywidgets controls over a Plotly ``FigureWidget``.
+
+    Build it with :func:`residual_panel`.  Changing a control (by hand or from Python, e.g.
+    ``panel.controls["scop_density"].value = 30``) recomputes the residuals and updates
+    :attr:`figure` in place.
+
+    Attributes
+    ----------
+    controls : dict of str to ipywidgets.Widget
+        ``preset``, ``methods``, ``scop_density``, ``relief_m``, ``attitude_rate_scale``, ``limit_px``.
+    figure : plotly.graph_objects.FigureWidget
+        One scattergl trace per method (``customdata``: signed row residual, pixels).
+    evaluations : dict of str to Evaluation
+        The current residuals per method (``residual_row`` aligned with ``evaluated_index``).
+    scene : Scene
+    check, control : PointSet
+        Current SCPs and SCOPs.
+    errors : dict of str to str
+        Methods that could not be fitted or evaluated, with the reason.
+    """
+
+    n_scps: int
+    seed: int
+    max_points: int
+    controls: dict[str, Any] = field(default_factory=dict)
+    figure: Any = None
+    status: Any = None
+    evaluations: dict[str, Evaluation] = field(default_factory=dict)
+    errors: dict[str, str] = field(default_factory=dict)
+    scene: Scene | None = None
+    check: PointSet | None = None
+    control: PointSet | None = None
+    n_updates: int = 0
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    # ------------------------------------------------------------- model layer
+    def state(self) -> PanelState:
+        """The controls' current values."""
+        c = self.controls
+        return PanelState(str(c["preset"].value), tuple(c["methods"].value), int(c["scop_density"].value),
+                          float(c["relief_m"].value), float(c["attitude_rate_scale"].value),
+                          float(c["limit_px"].value))
+
+    def _cached(self, key: tuple, make):
+        if key not in self._cache:
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[key] = make()
+        return self._cache[key]
+
+    def compute(self, s: PanelState) -> dict[str, Evaluation]:
+        """Scene, SCPs, SCOPs and per-method evaluations for ``s`` (cached by what they depend on)."""
+        skey = (s.preset, s.relief_m, s.attitude_rate_scale)
+        self.scene = self._cached(("scene", *skey), lambda: build_scene(
+            s.preset, relief_m=s.relief_m, attitude_rate_scale=s.attitude_rate_scale))
+        self.check = self._cached(("scps", *skey, self.n_scps), lambda: simulate_points(
+            self.scene, self.n_scps, kind="scp", seed=self.seed))
+        self.control = self._cached(("scops", *skey, s.scop_density), lambda: simulate_points(
+            self.scene, s.scop_density, kind="scop", seed=self.seed))
+        evs: dict[str, Evaluation] = {}
+        self.errors = {}
+        for name in s.methods:
+            def make(name=name) -> Evaluation | str:
+                try:
+                    return evaluate_method(create(name, self.scene), self.check, self.control, seed=self.seed)
+                except Exception as exc:  # shown in the status line; the other methods still draw
+                    return f"{type(exc).__name__}: {exc}"
+            fitted = registry()[name].needs_fit
+            out = self._cached(("eval", *skey, s.scop_density if fitted else None, name), make)
+            if isinstance(out, str):
+                self.errors[name] = out
+            else:
+                evs[name] = out
+        self.evaluations = evs
+        return evs
+
+    def make_figure(self, s: PanelState):
+        """The explorer's residual-map figure of the current evaluations (a plain ``go.Figure``)."""
+        from explorer.panels.figures import empty_figure, residual_maps
+
+        if not self.evaluations:
+            return empty_figure("no method evaluated" + (": " + "; ".join(self.errors.values()) if self.errors else ""))
+        fig = residual_maps(self.evaluations, self.check, control=self.control, shape=self.scene.shape,
+                            limit_px=s.limit_px, max_points=self.max_points)
+        fig.update_layout(title={"text": f"{self.scene.name}: relief {s.relief_m:g} m, attitude rate x"
+                                         f"{s.attitude_rate_scale:g}, {len(self.control)} SCOPs",
+                                 "font": {"size": 12}, "y": 0.995},
+                          margin={"t": 90})
+        return fig
+
+    def update(self, *_: Any) -> None:
+        """Recompute from the controls and redraw :attr:`figure` in place."""
+        s = self.state()
+        if self.status is not None:
+            self.status.value = "computing..."
+        self.compute(s)
+        fig = self.make_figure(s)
+        with self.figure.batch_update():
+            self.figure.data = []
+            self.figure.add_traces(list(fig.data))
+            self.figure.layout = fig.layout
+        self.n_updates += 1
+        if self.status is not None:
+            parts = [f"{n}: RMSE {ev.rmse_px:.3g} px, dr_max {ev.dr_max_px:.3g} px"
+                     for n, ev in self.evaluations.items()]
+            parts += [f"<span style='color:#b00'>{n}: {e}</span>" for n, e in self.errors.items()]
+            self.status.value = "<br>".join(parts) or "no method selected"
+
+    # --------------------------------------------------------------- display
+    @property
+    def widget(self):
+        """The ipywidgets box: controls, status line, figure."""
+        import ipywidgets as W  # noqa: N812
+
+        c = self.controls
+        row1 = W.HBox([c["preset"], c["methods"], W.VBox([c["scop_density"], c["limit_px"]])])
+        row2 = W.HBox([c["relief_m"], c["attitude_rate_scale"]])
+        return W.VBox([row1, row2, self.status, self.figure])
+
+    def static_html(self) -> str:
+        """The current figure as an HTML fragment (plotly.js from its CDN), for exported notebooks."""
+        import plotly.graph_objects as go
+
+        return go.Figure(self.figure).to_html(full_html=False, include_plotlyjs="cdn")
+
+    def _repr_mimebundle_(self, **kwargs: Any) -> dict:
+        bundle = self.widget._repr_mimebundle_(**kwargs) or {}
+        data = bundle[0] if isinstance(bundle, tuple) else bundle
+        data = dict(data)
+        data["text/html"] = self.static_html()
+        return data
+
+
+def residual_panel(
+    preset: str = "WSU",
+    *,
+    methods: Sequence[str] = ("lrm", "prm"),
+    scop_density: int = 100,
+    relief_m: float = 0.0,
+    attitude_rate_scale: float = 1.0,
+    limit_px: float = 1.0,
+    n_scps: int = 5000,
+    seed: int = 0,
+    max_points: int = 20000,
+    method_choices: Iterable[str] | None = None,
+) -> ResidualPanel:
+    """Interactive residual maps of best-scanline methods, driven by ipywidgets controls.
+
+    Parameters
+    ----------
+    preset : str
+        Initial preset id.
+    methods : sequence of str
+        Initially selected methods (registered names).
+    scop_density : int
+        Initial number of SCOPs; the control offers :data:`SCOP_MARKS` (the papers' counts).
+    relief_m : float
+        Initial synthetic relief amplitude, metres (control 0 to 2000 m).
+    attitude_rate_scale : float
+        Initial multiplier of the preset's attitude rates (control 0 to 5).
+    limit_px : float
+        Initial colour-scale limit, pixels (control: :data:`COLOUR_LIMITS_PX`).
+    n_scps : int
+        Number of SCPs (check points) the residuals are computed on.
+    seed : int
+        Seed of the SCOPs, SCPs and subsampling.
+    max_points : int
+        At most this many SCPs drawn per method.
+    method_choices : iterable of str, optional
+        Methods offered (default: every registered method).
+
+    Returns
+    -------
+    ResidualPanel
+        Displays as the controls and the live figure; computed once before returning.
+    """
+    import ipywidgets as W  # noqa: N812
+    import plotly.graph_objects as go
+
+    names = available()
+    choices = [m for m in (method_choices or names) if m in names]
+    unknown = [m for m in methods if m not in names]
+    if unknown:
+        raise InputError(f"unknown method(s) {', '.join(unknown)}; registered: {', '.join(names)}")
+    for m in methods:
+        if m not in choices:
+            choices.append(m)
+    if int(scop_density) not in SCOP_MARKS:
+        raise InputError(f"scop_density must be one of the papers' marks {SCOP_MARKS}, got {scop_density}")
+    limits = sorted(set(COLOUR_LIMITS_PX) | {float(limit_px)})
+    if not limit_px > 0:
+        raise InputError(f"limit_px must be positive, got {limit_px}")
+    if n_scps < 1:
+        raise InputError(f"n_scps must be at least 1, got {n_scps}")
+    ids = preset_ids()
+    match = [p for p in ids if p.lower() == str(preset).lower()]
+    if not match:
+        raise InputError(f"unknown preset {preset!r}; presets: {', '.join(ids)}")
+    style = {"description_width": "initial"}
+    controls = {
+        "preset": W.Dropdown(options=ids, value=match[0],
+                             description="preset", style=style, layout=W.Layout(width="180px")),
+        "methods": W.SelectMultiple(options=choices, value=tuple(methods), description="methods", rows=5,
+                                    style=style),
+        "scop_density": W.SelectionSlider(options=list(SCOP_MARKS), value=int(scop_density),
+                                          description="SCOPs", continuous_update=False, style=style),
+        "limit_px": W.SelectionSlider(options=limits, value=float(limit_px), description="colour limit (px)",
+                                      continuous_update=False, style=style),
+        "relief_m": W.FloatSlider(value=float(relief_m), min=0.0, max=2000.0, step=250.0,
+                                  description="relief (m)", continuous_update=False, style=style),
+        "attitude_rate_scale": W.FloatSlider(value=float(attitude_rate_scale), min=0.0, max=5.0, step=0.5,
+                                             description="attitude rate x", continuous_update=False, style=style),
+    }
+    panel = ResidualPanel(int(n_scps), int(seed), int(max_points), controls)
+    panel.status = W.HTML("")
+    panel.figure = go.FigureWidget()
+    panel.update()
+    for c in controls.values():
+        c.observe(panel.update, names="value")
+    return panel
+
+
+__all__ = ["COLOUR_LIMITS_PX", "SCOP_MARKS", "PanelState", "ResidualPanel", "SceneView", "residual_panel",
+           "scene_view"]
