@@ -47,6 +47,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from explorer.bench_defaults import (
+    DEFAULT_MAX_POINTS_SLOW,
+    DEFAULT_SCOPS,
+    DEFAULT_SCPS,
+    DEFAULT_SLOW_SECONDS,
+)
 from explorer.errors import InputError
 from explorer.evaluate import Evaluation, evaluate_method
 from explorer.methods import available, create, registry
@@ -54,10 +60,6 @@ from explorer.points import PointSet, simulate_points
 from explorer.presets import build_scene, preset_ids, preset_spec
 
 BENCH_VERSION = 1
-DEFAULT_SCOPS: tuple[int, ...] = (10, 30, 50, 100)
-DEFAULT_SCPS = 5_000_000
-DEFAULT_MAX_POINTS_SLOW = 20_000
-DEFAULT_SLOW_SECONDS = 60.0
 #: Methods that are always subsampled: pixel-level searches spend up to one CE per image row and point.
 SLOW_METHODS = frozenset({"ss", "bws", "ss-interp", "bws-interp"})
 #: The presets that are the papers' ten images (``paper`` in a preset list).

@@ -1,17 +1,24 @@
 """The ``pushbroom`` command line: thin wrappers over the library.
 
-Each sub-command module in ``explorer.commands`` exposes ``register(subparsers)``.
+Each sub-command module in ``explorer.commands`` exposes ``register(subparsers)`` and imports only the
+standard library at module level; the library is imported by the handler of the command that runs, so
+``pushbroom --help`` and ``pushbroom <command> --help`` stay fast.
+
+One error path: every deliberate error of the package (:class:`explorer.errors.ExplorerError`: a bad file,
+a bad number, a bad path, an unknown name) and every file-system error ends the command with one line on
+stderr naming the problem and exit status 2, as argparse does for bad arguments. Ctrl-C and SIGTERM stop the
+command (writers remove their partial files) with exit status 130 / 143.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
+import os
+import signal
 import sys
-
-from explorer.errors import ConvergenceError, InputError, SceneFileError
-from explorer.rpc.readers import RPCFormatError
+import warnings
+from typing import NoReturn
 
 COMMAND_MODULES = (
     "explorer.commands.simulate",
@@ -23,25 +30,83 @@ COMMAND_MODULES = (
 )
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (the problem and where to read the usage), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    """The ``pushbroom`` parser with every sub-command (imports only the light command modules)."""
+    parser = OneLineErrorParser(
         prog="pushbroom", description="Best scanline search for linear pushbroom images."
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
-        if importlib.util.find_spec(name) is not None:
-            importlib.import_module(name).register(sub)
+        importlib.import_module(name).register(sub)
     return parser
 
 
+def _command_name(args: argparse.Namespace) -> str:
+    parts = [str(args.command)]
+    for key in ("scene_command", "rpc_command"):
+        if getattr(args, key, None):
+            parts.append(str(getattr(args, key)))
+    return " ".join(parts)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that writers clean up."""
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    raise _Terminated()
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    print(f"pushbroom: warning: {_one_line(Warning(message))}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a bad argument (2, message already printed)
+        return exc.code if isinstance(exc.code, int) else 2
+    name = _command_name(args)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    warnings.showwarning = _show_warning  # one line per warning, no file paths
+    from explorer.errors import ExplorerError
+
     try:
         return int(args.func(args) or 0)
-    except (InputError, SceneFileError, RPCFormatError, ConvergenceError, KeyError, FileNotFoundError) as exc:
-        print(f"pushbroom {args.command}: error: {exc}", file=sys.stderr)
+    except ExplorerError as exc:
+        print(f"pushbroom {name}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader of stdout went away (e.g. `| head`): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except OSError as exc:  # file-system errors (rasterio's I/O errors derive from OSError too)
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        reason = exc.strerror or _one_line(exc)
+        print(f"pushbroom {name}: error:{where} {reason}", file=sys.stderr)
+        return 2
+    except _Terminated:
+        print(f"pushbroom {name}: terminated", file=sys.stderr)
+        return 143
+    except KeyboardInterrupt:
+        print(f"pushbroom {name}: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

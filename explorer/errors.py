@@ -28,6 +28,33 @@ class NotFittedError(ExplorerError, RuntimeError):
     """A learned method asked to predict before ``fit`` was called."""
 
 
+class UnknownNameError(ExplorerError, KeyError):
+    """An unknown name (preset, method, scene kind); the message suggests the closest known names.
+
+    Parameters
+    ----------
+    kind : str
+        What was looked up, e.g. ``"preset"``.
+    name : str
+        The name given.
+    known : sequence of str
+        The valid names.
+    """
+
+    def __init__(self, kind: str, name: str, known) -> None:
+        import difflib
+
+        known = list(known)
+        by_lower = {k.lower(): k for k in known}
+        close = difflib.get_close_matches(str(name).lower(), list(by_lower), n=3, cutoff=0.5)
+        hint = f"; did you mean {', '.join(repr(by_lower[c]) for c in close)}?" if close else ""
+        self.message = f"unknown {kind} {name!r}{hint} (available: {', '.join(known)})"
+        super().__init__(self.message)
+
+    def __str__(self) -> str:  # KeyError would print the repr of the message
+        return self.message
+
+
 class OutputError(ExplorerError, OSError):
     """An output path that cannot be written (a directory, a missing folder, no permission)."""
 

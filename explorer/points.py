@@ -15,6 +15,7 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.geometry.terrain import FlatTerrain
+from explorer.io_atomic import atomic_path
 from explorer.scene import Scene
 
 
@@ -66,10 +67,14 @@ class PointSet:
         return self.subset(np.sort(rng.choice(len(self), size=n, replace=False)))
 
     def save_npz(self, path: str | Path, scene: Scene | None = None) -> None:
-        """Write arrays ``row``, ``col``, ``ground``, ``time`` (and ``scene_json``) to an .npz file."""
+        """Write arrays ``row``, ``col``, ``ground``, ``time`` (and ``scene_json``) to an .npz file.
+
+        The file is written atomically under exactly ``path`` (no ``.npz`` is appended).
+        """
         extra = {"scene_json": np.array(scene.to_json())} if scene is not None else {}
-        np.savez(path, row=self.row, col=self.col, ground=self.ground, time=self.time,
-                 grid_shape=np.array(self.grid_shape), **extra)
+        with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+            np.savez(handle, row=self.row, col=self.col, ground=self.ground, time=self.time,
+                     grid_shape=np.array(self.grid_shape), **extra)
 
     @classmethod
     def load_npz(cls, path: str | Path) -> PointSet:

@@ -20,7 +20,7 @@ from functools import lru_cache
 import numpy as np
 
 from explorer._resources import asset_path
-from explorer.errors import SceneFileError
+from explorer.errors import SceneFileError, UnknownNameError
 from explorer.geometry.exterior import ExteriorOrientation, Jitter, LineTiming
 from explorer.geometry.frames import WGS84_A, WGS84_E2, LocalFrame
 from explorer.geometry.interior import InteriorOrientation
@@ -64,7 +64,7 @@ def preset_spec(preset_id: str) -> dict:
     for p in _load_table()["presets"]:
         if p["id"].lower() == preset_id.lower():
             return copy.deepcopy(p)
-    raise KeyError(f"unknown preset {preset_id!r}; available: {', '.join(preset_ids())}")
+    raise UnknownNameError("preset", preset_id, preset_ids())
 
 
 def _heading_azimuth(lat_deg: float, inclination_deg: float, direction: str) -> float:

@@ -10,6 +10,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from explorer.geometry.terrain import (
     intersect_plane,
     terrain_from_dict,
 )
+from explorer.io_atomic import write_text_atomic
 
 SCENE_FILE_VERSION = 1
 RIGOROUS_SCENE_FORMAT = "pushbroom-explorer rigorous line-scan scene"
@@ -71,6 +73,10 @@ class Scene:
     terrain: Terrain = field(default_factory=FlatTerrain)
     frame: LocalFrame = field(default_factory=lambda: LocalFrame(0.0, 0.0, 0.0))
     metadata: dict = field(default_factory=dict)
+
+    #: Capability: the exterior orientation is MPC polynomials of time (+ jitter), so the compiled
+    #: collinearity kernels (:mod:`explorer.geometry.kernels`) can pack this scene.
+    has_polynomial_exterior: ClassVar[bool] = True
 
     # ------------------------------------------------------------------ image
     @property
@@ -281,8 +287,8 @@ class Scene:
         return json.dumps(self.to_dict(), indent=1)
 
     def save(self, path: str | Path) -> None:
-        """Write the scene to a JSON file."""
-        Path(path).write_text(self.to_json())
+        """Write the scene to a JSON file (atomically: a failed write leaves no file under ``path``)."""
+        write_text_atomic(path, self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:

@@ -14,15 +14,21 @@ import argparse
 import json
 from pathlib import Path
 
-from explorer.bench import (
+from explorer.bench_defaults import (
     DEFAULT_MAX_POINTS_SLOW,
     DEFAULT_SCOPS,
     DEFAULT_SCPS,
     DEFAULT_SLOW_SECONDS,
-    format_table,
-    run_bench,
 )
-from explorer.errors import InputError
+from explorer.commands._args import (
+    existing_file,
+    non_negative_float,
+    non_negative_int,
+    output_file,
+    positive_float,
+    positive_int,
+    raster_file,
+)
 
 
 def parse_params(items: list[str] | None) -> dict[str, dict]:
@@ -30,6 +36,8 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
 
     Values are JSON when they parse as JSON, else strings.
     """
+    from explorer.errors import InputError
+
     out: dict[str, dict] = {}
     for item in items or []:
         key, sep, value = item.partition("=")
@@ -45,6 +53,10 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    from explorer.bench import format_table, run_bench
+    from explorer.io_atomic import write_text_atomic
+
+    params = parse_params(args.param)  # checked before the bench runs
     if args.rpc:
         from explorer.bench import bench_scene, parse_counts, resolve_methods
         from explorer.real.from_rpc import scene_from_rpc
@@ -54,14 +66,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
         result = bench_scene(
             scene, Path(args.rpc).stem, resolve_methods(args.methods), parse_counts(args.scops), args.scps,
             seed=args.seed, max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
-            method_params=parse_params(args.param),
+            method_params=params,
         )
     else:
         result = run_bench(
             args.preset, args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,
             relief_seed=args.relief_seed, attitude_rate_scale=args.attitude_rate_scale,
             max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
-            method_params=parse_params(args.param), progress=not args.no_progress,
+            method_params=params, progress=not args.no_progress,
         )
     print(format_table(result.runs))
     failed = [r for r in result.runs if r.get("error")]
@@ -77,10 +89,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             for w in r["warnings"]:
                 print(f"  {r['preset']} {r['method']}{scops}: {w}")
     if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result.doc, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {path}")
+        write_text_atomic(args.json, json.dumps(result.doc, indent=1, allow_nan=False) + "\n")
+        print(f"wrote {args.json}")
     if failed:
         print(f"{len(failed)} run(s) failed (see 'error' in the table/JSON)")
         return 1
@@ -93,22 +103,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--methods", default="all", help="method names, comma-separated, or 'all' (default all)")
     p.add_argument("--scops", default=",".join(map(str, DEFAULT_SCOPS)),
                    help="SCOP counts for learned methods (default 10,30,50,100)")
-    p.add_argument("--scps", type=int, default=DEFAULT_SCPS, help="SCPs per preset (default 5000000)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--relief", type=float, default=0.0, help="synthetic relief amplitude, metres (default 0)")
-    p.add_argument("--relief-seed", type=int, default=0)
-    p.add_argument("--attitude-rate-scale", type=float, default=1.0,
+    p.add_argument("--scps", type=positive_int, default=DEFAULT_SCPS, help="SCPs per preset (default 5000000)")
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--relief", type=non_negative_float, default=0.0,
+                   help="synthetic relief amplitude, metres (default 0)")
+    p.add_argument("--relief-seed", type=non_negative_int, default=0)
+    p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0,
                    help="multiplies the presets' body rates (0: orbit-following attitude)")
-    p.add_argument("--max-points-slow", type=int, default=DEFAULT_MAX_POINTS_SLOW,
+    p.add_argument("--max-points-slow", type=positive_int, default=DEFAULT_MAX_POINTS_SLOW,
                    help="subsample size for slow methods (default 20000)")
-    p.add_argument("--slow-seconds", type=float, default=DEFAULT_SLOW_SECONDS,
+    p.add_argument("--slow-seconds", type=positive_float, default=DEFAULT_SLOW_SECONDS,
                    help="subsample any method whose projected time exceeds this (default 60)")
     p.add_argument("--param", action="append", metavar="METHOD.NAME=VALUE",
                    help="constructor parameter of a method (JSON value), repeatable")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--json", default=None, metavar="OUT", help="write the runs as JSON")
-    p.add_argument("--rpc", default=None, help="benchmark on the scene resected from this RPC file instead of a preset")
-    p.add_argument("--dem", default=None, help="with --rpc: DEM for the GCP heights (GeoTIFF or .hgt)")
-    p.add_argument("--gcps", type=int, default=100, help="with --rpc: about this many GCPs per height layer")
-    p.add_argument("--degree", type=int, default=2, help="with --rpc: degree of the MPC polynomials")
+    p.add_argument("--json", default=None, metavar="OUT", type=output_file, help="write the runs as JSON")
+    p.add_argument("--rpc", default=None, type=existing_file,
+                   help="benchmark on the scene resected from this RPC file instead of a preset")
+    p.add_argument("--dem", default=None, type=raster_file,
+                   help="with --rpc: DEM for the GCP heights (GeoTIFF or .hgt)")
+    p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
+    p.add_argument("--degree", type=non_negative_int, default=2, help="with --rpc: degree of the MPC polynomials")
     p.set_defaults(func=cmd_bench)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from explorer.presets import default_preset_id
+from explorer.commands._args import port_number
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
@@ -16,9 +16,9 @@ def cmd_explore(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("explore", help="serve the interactive 3D explorer (viser) and print its URL")
-    p.add_argument("--preset", default=None, help=f"preset shown first (default {default_preset_id()})")
+    p.add_argument("--preset", default=None, help="preset shown first (default: the presets file's default, WSU)")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0 picks a free one)")
+    p.add_argument("--port", type=port_number, default=8080, help="port (default 8080; 0 picks a free one)")
     p.add_argument("--methods", default=None,
                    help="comma-separated methods checked at start (default lrm,prm,mlp,nr where registered)")
     p.set_defaults(func=cmd_explore)

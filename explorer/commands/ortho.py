@@ -4,28 +4,44 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-from tqdm import tqdm
-
-from explorer.commands.simulate import add_scene_arguments, scene_from_args
-from explorer.ortho import (
-    RPCProjector,
-    SceneProjector,
-    SourceImage,
-    default_pattern,
-    grid_covering,
-    ortho_dask_array,
-    render_synthetic_source,
-    scene_image_to_lonlat,
-    write_orthoimage,
+from explorer.commands._args import (
+    existing_file,
+    finite_float,
+    int_in_range,
+    output_file,
+    positive_float,
+    raster_file,
 )
+from explorer.commands.simulate import add_scene_arguments, scene_from_args
+
+_SCHEDULER = re.compile(r"^(threads|processes|synchronous|local-cluster(:[1-9][0-9]{0,2})?|tcp://[^\s:/]+:[0-9]{1,5})$")
+
+
+def scheduler_name(text: str) -> str:
+    """A dask scheduler: threads | processes | synchronous | local-cluster[:N] | tcp://host:port."""
+    if not _SCHEDULER.match(text):
+        raise argparse.ArgumentTypeError(
+            f"unknown scheduler {text!r}: use threads, processes, synchronous, local-cluster:N or tcp://HOST:PORT"
+        )
+    return text
+
+
+def image_shape(text: str) -> tuple[int, int]:
+    """``ROWSxCOLS`` with positive integers."""
+    m = re.fullmatch(r"\s*([0-9]{1,7})\s*[xX]\s*([0-9]{1,7})\s*", text)
+    if not m or int(m.group(1)) < 2 or int(m.group(2)) < 2:
+        raise argparse.ArgumentTypeError(f"{text!r} is not ROWSxCOLS (two integers >= 2, e.g. 40000x40000)")
+    return int(m.group(1)), int(m.group(2))
 
 
 def _rpc_image_to_lonlat(rpc, dem, height):
+    import numpy as np
+
     def fn(row, col):
         if dem is not None:
             lon, lat, _, ok = rpc.localization_on_dem(row, col, dem)
@@ -38,6 +54,19 @@ def _rpc_image_to_lonlat(rpc, dem, height):
 
 def build_ortho_job(args: argparse.Namespace, workdir: Path):
     """(projector, source, grid, pattern or None) for the parsed arguments."""
+    import numpy as np
+
+    from explorer.errors import InputError
+    from explorer.ortho import (
+        RPCProjector,
+        SceneProjector,
+        SourceImage,
+        default_pattern,
+        grid_covering,
+        render_synthetic_source,
+        scene_image_to_lonlat,
+    )
+
     dem = None
     if args.dem:
         from explorer.terrain_io import read_geotiff_dem, read_hgt
@@ -49,10 +78,15 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         rpc = read_rpc(args.rpc)
         if args.image:
             shape = SourceImage(args.image).shape
+            if rpc.image_size and tuple(rpc.image_size) != tuple(shape):
+                raise InputError(
+                    f"--image {args.image} is {shape[0]} x {shape[1]} pixels but the RPC describes a "
+                    f"{rpc.image_size[0]} x {rpc.image_size[1]} image"
+                )
         elif args.rpc_shape:
-            shape = tuple(int(v) for v in args.rpc_shape.split("x"))
+            shape = args.rpc_shape
         else:
-            raise SystemExit("--rpc with --synthetic needs --rpc-shape ROWSxCOLS (the source image size)")
+            raise InputError("--rpc with --synthetic needs --rpc-shape ROWSxCOLS (the source image size)")
         height = args.height if args.height is not None else (None if dem is not None else rpc.height_offset)
         projector = RPCProjector(rpc, shape, height=height, dem=dem)
         r = np.array([0, 0, shape[0] - 1, shape[0] - 1, shape[0] / 2], float)
@@ -77,13 +111,30 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         source = SourceImage(src_path)
     else:
         source = SourceImage(args.image)
+        if tuple(source.shape) != tuple(shape):
+            raise InputError(
+                f"--image {args.image} is {source.shape[0]} x {source.shape[1]} pixels but the scene is "
+                f"{shape[0]} x {shape[1]}: not the image of this scene"
+            )
+    if grid.width * grid.height > 4_000_000_000:
+        raise InputError(f"--gsd {args.gsd} gives a {grid.width} x {grid.height} output: too large")
+    if grid.width < 1 or grid.height < 1:
+        raise InputError(f"--gsd {args.gsd} is larger than the footprint: the output would be empty")
     return projector, source, grid, pattern
 
 
 def cmd_ortho(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from explorer.errors import InputError
+    from explorer.io_atomic import atomic_path
+    from explorer.ortho import ortho_dask_array, write_orthoimage
+
     if not args.synthetic and not args.image:
-        raise SystemExit("give --image IMG or --synthetic")
-    with tempfile.TemporaryDirectory() as tmp:
+        raise InputError("give --image IMG or --synthetic")
+    if args.synthetic and args.image:
+        raise InputError("give either --image or --synthetic, not both")
+    with tempfile.TemporaryDirectory(prefix="pushbroom-ortho-") as tmp:
         t0 = time.perf_counter()
         projector, source, grid, pattern = build_ortho_job(args, Path(tmp))
         t_setup = time.perf_counter() - t0
@@ -95,8 +146,11 @@ def cmd_ortho(args: argparse.Namespace) -> int:
             bar.refresh()
 
         t0 = time.perf_counter()
-        stats = write_orthoimage(arr, grid, args.out, scheduler=args.scheduler, progress=progress)
-        bar.close()
+        try:
+            with atomic_path(args.out) as partial:
+                stats = write_orthoimage(arr, grid, partial, scheduler=args.scheduler, progress=progress)
+        finally:
+            bar.close()
         dt = time.perf_counter() - t0
         pixels = grid.width * grid.height
         report = {"out": args.out, "width": grid.width, "height": grid.height, "epsg": grid.epsg,
@@ -116,16 +170,19 @@ def cmd_ortho(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ortho", help="orthorectify an image (or a synthetic one) to a UTM GeoTIFF on dask")
     add_scene_arguments(p)
-    p.add_argument("--rpc", default=None, help="RPC file (any supported format) instead of a scene")
-    p.add_argument("--rpc-shape", default=None, help="source size ROWSxCOLS for --rpc --synthetic")
-    p.add_argument("--dem", default=None, help="GeoTIFF or .hgt DEM, heights above the ellipsoid")
-    p.add_argument("--height", type=float, default=None, help="constant ellipsoidal height, metres")
-    p.add_argument("--image", default=None, help="source image (.npy or any raster rasterio reads)")
+    p.add_argument("--rpc", default=None, type=existing_file, help="RPC file (any supported format) instead of a scene")
+    p.add_argument("--rpc-shape", default=None, type=image_shape, help="source size ROWSxCOLS for --rpc --synthetic")
+    p.add_argument("--dem", default=None, type=raster_file, help="GeoTIFF or .hgt DEM, heights above the ellipsoid")
+    p.add_argument("--height", type=finite_float, default=None, help="constant ellipsoidal height, metres")
+    p.add_argument("--image", default=None, type=existing_file,
+                   help="source image (.npy or any raster rasterio reads); must have the scene's size")
     p.add_argument("--synthetic", action="store_true", help="render a known ground pattern as the source")
-    p.add_argument("--gsd", type=float, required=True, help="output pixel size, metres")
+    p.add_argument("--gsd", type=positive_float, required=True, help="output pixel size, metres (> 0)")
     p.add_argument("--method", default="exact", help="best-scanline method (a search method)")
-    p.add_argument("--chunk", type=int, default=2048, help="output chunk size, pixels")
-    p.add_argument("--scheduler", default="threads",
+    p.add_argument("--chunk", type=int_in_range(16, 65536, "--chunk"), default=2048,
+                   help="output chunk size, pixels (16 .. 65536)")
+    p.add_argument("--scheduler", default="threads", type=scheduler_name,
                    help="threads | processes | synchronous | local-cluster:N | tcp://host:port")
-    p.add_argument("--out", required=True, help="output GeoTIFF")
+    p.add_argument("--out", required=True, type=output_file,
+                   help="output GeoTIFF (written beside as a hidden partial file, renamed when complete)")
     p.set_defaults(func=cmd_ortho)

@@ -11,11 +11,12 @@ import csv
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
-import numpy as np
+from explorer.commands._args import existing_file, finite_float, output_file, raster_file
 
-from explorer.rpc import RationalFunctionModel, read_rpc
+if TYPE_CHECKING:
+    from explorer.rpc import RationalFunctionModel
 
 __all__ = ["cmd_info", "cmd_localize", "cmd_project", "register"]
 
@@ -32,15 +33,45 @@ _CONVENTIONS = {
 
 
 def _read_csv(path: str, columns: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:
-    with open(path, newline="", encoding="utf-8") as handle:
-        rows = list(csv.DictReader(handle))
+    """Rows of a CSV file and its ``columns`` as float arrays; InputError naming the file, line and column."""
+    import numpy as np
+
+    from explorer.errors import InputError
+
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            rows = list(csv.DictReader(handle))
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text CSV file") from None
+    except csv.Error as exc:
+        raise InputError(f"{path}: malformed CSV ({exc})") from None
     if not rows:
-        raise ValueError(f"{path}: no data rows")
+        raise InputError(f"{path}: no data rows")
     missing = [c for c in columns if c not in rows[0]]
     if missing:
-        raise ValueError(f"{path}: missing column(s) {', '.join(missing)}")
-    arrays = {c: np.array([float(r[c]) for r in rows]) for c in columns}
+        raise InputError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(rows[0])})")
+    arrays = {}
+    for c in columns:
+        texts = [record[c] for record in rows]
+        try:
+            values = np.asarray(texts, dtype=np.float64)
+            bad = np.flatnonzero(~np.isfinite(values))
+        except (TypeError, ValueError):
+            values = None
+            bad = [next(i for i, t in enumerate(texts) if not _is_number(t))]
+        if len(bad):
+            i = int(bad[0])
+            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i]!r} is not a finite number")
+        arrays[c] = values
     return rows, arrays
+
+
+def _is_number(text: object) -> bool:
+    try:
+        float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def _write_csv(
@@ -53,7 +84,9 @@ def _write_csv(
         writer.writeheader()
         writer.writerows(rows)
         return
-    with open(out, "w", newline="", encoding="utf-8") as handle:
+    from explorer.io_atomic import atomic_path
+
+    with atomic_path(out) as tmp, open(tmp, "w", newline="", encoding="utf-8") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(fieldnames))
         writer.writeheader()
         writer.writerows(rows)
@@ -92,12 +125,19 @@ def describe(model: RationalFunctionModel) -> str:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """``rpc info FILE``: print format, convention, offsets/scales and validity domain."""
+    from explorer.rpc import read_rpc
+
     print(describe(read_rpc(args.file)))
     return 0
 
 
 def cmd_project(args: argparse.Namespace) -> int:
     """``rpc project FILE``: ground (lon, lat, h) to image (row, col), 0-based pixel centre."""
+    from explorer.errors import InputError
+    from explorer.rpc import read_rpc
+
+    if not args.points and (args.lon is None or args.lat is None):
+        raise InputError("give --lon and --lat (and --h), or --points")
     model = read_rpc(args.file)
     if args.points:
         rows, arrays = _read_csv(args.points, ("lon", "lat", "h"))
@@ -108,9 +148,6 @@ def cmd_project(args: argparse.Namespace) -> int:
         ]
         _write_csv(out_rows, [*rows[0].keys(), "row", "col"], args.out)
         return 0
-    if args.lon is None or args.lat is None:
-        print("rpc project: give --lon and --lat (and --h), or --points", file=sys.stderr)
-        return 2
     row, col = model.projection(args.lon, args.lat, args.h)
     print(f"row={_fmt(row)} col={_fmt(col)}")
     return 0
@@ -127,18 +164,22 @@ def _load_dem(args: argparse.Namespace) -> Any:
 
 def cmd_localize(args: argparse.Namespace) -> int:
     """``rpc localize FILE``: image (row, col) to ground at a height or on a DEM."""
+    import numpy as np
+
+    from explorer.errors import InputError
+    from explorer.rpc import read_rpc
+
+    if not args.points:
+        if args.row is None or args.col is None:
+            raise InputError("give --row and --col, or --points")
+        if args.dem is None and args.h is None:
+            raise InputError("give --h or --dem")
     model = read_rpc(args.file)
     dem = _load_dem(args) if args.dem else None
     if args.points:
         rows, arrays = _read_csv(args.points, ("row", "col") if dem is not None else
                                  ("row", "col", "h"))
     else:
-        if args.row is None or args.col is None:
-            print("rpc localize: give --row and --col, or --points", file=sys.stderr)
-            return 2
-        if dem is None and args.h is None:
-            print("rpc localize: give --h or --dem", file=sys.stderr)
-            return 2
         rows = []
         arrays = {"row": np.array([args.row]), "col": np.array([args.col])}
         if dem is None:
@@ -183,28 +224,28 @@ def register(subparsers: Any) -> None:
     sub = rpc.add_subparsers(dest="rpc_command", required=True)
 
     info = sub.add_parser("info", help="format, convention, offsets/scales, validity domain")
-    info.add_argument("file", help="RPC file (any supported format)")
+    info.add_argument("file", type=existing_file, help="RPC file (any supported format)")
     info.set_defaults(func=cmd_info)
 
     project = sub.add_parser("project", help="ground (lon, lat, h) -> image (row, col)")
-    project.add_argument("file")
-    project.add_argument("--lon", type=float, help="degrees")
-    project.add_argument("--lat", type=float, help="degrees")
-    project.add_argument("--h", type=float, default=0.0, help="metres above the ellipsoid")
-    project.add_argument("--points", help="CSV with columns lon,lat,h")
-    project.add_argument("--out", help="output CSV (default: stdout); adds row,col")
+    project.add_argument("file", type=existing_file)
+    project.add_argument("--lon", type=finite_float, help="degrees")
+    project.add_argument("--lat", type=finite_float, help="degrees")
+    project.add_argument("--h", type=finite_float, default=0.0, help="metres above the ellipsoid")
+    project.add_argument("--points", type=existing_file, help="CSV with columns lon,lat,h")
+    project.add_argument("--out", type=output_file, help="output CSV (default: stdout); adds row,col")
     project.set_defaults(func=cmd_project)
 
     localize = sub.add_parser("localize", help="image (row, col) -> ground (lon, lat)")
-    localize.add_argument("file")
-    localize.add_argument("--row", type=float)
-    localize.add_argument("--col", type=float)
-    localize.add_argument("--h", type=float, help="metres above the ellipsoid")
-    localize.add_argument("--dem", help="GeoTIFF or SRTM .hgt DEM to intersect")
+    localize.add_argument("file", type=existing_file)
+    localize.add_argument("--row", type=finite_float)
+    localize.add_argument("--col", type=finite_float)
+    localize.add_argument("--h", type=finite_float, help="metres above the ellipsoid")
+    localize.add_argument("--dem", type=raster_file, help="GeoTIFF or SRTM .hgt DEM to intersect")
     localize.add_argument(
         "--dem-orthometric", action="store_true",
         help="DEM heights are above the EGM96 geoid (added N); .hgt files always are",
     )  # fmt: skip
-    localize.add_argument("--points", help="CSV with columns row,col[,h]")
-    localize.add_argument("--out", help="output CSV (default: stdout); adds lon,lat,converged")
+    localize.add_argument("--points", type=existing_file, help="CSV with columns row,col[,h]")
+    localize.add_argument("--out", type=output_file, help="output CSV (default: stdout); adds lon,lat,converged")
     localize.set_defaults(func=cmd_localize)

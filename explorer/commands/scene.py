@@ -14,38 +14,27 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 from typing import Any
+
+from explorer.commands._args import existing_file, int_in_range, non_negative_int, output_file, raster_file
 
 __all__ = ["cmd_from_dg", "cmd_from_dimap", "cmd_from_rpc", "register"]
 
 
-def _fail(args: argparse.Namespace, exc: Exception) -> int:
-    print(f"pushbroom scene {args.scene_command}: error: {exc}", file=sys.stderr)
-    return 2
-
-
 def _write_report(path: str | None, payload: dict) -> None:
     if path:
-        Path(path).write_text(json.dumps(payload, indent=1, default=float))
+        from explorer.io_atomic import write_text_atomic
+
+        write_text_atomic(path, json.dumps(payload, indent=1, default=float, allow_nan=False))
         print(f"wrote {path}")
 
 
 def cmd_from_rpc(args: argparse.Namespace) -> int:
     """Handler of ``scene from-rpc``."""
     from explorer.real.from_rpc import scene_from_rpc
-    from explorer.rpc import RPCFormatError
 
     t0 = time.perf_counter()
-    try:
-        return _from_rpc(args, scene_from_rpc, t0)
-    except RPCFormatError as exc:
-        return _fail(args, exc)
-
-
-def _from_rpc(args: argparse.Namespace, scene_from_rpc: Any, t0: float) -> int:
     scene, report = scene_from_rpc(
         args.file, dem=args.dem, n_gcps=args.gcps, preset=args.preset, layers=args.layers,
         dem_datum=args.dem_datum, degree=args.degree, column_terms=args.column_terms,
@@ -105,27 +94,27 @@ def _rigorous(args: argparse.Namespace, kind: str) -> int:
 
 def cmd_from_dimap(args: argparse.Namespace) -> int:
     """Handler of ``scene from-dimap``."""
-    if not Path(args.file).exists():
-        raise FileNotFoundError(f"no such file: {args.file}")
     return _rigorous(args, "dimap")
 
 
 def cmd_from_dg(args: argparse.Namespace) -> int:
     """Handler of ``scene from-dg``."""
-    if not Path(args.file).exists():
-        raise FileNotFoundError(f"no such file: {args.file}")
     return _rigorous(args, "dg")
 
 
 def _rigorous_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="metadata file")
-    p.add_argument("--out", help="MPC scene JSON (polynomials fitted to the rigorous model)")
-    p.add_argument("--rigorous-out", help="rigorous line-scan scene JSON (explorer.real.load_scene)")
-    p.add_argument("--degree", type=int, default=3, help="MPC polynomial degree of --out (default 3)")
+    p.add_argument("file", type=existing_file, help="metadata file")
+    p.add_argument("--out", type=output_file, help="MPC scene JSON (polynomials fitted to the rigorous model)")
+    p.add_argument("--rigorous-out", type=output_file,
+                   help="rigorous line-scan scene JSON (explorer.real.load_scene)")
+    p.add_argument("--degree", type=int_in_range(0, 9, "--degree"), default=3,
+                   help="MPC polynomial degree of --out (default 3)")
     p.add_argument("--no-compare", action="store_true", help="skip the comparison with the file's RPC")
-    p.add_argument("--compare-points", type=int, default=400, help="image points per height layer")
-    p.add_argument("--compare-layers", type=int, default=5, help="height layers over the RPC's range")
-    p.add_argument("--report", help="write the numbers as JSON")
+    p.add_argument("--compare-points", type=int_in_range(4, 1_000_000, "--compare-points"), default=400,
+                   help="image points per height layer")
+    p.add_argument("--compare-layers", type=int_in_range(1, 100, "--compare-layers"), default=5,
+                   help="height layers over the RPC's range")
+    p.add_argument("--report", type=output_file, help="write the numbers as JSON")
 
 
 def register(subparsers: Any) -> None:
@@ -134,32 +123,35 @@ def register(subparsers: Any) -> None:
     sub = scene.add_subparsers(dest="scene_command", required=True)
 
     p = sub.add_parser("from-rpc", help="MPC scene from an RPC file by space resection (the papers' pipeline)")
-    p.add_argument("file", help="RPC file (any format `pushbroom rpc info` reads)")
-    p.add_argument("--dem", help="DEM (GeoTIFF or SRTM .hgt) for the GCP heights and the scene terrain")
+    p.add_argument("file", type=existing_file, help="RPC file (any format `pushbroom rpc info` reads)")
+    p.add_argument("--dem", type=raster_file,
+                   help="DEM (GeoTIFF or SRTM .hgt) for the GCP heights and the scene terrain")
     p.add_argument("--dem-datum", choices=("geoid", "ellipsoid"), default="geoid",
                    help="vertical reference of a GeoTIFF DEM (default geoid = EGM96; RPC heights are ellipsoidal)")
-    p.add_argument("--gcps", type=int, default=100, help="about this many GCPs per height layer (default 100)")
-    p.add_argument("--layers", type=int, default=3,
+    p.add_argument("--gcps", type=int_in_range(4, 1_000_000, "--gcps"), default=100,
+                   help="about this many GCPs per height layer (default 100; at least 4, a 2 x 2 grid)")
+    p.add_argument("--layers", type=int_in_range(1, 100, "--layers"), default=3,
                    help="GCP height layers over the RPC's validity range when no DEM is given (default 3)")
     p.add_argument("--preset", help="preset id for the interior orientation (focal length) and altitude")
     p.add_argument("--estimate-focal", action="store_true", help="estimate the focal length even with --preset")
-    p.add_argument("--degree", type=int, default=2,
+    p.add_argument("--degree", type=int_in_range(0, 9, "--degree"), default=2,
                    help="MPC polynomial degree (default 2 as in the papers; 3 for agile Pleiades/SPOT)")
-    p.add_argument("--column-terms", type=int, default=0,
+    p.add_argument("--column-terms", type=int_in_range(0, 5, "--column-terms"), default=0,
                    help="non-uniform detector spacing terms (1 for products resampled across track, e.g. IKONOS)")
-    p.add_argument("--check", type=int, default=400, help="about this many check points (0: none)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the check-point heights")
+    p.add_argument("--check", type=int_in_range(0, 1_000_000, "--check"), default=400,
+                   help="about this many check points (0: none)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the check-point heights")
     p.add_argument("--method", choices=("lm", "trf"), default="lm", help="least-squares method")
     p.add_argument("--per-point", action="store_true", help="print every GCP residual")
-    p.add_argument("--out", help="output scene JSON")
-    p.add_argument("--report", help="write the resection report (with per-point residuals) as JSON")
+    p.add_argument("--out", type=output_file, help="output scene JSON")
+    p.add_argument("--report", type=output_file, help="write the resection report (with per-point residuals) as JSON")
     p.set_defaults(func=cmd_from_rpc)
 
     p = sub.add_parser("from-dimap", help="rigorous Pleiades model from a DIMAP v1.4 PHRDIMAP_*.XML")
     _rigorous_arguments(p)
-    p.add_argument("--look-degree", type=int, default=3,
+    p.add_argument("--look-degree", type=int_in_range(0, 9, "--look-degree"), default=3,
                    help="degree of the look-angle polynomials calibrated on the RPC (default 3)")
-    p.add_argument("--attitude-smoothing", type=int, default=3,
+    p.add_argument("--attitude-smoothing", type=int_in_range(-1, 9, "--attitude-smoothing"), default=3,
                    help="degree of the polynomial replacing the attitude samples (perfect sensor; -1: raw)")
     p.add_argument("--aberration", action=argparse.BooleanOptionalAction, default=False,
                    help="model the aberration of light (default off for Pleiades)")

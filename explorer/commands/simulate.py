@@ -5,24 +5,35 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from typing import TYPE_CHECKING
 
-from explorer.points import simulate_points
-from explorer.presets import build_scene, default_preset_id, presets_table
-from explorer.scene import Scene
+from explorer.commands._args import (
+    existing_file,
+    non_negative_float,
+    non_negative_int,
+    output_file,
+    positive_int,
+)
+
+if TYPE_CHECKING:
+    from explorer.scene import Scene
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The options every command that builds a scene accepts."""
-    p.add_argument("--preset", default=None, help=f"preset id (default {default_preset_id()})")
-    p.add_argument("--scene", default=None, help="scene JSON file (instead of --preset)")
-    p.add_argument("--relief", type=float, default=0.0, help="synthetic relief amplitude, metres")
-    p.add_argument("--relief-seed", type=int, default=0)
-    p.add_argument("--attitude-rate-scale", type=float, default=1.0)
-    p.add_argument("--jitter-scale", type=float, default=1.0)
+    p.add_argument("--preset", default=None, help="preset id (default: the presets file's default, WSU)")
+    p.add_argument("--scene", default=None, type=existing_file, help="scene JSON file (instead of --preset)")
+    p.add_argument("--relief", type=non_negative_float, default=0.0, help="synthetic relief amplitude, metres")
+    p.add_argument("--relief-seed", type=non_negative_int, default=0)
+    p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0)
+    p.add_argument("--jitter-scale", type=non_negative_float, default=1.0)
 
 
 def scene_from_args(args: argparse.Namespace, preset: str | None = None) -> Scene:
     """Build the scene named by ``--scene`` or ``--preset`` and the perturbation options."""
+    from explorer.presets import build_scene
+    from explorer.scene import Scene
+
     if getattr(args, "scene", None):
         return Scene.load(args.scene)
     return build_scene(
@@ -35,6 +46,8 @@ def scene_from_args(args: argparse.Namespace, preset: str | None = None) -> Scen
 
 
 def cmd_presets(args: argparse.Namespace) -> int:
+    from explorer.presets import presets_table
+
     rows = presets_table()
     if args.json:
         print(json.dumps(rows, indent=1))
@@ -71,6 +84,8 @@ def summarize_scene(scene: Scene) -> str:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    from explorer.points import simulate_points
+
     scene = scene_from_args(args)
     t0 = time.perf_counter()
     pts = simulate_points(scene, args.n, layers=args.layers, kind=args.kind, seed=args.seed)
@@ -92,9 +107,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("simulate", help="simulate SCOPs/SCPs on a preset and save them as .npz")
     add_scene_arguments(p)
-    p.add_argument("--n", type=int, default=100, help="about this many points per layer")
-    p.add_argument("--layers", type=int, default=1, help="height layers of a 3D grid")
+    p.add_argument("--n", type=positive_int, default=100, help="about this many points per layer (>= 4)")
+    p.add_argument("--layers", type=positive_int, default=1, help="height layers of a 3D grid")
     p.add_argument("--kind", choices=("scop", "scp"), default="scop")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default=None, help="output .npz (arrays row, col, ground, time, scene_json)")
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--out", default=None, type=output_file,
+                   help="output .npz file, written under exactly this name (arrays row, col, ground, time, scene_json)")
     p.set_defaults(func=cmd_simulate)

@@ -16,7 +16,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from explorer.errors import NotFittedError, as_points
+from explorer.errors import NotFittedError, UnknownNameError, as_points
 from explorer.geometry.kernels import collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
 from explorer.points import PointSet
@@ -218,5 +218,5 @@ def create(name: str, scene: Scene, **params) -> BestScanlineMethod:
     """Instantiate a registered method by name."""
     reg = registry()
     if name not in reg:
-        raise KeyError(f"unknown method {name!r}; available: {', '.join(sorted(reg))}")
+        raise UnknownNameError("method", name, sorted(reg))
     return reg[name](scene, **params)

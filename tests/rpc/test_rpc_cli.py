@@ -1,12 +1,11 @@
 """CLI handlers called through a parser built here (register(sub))."""
 
-import argparse
 import csv
 
 import numpy as np
 import pytest
 
-from explorer.commands.rpc import register
+from explorer.cli import main
 from explorer.rpc import read_rpc
 
 from .conftest import RPC_DIR
@@ -15,11 +14,7 @@ rpcm = pytest.importorskip("rpcm")
 
 
 def _run(argv):
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers(dest="command", required=True)
-    register(sub)
-    args = parser.parse_args(argv)
-    return args.func(args)
+    return main(argv)
 
 
 def test_info(capsys):

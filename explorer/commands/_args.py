@@ -1,0 +1,140 @@
+"""Argument types of the ``pushbroom`` command line: each checks one value when the arguments are parsed,
+before any work starts, and names the problem (argparse turns the message into one line and exit status 2).
+
+Only the standard library is imported here, so building the parser stays fast (``pushbroom --help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+__all__ = [
+    "existing_file",
+    "finite_float",
+    "int_in_range",
+    "non_negative_float",
+    "non_negative_int",
+    "output_file",
+    "port_number",
+    "positive_float",
+    "positive_int",
+    "raster_file",
+]
+
+
+def finite_float(text: str) -> float:
+    """A finite number (no NaN, no infinity)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0."""
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0")
+    return value
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (and at most 10**9: larger counts are a typo, not a request)."""
+    value = _integer(text)
+    if not 1 <= value <= 10**9:
+        raise argparse.ArgumentTypeError(f"{text!r} must be an integer between 1 and 1e9")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """An integer >= 0 (at most 10**9)."""
+    value = _integer(text)
+    if not 0 <= value <= 10**9:
+        raise argparse.ArgumentTypeError(f"{text!r} must be an integer between 0 and 1e9")
+    return value
+
+
+def int_in_range(low: int, high: int, what: str = "value"):
+    """An argument type for integers in ``[low, high]``; the message names ``what`` and the bounds."""
+
+    def parse(text: str) -> int:
+        value = _integer(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{what} {text!r} must be between {low} and {high}")
+        return value
+
+    parse.__name__ = f"int_in_range_{low}_{high}"
+    return parse
+
+
+def port_number(text: str) -> int:
+    """A TCP port, 0 (pick a free one) to 65535."""
+    value = _integer(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"port {text!r} is outside 0..65535")
+    return value
+
+
+def existing_file(text: str) -> str:
+    """A path to a readable regular file."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"no such file: {text!r}")
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a directory, not a file")
+    if not os.access(path, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{text!r} is not readable")
+    return text
+
+
+def raster_file(text: str) -> str:
+    """A readable raster (GeoTIFF, SRTM .hgt, anything GDAL opens)."""
+    existing_file(text)
+    if text.lower().endswith(".hgt"):
+        return text
+    import rasterio  # only when a raster argument is given
+    from rasterio.errors import RasterioError
+
+    try:
+        with rasterio.open(text) as ds:
+            if ds.count < 1 or ds.width < 1 or ds.height < 1:
+                raise argparse.ArgumentTypeError(f"{text!r} has no raster band")
+    except RasterioError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a raster GDAL can read") from None
+    return text
+
+
+def output_file(text: str) -> str:
+    """A path a result file can be written to: not a directory, in an existing writable folder."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("output path is empty")
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a directory; give a file name")
+    parent = path.parent
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"the folder of {text!r} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise argparse.ArgumentTypeError(f"the folder of {text!r} is not writable")
+    return text
