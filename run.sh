@@ -2,6 +2,9 @@
 # One entry point that does its own set-up on a fresh machine, then runs a job.
 #   ./run.sh explore [--preset WSU] [--port 8080]   the explorer (main job)
 #   ./run.sh test [pytest args]                     the whole test suite
+#   ./run.sh setup                                  set-up only (venv, packages from the lock, warm kernels)
+#   ./run.sh course [DIR]                           execute the course notebooks and write HTML to DIR
+#   ./run.sh lock                                   refresh requirements/lock.txt from a fresh resolve
 #   ./run.sh bench [...]  /  ./run.sh pushbroom ...  any CLI command
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -21,15 +24,36 @@ system_packages() {
   fi
 }
 
+LOCK=requirements/lock.txt
+EXTRAS="test,bench,notebooks,cluster"
+
 python_packages() {
-  local stamp="$VENV/.installed-$(cat pyproject.toml | sha1sum | cut -c1-12)"
+  local stamp="$VENV/.installed-$(cat pyproject.toml setup.py "$LOCK" 2>/dev/null | sha1sum | cut -c1-12)"
   [ -f "$stamp" ] && return 0
   [ -x "$PY" ] || python3 -m venv "$VENV"
   "$PY" -m pip install -q --upgrade pip
   # torch first: 2.13.0 is the CPU build on machines without a GPU (a bare "torch" pulls CUDA wheels)
   "$PY" -m pip install -q "torch==2.13.0"
-  "$PY" -m pip install -q -e ".[test,bench]"
+  # the tested versions of every dependency (requirements/lock.txt; `./run.sh lock` refreshes it)
+  local constraints=(); [ -f "$LOCK" ] && constraints=(-c "$LOCK")
+  "$PY" -m pip install -q "${constraints[@]}" -e ".[$EXTRAS]"
+  # compile every numba kernel once into numba's on-disk cache, so the first real run compiles nothing
+  if "$VENV/bin/pushbroom" warmup --help >/dev/null 2>&1; then "$VENV/bin/pushbroom" warmup; fi
   touch "$stamp"
+}
+
+refresh_lock() {
+  # resolve the newest versions the project admits in a scratch venv, run nothing, write the lock
+  local tmp; tmp=$(mktemp -d)
+  python3 -m venv "$tmp/venv"
+  "$tmp/venv/bin/pip" install -q --upgrade pip
+  "$tmp/venv/bin/pip" install -q "torch==2.13.0"
+  "$tmp/venv/bin/pip" install -q -e ".[$EXTRAS]"
+  mkdir -p requirements
+  { echo "# Tested versions: \`./run.sh setup\` installs with -c this file. Refresh: ./run.sh lock, then ./run.sh test."
+    "$tmp/venv/bin/pip" freeze --exclude-editable | sed 's/^torch==2.13.0+cpu$/torch==2.13.0/'; } > "$LOCK"
+  rm -rf "$tmp"
+  echo "wrote $LOCK"
 }
 
 job="${1:-explore}"; shift || true
@@ -42,6 +66,11 @@ case "$job" in
     exec "$VENV/bin/pushbroom" explore "$@" ;;
   setup)
     system_packages; python_packages ;;
+  course)
+    python_packages
+    exec "$PY" notebooks/build_course.py "$@" ;;
+  lock)
+    refresh_lock ;;
   pushbroom)
     python_packages; exec "$VENV/bin/pushbroom" "$@" ;;
   *)

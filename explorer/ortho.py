@@ -263,7 +263,11 @@ def write_orthoimage(
 
     client = None
     if scheduler.startswith("tcp://") or scheduler.startswith("local-cluster"):
-        from distributed import Client, LocalCluster
+        from explorer.errors import require
+
+        distributed = require("distributed", "a dask.distributed scheduler (--scheduler tcp:// or local-cluster)",
+                              "cluster")
+        Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
         if scheduler.startswith("local-cluster"):
             n = int(scheduler.split(":")[1]) if ":" in scheduler else 2
