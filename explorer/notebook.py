@@ -118,6 +118,22 @@ def _method_of(method: str | BestScanlineMethod, scene: Scene, control: PointSet
     return m
 
 
+@contextlib.contextmanager
+def _quiet():
+    """Silence stdout, stderr and rich's console (which in Jupyter displays instead of printing)."""
+    import rich
+
+    console = rich.get_console()
+    old_file, old_jupyter = getattr(console, "_file", None), console.is_jupyter
+    sink = io.StringIO()
+    console.file, console.is_jupyter = sink, False
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            yield
+    finally:
+        console.file, console.is_jupyter = old_file, old_jupyter
+
+
 def scene_view(
     scene: Scene | str = "WSU",
     *,
@@ -193,7 +209,7 @@ def scene_view(
         if res.trace:
             trace_rows = np.array([float(np.asarray(a).ravel()[0]) for a in res.trace])
     frame = B.DisplayFrame.for_scene(sc, sensor_distance=sensor_distance, height_exaggeration=height_exaggeration)
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):  # start-up banner
+    with _quiet():  # viser prints a start-up banner with rich, even with verbose=False
         server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         api = server.scene
@@ -227,7 +243,7 @@ def scene_view(
         server.initial_camera.look_at = (0.0, 0.0, 0.0)
         doc = api.as_html()
     finally:
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        with _quiet():
             server.stop()
     return SceneView(doc, sorted(nodes), row, trace_rows, int(height))
 
@@ -367,17 +383,11 @@ class ResidualPanel:
         return W.VBox([row1, row2, self.status, self.figure])
 
     def static_html(self) -> str:
-        """The current figure as an HTML fragment (plotly.js from its CDN), for exported notebooks."""
-        import plotly.graph_objects as go
-
-        return go.Figure(self.figure).to_html(full_html=False, include_plotlyjs="cdn")
+        """The current figure as an HTML fragment (see :func:`static_figure_html`)."""
+        return static_figure_html(self.figure)
 
     def _repr_mimebundle_(self, **kwargs: Any) -> dict:
-        bundle = self.widget._repr_mimebundle_(**kwargs) or {}
-        data = bundle[0] if isinstance(bundle, tuple) else bundle
-        data = dict(data)
-        data["text/html"] = self.static_html()
-        return data
+        return _widget_bundle(self.widget, self.static_html(), **kwargs)
 
 
 def residual_panel(
@@ -469,5 +479,137 @@ def residual_panel(
     return panel
 
 
-__all__ = ["COLOUR_LIMITS_PX", "SCOP_MARKS", "PanelState", "ResidualPanel", "SceneView", "residual_panel",
-           "scene_view"]
+# ===================================================================== static fallbacks
+def static_figure_html(figure: Any) -> str:
+    """A Plotly figure as an HTML fragment that draws itself without a kernel.
+
+    Uses the page's plotly.js when there is one (``window.Plotly``, or the ``plotly`` module the
+    Jupyter ``notebook`` renderer registers with require.js -- what a notebook exported by
+    ``notebooks/build_course.py`` holds), else loads plotly.js from its CDN.
+    """
+    import json
+    import uuid
+
+    import plotly.graph_objects as go
+    import plotly.io as pio
+    from plotly.offline import get_plotlyjs_version
+
+    plotly_js_version = get_plotlyjs_version()
+    fig = go.Figure(figure)
+    div = f"pbx-{uuid.uuid4().hex}"
+    spec = pio.to_json(fig, validate=False)
+    height = fig.layout.height or 450
+    return (
+        f'<div id="{div}" style="height:{int(height)}px;width:100%"></div><script type="text/javascript">'
+        f"(function(){{var s={spec};var draw=function(P){{P.newPlot({json.dumps(div)},s.data,s.layout,"
+        "{responsive:true});};"
+        "if(window.Plotly){draw(window.Plotly);}"
+        "else if(window.requirejs&&requirejs.defined&&requirejs.defined('plotly')){require(['plotly'],draw);}"
+        f"else{{var t=document.createElement('script');t.src='https://cdn.plot.ly/plotly-{plotly_js_version}.min.js';"
+        "t.onload=function(){draw(window.Plotly);};document.head.appendChild(t);}"
+        "})();</script>"
+    )
+
+
+def _widget_bundle(widget: Any, static_html: str, **kwargs: Any) -> dict:
+    """A widget's display bundle with a static ``text/html`` copy for kernel-less viewers."""
+    bundle = widget._repr_mimebundle_(**kwargs) or {}
+    data = dict(bundle[0] if isinstance(bundle, tuple) else bundle)
+    data["text/html"] = static_html
+    return data
+
+
+@dataclass
+class InteractiveFigure:
+    """A Plotly ``FigureWidget`` redrawn by a function of ipywidgets controls.
+
+    Build it with :func:`interactive_figure`; ``controls[name].value = v`` redraws.
+
+    Attributes
+    ----------
+    controls : dict of str to ipywidgets.Widget
+    figure : plotly.graph_objects.FigureWidget
+    make_figure : callable
+        ``make_figure(**values) -> go.Figure``.
+    n_updates : int
+    """
+
+    make_figure: Any
+    controls: dict[str, Any]
+    figure: Any
+    n_updates: int = 0
+
+    def values(self) -> dict[str, Any]:
+        """The controls' current values."""
+        return {k: c.value for k, c in self.controls.items()}
+
+    def update(self, *_: Any) -> None:
+        """Call ``make_figure`` with the controls' values and redraw :attr:`figure` in place."""
+        fig = self.make_figure(**self.values())
+        with self.figure.batch_update():
+            self.figure.data = []
+            self.figure.add_traces(list(fig.data))
+            self.figure.layout = fig.layout
+        self.n_updates += 1
+
+    @property
+    def widget(self):
+        """The ipywidgets box: controls above the figure."""
+        import ipywidgets as W  # noqa: N812
+
+        return W.VBox([W.HBox(list(self.controls.values())), self.figure])
+
+    def _repr_mimebundle_(self, **kwargs: Any) -> dict:
+        return _widget_bundle(self.widget, static_figure_html(self.figure), **kwargs)
+
+
+def interactive_figure(make_figure: Any, **controls: Any) -> InteractiveFigure:
+    """A figure that follows sliders: ``make_figure(**values)`` redrawn whenever a control changes.
+
+    Parameters
+    ----------
+    make_figure : callable(**values) -> plotly.graph_objects.Figure
+    **controls
+        One control per keyword argument of ``make_figure``, written as for
+        ``ipywidgets.interact``: ``(min, max, step)`` for a slider (float if any bound is a
+        float), a list or tuple of values for a dropdown, a bool for a checkbox, or an
+        ipywidgets widget.  The control starts at the slider's middle / the first value, or at
+        ``make_figure``'s default for that argument when it has one inside the range.
+
+    Returns
+    -------
+    InteractiveFigure
+        Displays as the controls over the live figure (a static copy for exported notebooks).
+    """
+    import inspect
+
+    import ipywidgets as W  # noqa: N812
+    import plotly.graph_objects as go
+
+    if not controls:
+        raise InputError("interactive_figure needs at least one control")
+    defaults = {k: p.default for k, p in inspect.signature(make_figure).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+    widgets = {}
+    for name, abbrev in controls.items():
+        if isinstance(abbrev, W.Widget):
+            w = abbrev
+        else:
+            w = (W.interactive.widget_from_abbrev(abbrev, defaults[name]) if name in defaults
+                 else W.interactive.widget_from_abbrev(abbrev))
+            if w is None:
+                raise InputError(f"control {name!r}: cannot make a widget from {abbrev!r}")
+            if hasattr(w, "continuous_update"):
+                w.continuous_update = False
+        w.description = name
+        w.style = {"description_width": "initial"}
+        widgets[name] = w
+    out = InteractiveFigure(make_figure, widgets, go.FigureWidget())
+    out.update()
+    for w in widgets.values():
+        w.observe(out.update, names="value")
+    return out
+
+
+__all__ = ["COLOUR_LIMITS_PX", "SCOP_MARKS", "InteractiveFigure", "PanelState", "ResidualPanel", "SceneView",
+           "interactive_figure", "residual_panel", "scene_view", "static_figure_html"]

@@ -26,6 +26,10 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+STATIC_PRIORITY = ["application/javascript", "text/html", "text/markdown", "image/svg+xml", "text/latex", "image/png",
+                   "image/jpeg", "text/plain"]
+"""nbconvert's HTML output priority without ``widget-view``: a live widget needs a kernel, so the page shows the
+static ``text/html`` copy that :mod:`explorer.notebook` widgets carry."""
 
 
 def course_files(include_solutions: bool = True, only: list[str] | None = None) -> list[Path]:
@@ -60,10 +64,13 @@ def execute(path: Path, *, small: bool, timeout: int = 900):
 
 
 def to_html(nb) -> str:
-    """nbconvert's HTML (lab template) of an executed notebook."""
+    """nbconvert's HTML (lab template) of an executed notebook; widgets as their static copies."""
     from nbconvert import HTMLExporter
+    from traitlets.config import Config
 
-    body, _ = HTMLExporter(template_name="lab").from_notebook_node(nb)
+    config = Config({"NbConvertBase": {"display_data_priority": STATIC_PRIORITY}})
+    exporter = HTMLExporter(template_name="lab", config=config)
+    body, _ = exporter.from_notebook_node(nb)
     return body
 
 
