@@ -15,6 +15,8 @@ __all__ = [
     "existing_file",
     "finite_float",
     "int_in_range",
+    "latitude",
+    "longitude",
     "non_negative_float",
     "non_negative_int",
     "output_file",
@@ -33,6 +35,22 @@ def finite_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def latitude(text: str) -> float:
+    """A latitude in degrees, -90 .. 90."""
+    value = finite_float(text)
+    if not -90.0 <= value <= 90.0:
+        raise argparse.ArgumentTypeError(f"latitude {text!r} is outside -90 .. 90 degrees")
+    return value
+
+
+def longitude(text: str) -> float:
+    """A longitude in degrees, -360 .. 360."""
+    value = finite_float(text)
+    if not -360.0 <= value <= 360.0:
+        raise argparse.ArgumentTypeError(f"longitude {text!r} is outside -360 .. 360 degrees")
     return value
 
 

@@ -8,6 +8,10 @@ from explorer.commands._args import port_number
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
+    from explorer.presets import preset_spec
+
+    if args.preset:
+        preset_spec(args.preset)  # an unknown preset is an error before the server starts
     from explorer.app import serve  # viser and plotly load only for this command
 
     return serve(preset=args.preset, host=args.host, port=args.port,

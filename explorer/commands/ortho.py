@@ -104,6 +104,11 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
 
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()
     grid = grid_covering(lon, lat, args.gsd, epsg)
+    if grid.width * grid.height > 4_000_000_000:
+        raise InputError(f"--gsd {args.gsd} gives a {grid.width} x {grid.height} output: too large")
+    if grid.width < 8 or grid.height < 8:
+        raise InputError(f"--gsd {args.gsd} m is too coarse for the footprint: the output would be "
+                         f"{grid.width} x {grid.height} pixels")
     pattern = None
     if args.synthetic:
         pattern = default_pattern(epsg, args.gsd, (grid.x0, grid.y0))
@@ -116,10 +121,6 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
                 f"--image {args.image} is {source.shape[0]} x {source.shape[1]} pixels but the scene is "
                 f"{shape[0]} x {shape[1]}: not the image of this scene"
             )
-    if grid.width * grid.height > 4_000_000_000:
-        raise InputError(f"--gsd {args.gsd} gives a {grid.width} x {grid.height} output: too large")
-    if grid.width < 1 or grid.height < 1:
-        raise InputError(f"--gsd {args.gsd} is larger than the footprint: the output would be empty")
     return projector, source, grid, pattern
 
 

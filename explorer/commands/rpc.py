@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from explorer.commands._args import existing_file, finite_float, output_file, raster_file
+from explorer.commands._args import existing_file, finite_float, latitude, longitude, output_file, raster_file
 
 if TYPE_CHECKING:
     from explorer.rpc import RationalFunctionModel
@@ -229,8 +229,8 @@ def register(subparsers: Any) -> None:
 
     project = sub.add_parser("project", help="ground (lon, lat, h) -> image (row, col)")
     project.add_argument("file", type=existing_file)
-    project.add_argument("--lon", type=finite_float, help="degrees")
-    project.add_argument("--lat", type=finite_float, help="degrees")
+    project.add_argument("--lon", type=longitude, help="degrees")
+    project.add_argument("--lat", type=latitude, help="degrees")
     project.add_argument("--h", type=finite_float, default=0.0, help="metres above the ellipsoid")
     project.add_argument("--points", type=existing_file, help="CSV with columns lon,lat,h")
     project.add_argument("--out", type=output_file, help="output CSV (default: stdout); adds row,col")
