@@ -211,6 +211,7 @@ def test_scene_nodes_and_counts(server):
 
 def test_scp_colours_follow_residuals(server):
     app = make_app(server)
+    app.handles["colour_mode"].value = "fixed"
     app.handles["limit"].value = "0.01"  # toy_poly errs by up to ~0.03 px: both ends saturate
     s = app.settings()
     assert s.color_method == "toy_poly" and s.limit_px == 0.01
@@ -231,11 +232,17 @@ def test_scp_colours_follow_residuals(server):
 
 def test_exact_method_colours_are_neutral_and_its_rows_exact(server):
     app = make_app(server)
+    app.handles["colour_mode"].value = "fixed"
     app.handles["color_method"].value = "toy_bisect"
     ev = app.runs["toy_bisect"].evaluation
     assert np.nanmax(np.abs(ev.residual_row)) < 1e-6
     colors = app.nodes["/points/scps"].colors
-    assert np.all(np.abs(colors.astype(int) - 221) <= 1)  # the light-grey centre of the scale
+    assert np.all(np.abs(colors.astype(int) - 221) <= 1)  # the light-grey centre of the fixed +-1 px scale
+    # the automatic scale (default) is scale-free: the same tiny residuals fill the whole ramp
+    app.handles["colour_mode"].value = "per method"
+    lim = np.percentile(np.abs(ev.residual_row[np.isfinite(ev.residual_row)]), 99)
+    np.testing.assert_array_equal(app.nodes["/points/scps"].colors, diverging_rgb(app.cloud_residual, lim))
+    assert len(np.unique(app.nodes["/points/scps"].colors, axis=0)) > 10
 
 
 def test_point_cloud_decimation_is_named(server):
@@ -293,13 +300,22 @@ def test_residual_map_panel_holds_the_model_residuals(server):
     fig = app.handles["maps"].figure
     s = app.settings()
     scps = app.model.scps(s)
-    for name in ("toy_poly", "toy_bisect"):
+    for k, name in enumerate(("toy_poly", "toy_bisect")):
         ev = app.runs[name].evaluation
-        (tr,) = [t for t in fig.data if t.name == name]
+        (tr,) = [t for t in fig.data if t.name == f"{name} row"]
         ok = np.isfinite(ev.residual_row)
-        np.testing.assert_array_equal(np.asarray(tr.customdata), ev.residual_row[ok])
+        cd = np.asarray(tr.customdata)
+        np.testing.assert_array_equal(cd[:, 0], ev.residual_row[ok])
+        np.testing.assert_array_equal(cd[:, 1], ev.evaluated_index[ok])  # the SCP index a click selects
         np.testing.assert_array_equal(np.asarray(tr.x), scps.col[ev.evaluated_index[ok]])
         np.testing.assert_array_equal(np.asarray(tr.y), scps.row[ev.evaluated_index[ok]])
+        # default colour scale: per map, symmetric, the 99th percentile of |residual|
+        axis = fig.layout[f"coloraxis{k + 1 if k else ''}"]
+        lim = np.percentile(np.abs(ev.residual_row[ok]), 99)
+        assert axis.cmax == pytest.approx(lim, rel=1e-12) and axis.cmin == -axis.cmax
+        assert f"{lim:.2g}" in axis.colorbar.title.text
+    app.handles["colour_mode"].value = "fixed"
+    fig = app.handles["maps"].figure
     assert fig.layout.coloraxis.cmin == -1.0 and fig.layout.coloraxis.cmax == 1.0
     assert "toy_poly" in app.handles["summary"].content
 

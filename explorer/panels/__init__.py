@@ -102,6 +102,54 @@ def diverging_rgb(residual_px: np.ndarray, limit_px: float) -> np.ndarray:
     return ramp(residual_px, DIVERGING, -limit_px, limit_px)
 
 
+ROBUST_PERCENTILE = 99.0
+"""Percentile of |residual| that sets an automatic colour limit (outliers saturate)."""
+LOG_MAGNITUDE: Stops = [
+    (0.0, (13, 8, 135)),
+    (0.25, (126, 3, 168)),
+    (0.5, (204, 71, 120)),
+    (0.75, (248, 149, 64)),
+    (1.0, (240, 249, 33)),
+]
+"""Sequential scale (plasma) of log10 |residual|: small (index 0) to large (index -1)."""
+
+
+def robust_limit(values: np.ndarray, percentile: float = ROBUST_PERCENTILE) -> float:
+    """Automatic symmetric colour limit of signed residuals: the ``percentile`` of |value|.
+
+    Scale-free, so residuals of 1e-10 px and of 10 px both fill their scale.  Falls back to
+    the largest |value| when the percentile is 0, and to 1e-12 when every value is 0 or none is
+    finite (the scale then shows a uniform zero honestly).
+
+    Parameters
+    ----------
+    values : ndarray, shape (N,)
+        Residuals, pixels; NaN ignored.
+    percentile : float
+
+    Returns
+    -------
+    float
+        Limit L > 0, pixels: the scale spans ``[-L, +L]``.
+    """
+    a = np.abs(np.asarray(values, dtype=np.float64).ravel())
+    a = a[np.isfinite(a)]
+    if a.size == 0:
+        return 1e-12
+    lim = float(np.percentile(a, percentile))
+    if not lim > 0:
+        lim = float(a.max())
+    return lim if lim > 0 else 1e-12
+
+
+def count_text(count: int, total: int) -> str:
+    """``"2 of 40,000"`` for one or two points (a percentage of so few says nothing), else
+    ``"1,234 (3.1%)"``."""
+    if count <= 2:
+        return f"{count} of {total:,}"
+    return f"{count:,} ({100.0 * count / max(total, 1):.2g}%)"
+
+
 def height_rgb(height_m: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Colours (N, 3) uint8 of terrain heights on :data:`HEIGHT`; flat ground if ``hi <= lo``."""
     h = np.asarray(height_m, dtype=np.float64).ravel()
@@ -121,7 +169,7 @@ def rgb_string(rgb: tuple[int, int, int]) -> str:
 
 
 __all__ = [
-    "DIVERGING", "FLAT_GROUND_RGB", "HEIGHT", "INVALID_RGB", "ITERATION", "NEGATIVE_END",
-    "POSITIVE_END", "SCOP_RGB", "diverging_rgb", "height_rgb", "plotly_colorscale", "ramp",
-    "rgb_string",
+    "DIVERGING", "FLAT_GROUND_RGB", "HEIGHT", "INVALID_RGB", "ITERATION", "LOG_MAGNITUDE", "NEGATIVE_END",
+    "POSITIVE_END", "ROBUST_PERCENTILE", "SCOP_RGB", "count_text", "diverging_rgb", "height_rgb",
+    "plotly_colorscale", "ramp", "rgb_string", "robust_limit",
 ]

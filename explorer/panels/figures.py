@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import plotly.graph_objects as go
@@ -31,9 +32,13 @@ from explorer.evaluate import Evaluation
 from explorer.panels import (
     DIVERGING,
     INVALID_RGB,
+    LOG_MAGNITUDE,
+    ROBUST_PERCENTILE,
     SCOP_RGB,
+    count_text,
     plotly_colorscale,
     rgb_string,
+    robust_limit,
 )
 from explorer.points import PointSet
 
@@ -115,125 +120,291 @@ def _label(name: str, labels: Mapping[str, str] | None) -> str:
     return labels.get(name, name) if labels else name
 
 
+PLOTLY_CONFIG = {
+    "displaylogo": False,
+    "showSendToCloud": False,
+    "showEditInChartStudio": False,
+    "modeBarButtonsToRemove": ["sendDataToCloud", "editInChartStudio"],
+}
+"""Plotly config of every panel: no "share to cloud" / Chart Studio button, nothing leaves the machine."""
+STATUS_STYLE = {
+    "refused": ("rgb(0,200,200)", "circle-open", "refused (outside its domain, e.g. height extrapolation)"),
+    "not converged": (rgb_string(INVALID_RGB), "x", "not converged"),
+    "outside image": ("rgb(255,255,255)", "square-open", "outside the image"),
+}
+"""Marker colour, symbol and legend text of points without a residual, by status name."""
+_TITLE_PX = 34
+_AXIS_PX = 40
+_REF_WIDTH_PX = 520
+
+
+@dataclass
+class MapPanel:
+    """One residual map: its values at check points and how to title it."""
+
+    title: str
+    values: np.ndarray
+    index: np.ndarray
+    missing: dict[str, np.ndarray]
+
+
+def _panels(
+    evaluations: Mapping[str, Evaluation], check: PointSet, component: str,
+    difference: tuple[str, str] | None, status: Mapping[str, np.ndarray] | None,
+    labels: Mapping[str, str] | None, max_points: int | None,
+) -> list[MapPanel]:
+    comps = {"row": ("row",), "column": ("column",), "row and column": ("row", "column")}.get(component)
+    if comps is None:
+        raise ValueError(f"component must be 'row', 'column' or 'row and column', got {component!r}")
+    out = []
+    for n, ev in evaluations.items():
+        idx = np.asarray(ev.evaluated_index)
+        st = None if status is None else status.get(n)
+        for c in comps:
+            res = np.asarray(ev.residual_row if c == "row" else ev.residual_col, dtype=np.float64)
+            ok = np.isfinite(res)
+            rms = float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else float("nan")
+            m = idx.size
+            sub = f"{m:,} of {ev.n_scps:,} SCPs" if m < ev.n_scps else f"{m:,} SCPs"
+            shown = min(m, max_points) if max_points is not None else m
+            dec = f", {shown:,} drawn" if shown < m else ""
+            title = f"{_label(n, labels)} {c}: RMSE {rms:.3g} px<br>({sub}{dec})"
+            missing: dict[str, np.ndarray] = {}
+            if (~ok).any():
+                if st is not None and np.shape(st) == res.shape:
+                    for code, name in enumerate(("valid", "refused", "not converged", "outside image")):
+                        if code and ((~ok) & (st == code)).any():
+                            missing[name] = idx[(~ok) & (st == code)]
+                    rest = (~ok) & (st == 0)
+                    if rest.any():
+                        missing["not converged"] = np.union1d(missing.get("not converged", []), idx[rest])
+                else:
+                    missing["not converged"] = idx[~ok]
+            out.append(MapPanel(title, res[ok], idx[ok], missing))
+    if difference is not None:
+        a, b = difference
+        if a in evaluations and b in evaluations and a != b:
+            ea, eb = evaluations[a], evaluations[b]
+            common, ia, ib = np.intersect1d(ea.evaluated_index, eb.evaluated_index, return_indices=True)
+            d = np.asarray(ea.residual_row)[ia] - np.asarray(eb.residual_row)[ib]
+            ok = np.isfinite(d)
+            rms = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
+            title = (f"{_label(a, labels)} minus {_label(b, labels)} (row): RMS {rms:.3g} px"
+                     f"<br>({int(ok.sum()):,} points both evaluated)")
+            out.append(MapPanel(title, d[ok], common[ok], {}))
+    return out
+
+
 def residual_maps(
     evaluations: Mapping[str, Evaluation],
     check: PointSet,
     *,
     control: PointSet | None = None,
     shape: tuple[int, int] | None = None,
-    limit_px: float = 1.0,
+    limit_px: float | None = None,
+    mode: str | None = None,
+    component: str = "row",
+    difference: tuple[str, str] | None = None,
+    status: Mapping[str, np.ndarray] | None = None,
     max_points: int | None = 20000,
     labels: Mapping[str, str] | None = None,
     columns: int | None = None,
+    show_control: bool = True,
+    percentile: float = ROBUST_PERCENTILE,
 ) -> go.Figure:
-    """Scanline residual maps over the image, one small multiple per method.
+    """Residual maps over the image: one small multiple per method (and component).
 
     Parameters
     ----------
     evaluations : mapping of str to Evaluation
-        Method name -> evaluation on ``check`` (``residual_row`` (M,) aligned with
-        ``evaluated_index`` (M,), pixels, NaN where the method gave no valid row).
+        Method name -> evaluation on ``check`` (``residual_row`` / ``residual_col`` (M,)
+        aligned with ``evaluated_index`` (M,), pixels, NaN where the method gave no answer).
     check : PointSet
         The SCPs the evaluations used (image row/col of each point).
     control : PointSet, optional
-        SCOPs, drawn as gold crosses on every map.
+        SCOPs, drawn as small gold crosses on every map (one legend entry toggles them).
     shape : (int, int), optional
         Image (rows, columns) for the axis ranges (pixel edges).
-    limit_px : float
-        The shared colour scale spans ``[-limit_px, +limit_px]`` and is centred at 0;
-        larger residuals saturate.  It is fixed: the same for every method.
+    limit_px : float, optional
+        Colour limit of the ``"fixed"`` mode, pixels.
+    mode : {"per method", "shared", "log magnitude", "fixed"}, optional
+        ``"per method"``: every map its own symmetric diverging scale ``[-L, +L]`` with L the
+        ``percentile`` of its |residual| (:func:`explorer.panels.robust_limit`, stated on its
+        colour bar), so 1e-10 px and 10 px both show structure; ``"shared"``: one such L over
+        all maps; ``"log magnitude"``: log10 |residual| on a sequential scale spanning the 1st
+        to 99th percentile over all maps; ``"fixed"``: ``[-limit_px, +limit_px]``.  Default:
+        ``"fixed"`` when ``limit_px`` is given, else ``"per method"``.
+    component : {"row", "column", "row and column"}
+        The scanline (row) residual, the column residual, or both (two maps per method).
+    difference : (str, str), optional
+        Also map the row residual of the first method minus that of the second, on the
+        points both evaluated.
+    status : mapping of str to ndarray, optional
+        Per method the status codes (M,) of ``explorer.app.model.STATUS_NAMES``; points
+        without a residual are then drawn and named as refused / not converged / outside
+        the image (else all as not converged).
     max_points : int or None
-        Draw at most this many points per method (an evenly strided subset, named in the
-        subplot title); None draws all.
+        Draw at most this many points per map (an evenly strided subset, named in the
+        title); None draws all.
     labels : mapping, optional
         Display names.
     columns : int, optional
-        Small multiples per figure row (default 2, or 3 beyond four methods).
+        Maps per figure row (default 2, 3 beyond four maps).
+    show_control : bool
+        Draw the SCOPs.
+    percentile : float
+        Percentile of |residual| that sets the automatic limits.
 
     Returns
     -------
     go.Figure
-        One ``scattergl`` trace per method (``x`` = column, ``y`` = row, ``customdata`` =
-        residual, all on ``coloraxis``), plus traces for invalid points and SCOPs.
-        ``layout.meta["height_over_width"]`` suggests a display aspect.
+        Per map one ``scattergl`` trace (``x`` = column, ``y`` = row, ``customdata`` =
+        (residual px, SCP index), ``meta`` = map title), plus traces for points without a
+        residual (named by status) and SCOPs.  ``layout.meta`` holds ``height_over_width``,
+        ``mode`` and ``limits_px`` (per map the colour limit; for the log mode the exponent
+        range).
     """
-    names = list(evaluations)
-    if not names:
+    if mode is None:
+        mode = "fixed" if limit_px is not None else "per method"
+    if mode not in ("per method", "shared", "log magnitude", "fixed"):
+        raise ValueError(f"mode must be 'per method', 'shared', 'log magnitude' or 'fixed', got {mode!r}")
+    if mode == "fixed" and not (limit_px is not None and limit_px > 0):
+        raise ValueError(f"the fixed mode needs a positive limit_px, got {limit_px}")
+    panels = _panels(evaluations, check, component, difference, status, labels, max_points)
+    if not panels:
         return empty_figure("no method evaluated")
-    ncol = columns or (2 if len(names) <= 4 else 3)
-    ncol = max(1, min(ncol, len(names)))
-    nrow = math.ceil(len(names) / ncol)
-    titles = []
-    for n in names:
-        ev = evaluations[n]
-        m = len(ev.evaluated_index)
-        shown = min(m, max_points) if max_points is not None else m
-        sub = f"{m:,} of {ev.n_scps:,} SCPs" if m < ev.n_scps else f"{m:,} SCPs"
-        dec = f", {shown:,} drawn" if shown < m else ""
-        titles.append(f"{_label(n, labels)}: RMSE {ev.rmse_px:.3g} px<br>({sub}{dec})")
-    layout, refs = _grid(len(names), ncol, titles, hgap=0.04, vgap=0.16)
+    n = len(panels)
+    ncol = columns or (2 if n <= 4 else 3)
+    ncol = max(1, min(ncol, n))
+    nrow = math.ceil(n / ncol)
+    per_map = mode == "per method"
+    # geometry in pixels at a reference width; fractions of the figure keep titles clear of the
+    # maps above them (the figure's height follows its width through height_over_width)
+    cbar_px = 70 if per_map else 0
+    hgap_px = 16 + cbar_px
+    plot_w = (_REF_WIDTH_PX - 60 - 70 * (not per_map) - hgap_px * (ncol - 1) - cbar_px) / ncol
     image_hw = shape[0] / shape[1] if shape is not None else 1.0
-    hw = float(np.clip(0.25 + 0.85 * nrow / ncol * image_hw, 0.4, 2.5))
-    hover = "row %{y:.2f}<br>col %{x:.2f}<br>residual %{customdata:.4g} px<extra>%{meta}</extra>"
+    plot_h = float(np.clip(plot_w * image_hw, 80.0, 420.0))
+    top, bottom = _TITLE_PX + 6, _AXIS_PX
+    row_px = plot_h + _TITLE_PX + _AXIS_PX
+    height_px = top + bottom + nrow * plot_h + (nrow - 1) * (_TITLE_PX + _AXIS_PX)
+    inner_h = height_px - top - bottom
+    inner_w = _REF_WIDTH_PX - 60 - (70 if not per_map else 0)
+    hgap = hgap_px / inner_w
+    vgap = (row_px - plot_h) / inner_h
+    layout, refs = _grid(n, ncol, [p.title for p in panels], hgap=hgap, vgap=vgap)
+    for ann in layout["annotations"]:
+        ann["font"] = {"size": 10}
+    limits: list[float] = []
+    if mode == "log magnitude":
+        logs = [np.log10(np.maximum(np.abs(p.values), 1e-300)) for p in panels]
+        allv = np.concatenate([v for v in logs if v.size]) if any(v.size for v in logs) else np.zeros(1)
+        lo, hi = (float(np.percentile(allv, 100 - percentile)), float(np.percentile(allv, percentile)))
+        if hi <= lo:
+            lo, hi = lo - 0.5, hi + 0.5
+        limits = [lo, hi]
+    elif mode == "shared":
+        limits = [robust_limit(np.concatenate([p.values for p in panels]), percentile)]
+    elif mode == "fixed":
+        limits = [float(limit_px)]
+    else:
+        limits = [robust_limit(p.values, percentile) for p in panels]
+    hover_what = "log10 |residual| %{marker.color:.3f}" if mode == "log magnitude" else ""
     data: list[dict] = []
-    for k, n in enumerate(names):
-        ev = evaluations[n]
+    legend_seen: set[str] = set()
+    for k, p in enumerate(panels):
         xr, yr = refs[k]
-        res = np.asarray(ev.residual_row, dtype=np.float64)
-        idx = np.asarray(ev.evaluated_index)
-        pos = decimation_index(res.size, max_points)
-        res_s, idx_s = res[pos], idx[pos]
-        ok = np.isfinite(res_s)
+        pos = decimation_index(p.values.size, max_points)
+        vals, idx = p.values[pos], p.index[pos]
+        axis = f"coloraxis{k + 1 if k else ''}" if per_map else "coloraxis"
+        colour = np.log10(np.maximum(np.abs(vals), 1e-300)) if mode == "log magnitude" else vals
         data.append({
-            "type": "scattergl", "x": check.col[idx_s[ok]], "y": check.row[idx_s[ok]],
-            "customdata": res_s[ok], "mode": "markers", "xaxis": xr, "yaxis": yr,
-            "marker": {"color": res_s[ok], "coloraxis": "coloraxis", "size": 4},
-            "name": _label(n, labels), "meta": _label(n, labels), "hovertemplate": hover,
+            "type": "scattergl", "x": check.col[idx], "y": check.row[idx],
+            "customdata": np.stack([vals, idx.astype(np.float64)], axis=1) if vals.size else np.zeros((0, 2)),
+            "mode": "markers", "xaxis": xr, "yaxis": yr,
+            "marker": {"color": colour, "coloraxis": axis, "size": 4},
+            "name": p.title.split(":")[0], "meta": p.title.split(":")[0],
+            "hovertemplate": "row %{y:.2f}<br>col %{x:.2f}<br>residual %{customdata[0]:.4g} px<br>"
+                             f"SCP %{{customdata[1]:.0f}}{'<br>' + hover_what if hover_what else ''}"
+                             "<extra>%{meta}</extra>",
             "showlegend": False,
         })
-        if (~ok).any():
+        for what, where in p.missing.items():
+            colour_s, symbol, text = STATUS_STYLE[what]
+            total = len(p.values) + sum(len(v) for v in p.missing.values())
             data.append({
-                "type": "scattergl", "x": check.col[idx_s[~ok]], "y": check.row[idx_s[~ok]],
-                "mode": "markers", "xaxis": xr, "yaxis": yr,
-                "marker": {"color": rgb_string(INVALID_RGB), "size": 5, "symbol": "x"},
-                "name": "no valid row", "legendgroup": "invalid", "showlegend": False,
-                "hovertemplate": "row %{y:.2f}<br>col %{x:.2f}<br>no valid row<extra></extra>",
+                "type": "scattergl", "x": check.col[where], "y": check.row[where], "mode": "markers",
+                "xaxis": xr, "yaxis": yr, "marker": {"color": colour_s, "size": 6, "symbol": symbol},
+                "name": f"{p.title.split(':')[0]}: {text}: {count_text(len(where), total)}",
+                "legendgroup": what, "showlegend": True,
+                "hovertemplate": f"row %{{y:.2f}}<br>col %{{x:.2f}}<br>{text}<extra></extra>",
             })
-        if control is not None and len(control):
+        if show_control and control is not None and len(control):
             data.append({
                 "type": "scattergl", "x": control.col, "y": control.row, "mode": "markers",
                 "xaxis": xr, "yaxis": yr,
-                "marker": {"color": rgb_string(SCOP_RGB), "size": 7, "symbol": "cross",
-                           "line": {"width": 1, "color": "black"}},
-                "name": f"SCOPs ({len(control)})", "legendgroup": "scop", "showlegend": k == 0,
+                "marker": {"color": rgb_string(SCOP_RGB), "size": 4 if len(control) > 100 else 6,
+                           "symbol": "cross", "opacity": 0.8},
+                "name": f"SCOPs ({len(control)}): click to hide", "legendgroup": "scop",
+                "showlegend": "scop" not in legend_seen,
                 "hovertemplate": "SCOP<br>row %{y:.2f}<br>col %{x:.2f}<extra></extra>",
             })
-    for k in range(len(names)):
+            legend_seen.add("scop")
+    for k in range(n):
         r, c = divmod(k, ncol)
         sx = "" if k == 0 else str(k + 1)
         xa, ya = layout[f"xaxis{sx}"], layout[f"yaxis{sx}"]
         xa.update(showgrid=False, zeroline=False)
         ya.update(showgrid=False, zeroline=False)
-        if r == nrow - 1 or k + ncol >= len(names):
-            xa["title"] = {"text": "column"}
+        if r == nrow - 1 or k + ncol >= n:
+            xa["title"] = {"text": "column", "standoff": 2}
+        xa["showticklabels"] = True
         if c == 0:
-            ya["title"] = {"text": "row"}
+            ya["title"] = {"text": "row", "standoff": 2}
         if shape is not None:
             xa["range"] = [-0.5, shape[1] - 0.5]
             ya["range"] = [shape[0] - 0.5, -0.5]
         else:
             ya["autorange"] = "reversed"
+        xa["nticks"] = 4
+        ya["nticks"] = 5
+    pct = f"p{percentile:g} |residual|"
+    if per_map:
+        for k, lim in enumerate(limits):
+            xd, yd = layout[f"xaxis{k + 1 if k else ''}"]["domain"], layout[f"yaxis{k + 1 if k else ''}"]["domain"]
+            layout[f"coloraxis{k + 1 if k else ''}"] = {
+                "colorscale": plotly_colorscale(DIVERGING), "cmin": -lim, "cmax": lim, "cmid": 0.0,
+                "colorbar": {"title": {"text": f"+-{lim:.2g} px<br>({pct})", "font": {"size": 9}},
+                             "thickness": 8, "len": yd[1] - yd[0], "lenmode": "fraction", "y": yd[0],
+                             "yanchor": "bottom", "x": xd[1] + 0.01, "xanchor": "left",
+                             "tickfont": {"size": 8}, "nticks": 5, "exponentformat": "e"}}
+    elif mode == "log magnitude":
+        layout["coloraxis"] = {
+            "colorscale": plotly_colorscale(LOG_MAGNITUDE), "cmin": limits[0], "cmax": limits[1],
+            "colorbar": {"title": {"text": "|residual| px<br>(log, p1-p99)", "font": {"size": 9}},
+                         "thickness": 10, "len": 0.8, "y": 1.0, "yanchor": "top", "tickprefix": "1e",
+                         "tickformat": ".0f", "dtick": max(1, int(np.ceil((limits[1] - limits[0]) / 6)))}}
+    else:
+        what = f"+-{limits[0]:.2g} px<br>({pct}, all maps)" if mode == "shared" else f"+-{limits[0]:g} px (fixed)"
+        layout["coloraxis"] = {
+            "colorscale": plotly_colorscale(DIVERGING), "cmin": -limits[0], "cmax": limits[0], "cmid": 0.0,
+            "colorbar": {"title": {"text": what, "font": {"size": 9}}, "thickness": 10, "len": 0.8, "y": 1.0,
+                         "yanchor": "top", "exponentformat": "e"}}
     layout.update(
-        coloraxis={"colorscale": plotly_colorscale(DIVERGING), "cmin": -limit_px, "cmax": limit_px,
-                   "cmid": 0.0, "colorbar": {"title": {"text": "row error<br>px"}, "thickness": 12,
-                                                "len": 0.7, "y": 1.0, "yanchor": "top"}},
-        height=int(500 * hw), margin={"l": 50, "r": 10, "t": 60, "b": 40},
-        legend={"x": 1.02, "xanchor": "left", "y": 0.0, "yanchor": "bottom", "font": {"size": 10}},
+        height=int(height_px), margin={"l": 50, "r": 10 if per_map else 80, "t": top, "b": bottom},
+        legend={"orientation": "h", "x": 0.0, "xanchor": "left", "y": -bottom / height_px - 0.01,
+                "yanchor": "top", "font": {"size": 9}},
         plot_bgcolor=PLOT_BG,
-        meta={"height_over_width": hw, "limit_px": limit_px},
+        meta={"height_over_width": height_px / _REF_WIDTH_PX, "mode": mode, "limits_px": limits,
+              "titles": [p.title for p in panels], "title_px": _TITLE_PX, "axis_px": _AXIS_PX},
     )
-    fig = go.Figure(data=data, layout=layout)
-    return fig
+    if any(d.get("showlegend") for d in data):  # room for the legend under the maps
+        extra = 18 * (1 + sum(1 for d in data if d.get("showlegend")) // 2)
+        layout["height"] = int(height_px + extra)
+        layout["margin"]["b"] = bottom + extra
+        layout["legend"]["y"] = -(bottom - 6) / (height_px - top - bottom)
+        layout["meta"]["height_over_width"] = (height_px + extra) / _REF_WIDTH_PX
+    return go.Figure(data=data, layout=layout)
 
 
 def accuracy_vs_density(
@@ -349,7 +520,33 @@ def timing_bars(
     return fig
 
 
+def figures_html(figures: Sequence[tuple[str, go.Figure]], title: str, notes: Sequence[str] = ()) -> str:
+    """The figures in one self-contained HTML page: plotly.js inlined once, no script or style
+    loaded from the network (opens offline), deterministic element ids.
+
+    Parameters
+    ----------
+    figures : sequence of (heading, go.Figure)
+    title : str
+        Page title and top heading.
+    notes : sequence of str
+        Paragraphs under the heading (what was computed, on which points).
+    """
+    import html
+
+    parts = [f"<h1>{html.escape(title)}</h1>"] + [f"<p>{html.escape(t)}</p>" for t in notes]
+    for k, (heading, fig) in enumerate(figures):
+        fig = go.Figure(fig)
+        aspect = float((fig.layout.meta or {}).get("height_over_width", 0.6))
+        fig.update_layout(width=1000, height=int(1000 * aspect))
+        parts.append(f"<h2>{html.escape(heading)}</h2>")
+        parts.append(fig.to_html(full_html=False, include_plotlyjs=(k == 0), div_id=f"panel-{k}",
+                                 config=PLOTLY_CONFIG))
+    return ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + html.escape(title)
+            + "</title></head><body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
+
+
 __all__ = [
-    "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure", "method_colors",
-    "residual_maps", "timing_bars",
+    "PLOTLY_CONFIG", "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure", "figures_html",
+    "method_colors", "residual_maps", "timing_bars",
 ]

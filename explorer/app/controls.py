@@ -1,0 +1,188 @@
+"""The explorer's controls in the viser panel, and the bridge that turns a click on a residual map
+into a selected point in the 3D view.
+
+:func:`build_controls` adds every control and returns ``{key: handle}``; the callbacks it
+wires only *request* work from the :class:`~explorer.app.gui.ExplorerApp` (the worker thread
+debounces and computes).  Control -> cache table: ``docs/explorer.md#controls``.
+
+Map clicks: viser draws Plotly figures in the browser but reports no Plotly events, so a small
+script (run once per page by an HTML element's ``onerror`` handler, the only way viser's HTML
+element runs code) listens for ``plotly_click`` on every Plotly plot and types the clicked
+point's SCP index (the second ``customdata`` column of the maps) into the *Picked SCP* text
+control, as a user would; its callback selects that SCP.  Nothing is loaded from the network.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import TYPE_CHECKING, Any
+
+from explorer.app.model import COLOUR_LIMITS_PX, COLOUR_MODES, COMPONENTS, SCOP_DENSITIES, SCP_COUNTS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from explorer.app.gui import ExplorerApp
+
+NO_DIFFERENCE = "(none)"
+"""Difference-map dropdown entry: no difference map."""
+
+CLICK_SCRIPT = r"""
+(function () {
+  if (window.__pushbroomPick) { window.__pushbroomPick.uuid = '%(uuid)s'; return; }
+  const state = {uuid: '%(uuid)s'};
+  window.__pushbroomPick = state;
+  function pickInput() {
+    const label = document.querySelector('label[for="' + state.uuid + '"]');
+    let node = label;
+    while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+    return node ? node.querySelector('input') : null;
+  }
+  function type(text) {
+    const input = pickInput();
+    if (!input) return;
+    const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
+    setter.call(input, text);
+    input.dispatchEvent(new Event('input', {bubbles: true}));
+  }
+  function attach() {
+    for (const gd of document.querySelectorAll('.js-plotly-plot')) {
+      if (gd.__pushbroomPick || typeof gd.on !== 'function') continue;
+      gd.__pushbroomPick = true;
+      gd.on('plotly_click', function (ev) {
+        const p = ev && ev.points && ev.points[0];
+        if (!p || !Array.isArray(p.customdata) || p.customdata.length < 2) return;
+        type('scp ' + Math.round(p.customdata[1]));
+      });
+    }
+  }
+  setInterval(attach, 500);
+})();
+"""
+
+
+def click_bridge_html(uuid: str) -> str:
+    """HTML whose ``onerror`` runs :data:`CLICK_SCRIPT` for the text control ``uuid``."""
+    script = (CLICK_SCRIPT % {"uuid": uuid}).replace("\n", " ").replace('"', "&quot;")
+    return f'<img src="data:," alt="" style="display:none" onerror="{script}">'
+
+
+def build_controls(app: ExplorerApp, *, scene_ids: list[str], scene_id: str, scp_count: int,
+                   scop_density: int, sweep: bool) -> dict[str, Any]:
+    """Add the controls and panels to ``app.server.gui``; returns the handles by key.
+
+    Parameters
+    ----------
+    app : ExplorerApp
+    scene_ids : list of str
+        Entries of the scene dropdown (the loaded sources' labels, then the presets).
+    scene_id : str
+        The entry shown first.
+    """
+    F = app._F  # noqa: N806
+    gui = app.server.gui
+    gui.configure_theme(control_width="medium", show_share_button=False)
+    with contextlib.suppress(Exception):
+        gui.main_panel.dock_left()
+    h: dict[str, Any] = {}
+    h["status"] = gui.add_markdown("**Status:** starting")
+    h["progress"] = gui.add_progress_bar(0.0, animated=False)
+    h["run"] = gui.add_button("Run", hint="recompute now (also after changes with auto update off)")
+    h["auto"] = gui.add_checkbox("Update on change", True)
+    with gui.add_folder("Scene"):
+        h["preset"] = gui.add_dropdown("Scene", scene_ids, initial_value=scene_id,
+                                       hint="a loaded file (named by file and sensor) or a synthetic preset")
+        h["relief"] = gui.add_slider("Relief (m)", 0, 3000, 100, 0, hint="presets only")
+        h["rates"] = gui.add_slider("Attitude rate scale", 0.0, 5.0, 0.1, 1.0, hint="presets only")
+        h["jitter"] = gui.add_slider("Jitter amplitude scale", 0.0, 10.0, 0.5, 1.0, hint="presets only")
+    with gui.add_folder("Points"):
+        densities = sorted(set(SCOP_DENSITIES) | {int(scop_density)})
+        h["density"] = gui.add_dropdown("SCOPs", [str(d) for d in densities], initial_value=str(int(scop_density)))
+        counts = sorted(set(SCP_COUNTS) | {int(scp_count)})
+        h["scps"] = gui.add_dropdown("SCPs (maps)", [str(c) for c in counts], initial_value=str(int(scp_count)))
+    with gui.add_folder("Methods") as folder:
+        app._methods_folder = folder
+        h["method_boxes"] = {}
+        h["methods_note"] = gui.add_markdown("*Loading the methods...*")
+        h["color_method"] = gui.add_dropdown("Colour by", app._color_options([]))
+        h["layers"] = gui.add_slider("MLP layers", 1, 5, 1, 1, hint="hidden layers, for methods that take them")
+        h["neurons"] = gui.add_slider("MLP neurons", 2, 50, 1, 10,
+                                      hint="neurons per hidden layer, for methods that take them")
+        h["sweep"] = gui.add_checkbox("Accuracy vs SCOPs sweep", sweep)
+    with gui.add_folder("Residual maps"):
+        h["colour_mode"] = gui.add_dropdown(
+            "Colour scale", COLOUR_MODES, initial_value=COLOUR_MODES[0],
+            hint="per method / shared: symmetric limit from the 99th percentile of |residual| (named on the "
+                 "colour bar); log magnitude: log10 |residual|; fixed: the limit below")
+        h["limit"] = gui.add_dropdown("Fixed limit +- px", [f"{v:g}" for v in COLOUR_LIMITS_PX], initial_value="1")
+        h["component"] = gui.add_dropdown("Residual", COMPONENTS, initial_value=COMPONENTS[0],
+                                          hint="row (scanline) residual, column residual, or both")
+        h["diff_a"] = gui.add_dropdown("Difference: A", (NO_DIFFERENCE,), hint="map of A minus B (row residual)")
+        h["diff_b"] = gui.add_dropdown("Difference: B", (NO_DIFFERENCE,))
+        h["show_scops"] = gui.add_checkbox("Show SCOPs on maps", True)
+        h["export"] = gui.add_button("Export (summary, residuals, panels)",
+                                     hint="every check point, no subsample: a zip of summary.json, residuals.csv "
+                                          "and panels.html (as `pushbroom explore --export`)")
+    with gui.add_folder("View"):
+        h["distance"] = gui.add_dropdown("Sensor distance", ("compressed", "true"))
+        h["exaggeration"] = gui.add_slider("Height exaggeration", 1.0, 10.0, 0.5, 1.0)
+        h["reset_view"] = gui.add_button("Reset view", hint="frame the footprint and the track again")
+    with gui.add_folder("Selected point"):
+        h["sel_mode"] = gui.add_dropdown("Select", ("worst SCP", "image point", "picked SCP"))
+        h["sel_row"] = gui.add_slider("Row", 0.0, 1e6, 0.5, 0.0)
+        h["sel_col"] = gui.add_slider("Column", 0.0, 1e6, 0.5, 0.0)
+        h["pick"] = gui.add_text("Picked SCP", "", hint="click a point in a residual map (or type `scp <index>`)")
+        h["sel_text"] = gui.add_markdown("")
+    h["click_bridge"] = gui.add_html(click_bridge_html(h["pick"]._impl.uuid))
+    h["cloud_text"] = gui.add_markdown("")
+    app.handles = h
+
+    app.panel = gui.add_panel()
+    config = F.PLOTLY_CONFIG
+    with app.panel.add_tab("Residual maps"):
+        h["maps"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+        h["maps_note"] = gui.add_markdown("")
+        h["summary"] = gui.add_markdown("")
+    with app.panel.add_tab("Accuracy vs SCOPs"):
+        h["accuracy"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+    with app.panel.add_tab("Timing"):
+        h["timing"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+    with contextlib.suppress(Exception):
+        app.panel.dock_right()
+        app.panel.set_width(560)
+
+    def changed(_event: Any = None) -> None:
+        if getattr(app._local, "quiet", False):
+            return
+        if h["auto"].value:
+            app.request_update()
+
+    for key in ("preset", "relief", "rates", "jitter", "density", "scps", "color_method", "layers",
+                "neurons", "limit", "colour_mode", "component", "diff_a", "diff_b", "show_scops", "distance",
+                "exaggeration", "sweep", "sel_mode"):
+        h[key].on_update(changed)
+    app._changed_cb = changed
+
+    def selection_changed(_event: Any = None) -> None:
+        if getattr(app._local, "quiet", False):
+            return
+        with app.quiet():
+            h["sel_mode"].value = "image point"
+        changed()
+
+    def picked(_event: Any = None) -> None:
+        if getattr(app._local, "quiet", False):
+            return
+        if app.pick_index() is not None:
+            with app.quiet():
+                h["sel_mode"].value = "picked SCP"
+            app.request_update()
+
+    h["sel_row"].on_update(selection_changed)
+    h["sel_col"].on_update(selection_changed)
+    h["pick"].on_update(picked)
+    h["run"].on_click(lambda _e: app.request_update())
+    h["reset_view"].on_click(lambda _e: app.reset_view())
+    h["export"].on_click(lambda e: app.export_to_client(getattr(e, "client", None)))
+    return h
+
+
+__all__ = ["CLICK_SCRIPT", "NO_DIFFERENCE", "build_controls", "click_bridge_html"]

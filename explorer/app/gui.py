@@ -1,0 +1,418 @@
+"""The explorer's GUI on a viser server: :class:`ExplorerApp`.
+
+The app owns the controls (:mod:`explorer.app.controls`), a worker thread that recomputes
+what the controls changed (requests are debounced -- a slider drag sends dozens -- and the
+newest wins), the fit threads (:class:`explorer.app.jobs.FitPool`) and the drawing
+(:class:`explorer.app.views.Views`: the 3D scene through :mod:`explorer.scene3d.builders`,
+the Plotly panels through :mod:`explorer.panels.figures`).  All numbers come from
+:class:`explorer.app.model.ExplorerModel`.  Usage: ``docs/explorer.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Hashable, Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from explorer.app.controls import NO_DIFFERENCE, build_controls
+from explorer.app.jobs import FitPool
+from explorer.app.model import (
+    DEFAULT_METHODS,
+    Evaluation,
+    ExplorerModel,
+    FitRecord,
+    MethodRun,
+    Selection,
+    Settings,
+    control_default,
+    safe_available,
+)
+from explorer.app.views import Superseded, Views
+from explorer.methods import registry
+from explorer.presets import default_preset_id, preset_ids
+from explorer.scene import Scene
+
+DEBOUNCE_S = 0.25
+"""A request waits until the controls have been still this long (a slider drag sends a value per
+frame; only the last is computed)."""
+
+
+class ExplorerApp(Views):
+    """The explorer's GUI on a viser server.
+
+    Parameters
+    ----------
+    server : viser.ViserServer
+    preset : str, optional
+        Scene shown first: a preset id or the label of one of ``sources`` (default: the first
+        source, else the default preset).
+    methods : sequence of str, optional
+        Methods checked at start (default: :data:`DEFAULT_METHODS` that are registered).
+    scp_count, scop_density : int
+    background : bool
+        True (interactive): recompute in a worker thread, newest request wins, and train
+        learned methods in a :class:`FitPool` thread -- an update waits at most
+        ``fit_wait_s`` for a fit, shows the other methods, and redraws when the fit lands.
+        False: every request (every ``.value`` assignment) recomputes inline, fits
+        included, and returns with the scene updated (tests, scripts).
+    model : ExplorerModel, optional
+    max_cloud_points : int
+        At most this many SCPs are sent to the 3D view (an evenly strided subset, named in
+        the GUI).
+    max_map_points : int
+        At most this many points per map (named in the map titles and under the maps).
+    sweep : bool
+        Compute the accuracy-vs-density sweep (checkbox, can be changed in the GUI).
+    fit_wait_s : float
+        How long an update waits for a fit in background mode before showing it as pending.
+    sources : sequence of explorer.app.sources.Source, optional
+        Loaded scenes (real sensors) offered in the scene dropdown before the presets.
+    debounce_s : float
+        Background mode: start computing once the controls have been still this long.
+    """
+
+    def __init__(
+        self,
+        server: Any,
+        *,
+        preset: str | None = None,
+        methods: tuple[str, ...] | list[str] | None = None,
+        scp_count: int = 50_000,
+        scop_density: int = 100,
+        background: bool = True,
+        model: ExplorerModel | None = None,
+        max_cloud_points: int = 50_000,
+        max_map_points: int = 10_000,
+        sweep: bool = True,
+        fit_wait_s: float = 0.5,
+        sources: Sequence[Any] = (),
+        debounce_s: float = DEBOUNCE_S,
+    ) -> None:
+        import viser  # noqa: F401  (the GUI layer; the model never needs it)
+
+        from explorer.panels import figures as F  # noqa: N812
+        from explorer.scene3d import builders as B  # noqa: N812
+
+        self._F, self._B = F, B
+        self.server = server
+        self.sources = [s for s in sources if s.scene is not None]
+        self.model = model or ExplorerModel()
+        for src in self.sources:
+            self.model.fixed_scenes[src.label] = src.scene
+        self.background = background
+        self.debounce_s = debounce_s
+        self.max_cloud_points = max_cloud_points
+        self.max_map_points = max_map_points
+        self.fit_wait_s = fit_wait_s
+        self.nodes: dict[str, Any] = {}
+        self.runs: dict[str, MethodRun] = {}
+        self.pending: dict[str, str] = {}
+        self.sweeps: dict[str, list[Evaluation]] = {}
+        self.selection: Selection | None = None
+        self.frame = None
+        self.scene: Scene | None = None
+        self.cloud_index: np.ndarray | None = None
+        self.cloud_residual: np.ndarray | None = None
+        self.last_update_s: float | None = None
+        self.last_times: dict[str, float] = {}
+        self.errors: list[str] = []
+        self.url: str | None = None
+        self.startup_s: float | None = None
+        self.camera_pose: tuple | None = None
+        """(position, look_at, far) of the last framing, display km."""
+        self.exports = 0
+        self._sent: dict[str, Hashable] = {}
+        self._local = threading.local()
+        self._lock = threading.Condition()
+        self._gen = 0
+        self._done_gen = 0
+        self._completed_gen = 0
+        self._busy = False
+        self._closing = False
+        self._waiting_for: set = set()
+        self._last_trigger = 0.0
+        self._last_request = 0.0
+        self._worker: threading.Thread | None = None
+        self.fits: FitPool | None = None
+
+        self.method_names: list[str] = []
+        self.methods_ready = threading.Event()
+        self._methods_gen = 0
+        wanted = list(methods) if methods is not None else None
+        labels = [s.label for s in self.sources]
+        scene_ids = labels + [p for p in preset_ids() if p not in labels]
+        first = preset or (labels[0] if labels else default_preset_id())
+        build_controls(self, scene_ids=scene_ids, scene_id=first, scp_count=scp_count,
+                       scop_density=scop_density, sweep=sweep)
+        self.server.scene.set_up_direction("+z")
+        self.server.initial_camera.near = 0.001
+        self.server.initial_camera.far = 5000.0
+        if background:
+            # draw the scene at once; import the method modules (torch...) meanwhile
+            self.fits = FitPool(self._lock, self._fit_done)
+            self._worker = threading.Thread(target=self._work, name="explorer-worker", daemon=True)
+            self._worker.start()
+            self.request_update()
+            threading.Thread(target=self._discover_methods, args=(wanted,), name="explorer-discover",
+                             daemon=True).start()
+        else:
+            self._discover_methods(wanted)
+
+    def _discover_methods(self, wanted: list[str] | None) -> None:
+        """Import the method modules, add a checkbox per registered method, then update."""
+        names, err = safe_available()
+        if err:
+            self.errors.append(err)
+        wanted = wanted if wanted is not None else [m for m in DEFAULT_METHODS if m in names]
+        unknown = [m for m in wanted if m not in names]
+        if unknown:
+            msg = f"unknown method(s) {unknown}; available: {', '.join(names)}"
+            if not self.background:
+                raise KeyError(msg)
+            self.errors.append(msg)
+            print(f"pushbroom explorer: {msg}", file=sys.stderr, flush=True)
+            wanted = [m for m in wanted if m in names]
+        gui, h = self.server.gui, self.handles
+        base = float(h["methods_note"].order)
+
+        def methods_changed(_event: Any = None) -> None:
+            if getattr(self._local, "quiet", False):
+                return
+            with self.quiet():
+                self._method_options(self.checked_methods())
+            self._changed_cb()
+
+        with self._methods_folder:
+            for k, name in enumerate(names):
+                cls = registry()[name]
+                box = gui.add_checkbox(name, name in wanted, order=base + (k + 1) / (len(names) + 1),
+                                       hint=f"{cls.label} -- {cls.reference}"[:300])
+                box.on_update(methods_changed)
+                h["method_boxes"][name] = box
+        order = wanted + [n for n in names if n not in wanted]
+        with self.quiet():
+            self._method_options(wanted)
+            h["layers"].value = int(np.clip(control_default("layers", order, 1), 1, 5))
+            h["neurons"].value = int(np.clip(control_default("neurons", order, 10), 2, 50))
+        h["methods_note"].content = ("" if not err else f"*some method modules failed to load: {err}*")
+        self.method_names = names
+        self._methods_gen = self.request_update()
+        self.methods_ready.set()
+
+    def wait_methods(self, timeout: float = 120.0) -> int:
+        """Block until the methods are loaded; returns the generation of the update that first
+        uses them (for :meth:`wait_update`), 0 on timeout."""
+        return self._methods_gen if self.methods_ready.wait(timeout) else 0
+
+    @staticmethod
+    def _color_options(methods: list[str]) -> tuple[str, ...]:
+        return tuple(methods) if methods else ("(none)",)
+
+    def _method_options(self, methods: list[str]) -> None:
+        """Offer the checked methods in the colour-by and difference dropdowns."""
+        h = self.handles
+        h["color_method"].options = self._color_options(methods)
+        opts = (NO_DIFFERENCE, *methods)
+        for key in ("diff_a", "diff_b"):
+            if h[key].value not in opts:
+                h[key].value = NO_DIFFERENCE
+            h[key].options = opts
+
+    def pick_index(self) -> int | None:
+        """The SCP index typed into (or clicked into) the *Picked SCP* control, if any."""
+        m = re.fullmatch(r"\s*(?:scp\s*)?(\d+)\s*", str(self.handles["pick"].value))
+        return int(m.group(1)) if m else None
+
+    @contextlib.contextmanager
+    def quiet(self) -> Iterator[None]:
+        """Programmatic GUI changes inside this block (this thread) do not trigger updates."""
+        old = getattr(self._local, "quiet", False)
+        self._local.quiet = True
+        try:
+            yield
+        finally:
+            self._local.quiet = old
+
+    def checked_methods(self) -> list[str]:
+        return [n for n, b in self.handles["method_boxes"].items() if b.value]
+
+    def settings(self) -> Settings:
+        """The current control values."""
+        h = self.handles
+        methods = tuple(self.checked_methods())
+        cm = h["color_method"].value
+        pick = self.pick_index()
+        if h["sel_mode"].value == "image point":
+            sel: tuple = ("image", float(h["sel_row"].value), float(h["sel_col"].value))
+        elif h["sel_mode"].value == "picked SCP" and pick is not None:
+            sel = ("scp", pick)
+        else:
+            sel = ("worst",)
+        fixed = h["preset"].value in self.model.fixed_scenes  # a loaded file: the preset sliders do not apply
+        a, b = h["diff_a"].value, h["diff_b"].value
+        diff = (a, b) if a in methods and b in methods and a != b else None
+        return Settings(
+            preset=h["preset"].value, relief_m=0.0 if fixed else float(h["relief"].value),
+            attitude_rate_scale=1.0 if fixed else round(float(h["rates"].value), 6),
+            jitter_scale=1.0 if fixed else round(float(h["jitter"].value), 6), scop_density=int(h["density"].value),
+            scp_count=int(h["scps"].value), methods=methods,
+            color_method=cm if cm in methods else (methods[0] if methods else None),
+            mlp_layers=int(h["layers"].value), mlp_neurons=int(h["neurons"].value),
+            limit_px=float(h["limit"].value), colour_mode=h["colour_mode"].value,
+            component=h["component"].value, diff=diff, show_scops=bool(h["show_scops"].value),
+            sensor_distance=h["distance"].value,
+            height_exaggeration=float(h["exaggeration"].value), selection=sel,
+            sweep=bool(h["sweep"].value),
+        )
+
+    # ------------------------------------------------------------ requests
+    def request_update(self) -> int:
+        """Ask for a recomputation with the current controls (the newest request wins).
+
+        Returns the request's generation number (see :meth:`wait_update`).
+        """
+        with self._lock:
+            self._gen += 1
+            gen = self._gen
+            self._last_request = time.monotonic()
+            self._lock.notify_all()
+        if not self.background:
+            self._run(gen)
+        return gen
+
+    def wait_update(self, gen: int, timeout: float = 120.0) -> bool:
+        """Block until an update at least as new as ``gen`` ran to completion (pending fits
+        shown as pending); False on timeout."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while self._completed_gen < gen:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._lock.wait(left)
+        return True
+
+    def wait_idle(self, timeout: float = 120.0) -> bool:
+        """Block until the methods are loaded and every requested update and every queued fit has
+        finished; False on timeout."""
+        end = time.monotonic() + timeout
+        if not self.methods_ready.wait(timeout):
+            return False
+        with self._lock:
+            while (self._done_gen < self._gen or self._busy
+                   or (self.fits is not None and self.fits.busy)):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._lock.wait(left)
+        return True
+
+    def close(self) -> None:
+        """Stop the worker and fit threads (the server is the caller's)."""
+        with self._lock:
+            self._closing = True
+            self._lock.notify_all()
+        if self.fits is not None:
+            self.fits.close()
+        if self._worker is not None:
+            self._worker.join(timeout=60)
+
+    def _fit_done(self, key: Hashable, priority: int) -> None:
+        """Called by the fit thread (holding the lock) after each fit: redraw with it."""
+        if self._closing or key in self._waiting_for:
+            return
+        now = time.monotonic()
+        if priority == 0 or not self.fits.queued() or now - self._last_trigger > 2.0:
+            self._last_trigger = now
+            self._gen += 1
+            self._lock.notify_all()
+
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                while self._done_gen >= self._gen and not self._closing:
+                    self._lock.wait()
+                # debounce: wait until the controls have been still for debounce_s
+                while not self._closing:
+                    left = self._last_request + self.debounce_s - time.monotonic()
+                    if left <= 0:
+                        break
+                    self._lock.wait(left)
+                if self._closing:
+                    return
+                gen = self._gen
+            self._run(gen)
+
+    def _run(self, gen: int) -> None:
+        with self._lock:
+            self._busy = True
+        try:
+            self.update(self.settings(), gen)
+        except Superseded:
+            pass
+        except Exception as exc:  # show, never die
+            self.errors.append(traceback.format_exc())
+            self._status(f"error: {type(exc).__name__}: {exc}", 0.0)
+        finally:
+            with self._lock:
+                self._busy = False
+                self._done_gen = max(self._done_gen, gen)
+                self._lock.notify_all()
+
+    def _check(self, gen: int | None) -> None:
+        if gen is not None and (self._gen != gen or self._closing):
+            raise Superseded
+
+    def _status(self, text: str, progress: float | None = None, busy: bool = True) -> None:
+        self.handles["status"].content = f"**Status:** {text}"
+        if progress is not None:
+            self.handles["progress"].value = float(np.clip(progress, 0.0, 100.0))
+        self.handles["progress"].animated = busy
+
+    def _get_fits(self, jobs: list[tuple[str, int | None]], s: Settings, priority: int,
+                  wait_s: float, gen: int | None = None) -> dict[tuple[str, int | None], FitRecord | None]:
+        """Fits of (method, density) pairs: inline in foreground mode; in background mode all
+        are queued on the fit threads at once (quickest expected first) and waited for at most
+        ``wait_s`` together (less if a newer request for ``gen`` arrives); None for those still
+        training."""
+        m = self.model
+        out: dict[tuple[str, int | None], FitRecord | None] = {}
+        missing = []
+        for name, d in jobs:
+            if not self.background or not registry()[name].needs_fit:
+                out[(name, d)] = m.fit(name, s, d)
+                continue
+            out[(name, d)] = m.cached_fit(name, s, d)
+            if out[(name, d)] is None:
+                key = m.fit_key(name, s, d)
+                cost = m.fit_seconds.get(name, 1.0) * (d or s.scop_density) / 100.0
+                self.fits.submit(key, lambda n=name, dd=d: m.fit(n, s, dd), priority, cost)
+                missing.append((name, d, key))
+        if missing and wait_s > 0:
+            keys = [k for _, _, k in missing]
+            with self._lock:
+                self._waiting_for = set(keys)
+            try:
+                self.fits.wait_for(keys, time.monotonic() + wait_s,
+                                   abort=lambda: gen is not None and (self._gen != gen or self._closing))
+            finally:
+                with self._lock:
+                    self._waiting_for = set()
+            for name, d, _ in missing:
+                out[(name, d)] = m.cached_fit(name, s, d)
+        return out
+
+    def _pending_text(self, name: str, s: Settings) -> str:
+        key = self.model.fit_key(name, s)
+        started = self.fits.running.get(key) if self.fits is not None else None
+        if started is not None:
+            return f"training on {s.scop_density} SCOPs ({time.monotonic() - started:.0f} s so far)"
+        return f"queued for training on {s.scop_density} SCOPs"
+

@@ -1,0 +1,569 @@
+"""The explorer's model: scenes, points, fits and evaluations with caches; no viser, no plotly.
+
+:class:`ExplorerModel` builds scenes (a preset with the GUI's relief / attitude / jitter
+controls, or a fixed scene loaded from a file by :mod:`explorer.app.sources`), SCOPs and SCPs,
+fits and evaluates methods through ``explorer.methods.create`` /
+``explorer.evaluate.evaluate_method``, and caches every result by what it depends on --
+scenes by (scene id, relief, attitude rates, jitter), SCOPs by (scene, density), SCPs by
+(scene, count), fits by (scene, SCOPs, method, params), evaluations by (fit, SCPs,
+subsample).  Methods too slow for the time budget are evaluated on a seeded subsample whose
+size the panels name; ``locate_budget_s=None`` (the export) never subsamples.
+
+Every evaluated point carries a status (:data:`STATUS_NAMES`): valid, *refused* (the method
+declined to answer outside its domain, e.g. a regression's height extrapolation), not
+converged, or outside the image.  Usage and the GUI: ``docs/explorer.md``; conventions:
+``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from explorer.evaluate import Evaluation, evaluate_method
+from explorer.methods import available, create, registry
+from explorer.methods.base import BestScanlineMethod
+from explorer.panels import count_text
+from explorer.points import PointSet, simulate_points
+from explorer.presets import build_scene
+from explorer.scene import Scene
+
+SCOP_DENSITIES = (10, 20, 30, 50, 100, 300, 500, 1000)
+"""SCOP counts offered (the papers' marks)."""
+SCP_COUNTS = (1_000, 10_000, 50_000, 100_000, 250_000)
+COLOUR_LIMITS_PX = (0.01, 0.1, 0.5, 1.0, 2.0, 5.0, 20.0)
+"""Fixed colour limits offered besides the automatic modes."""
+COLOUR_MODES = ("per method", "shared", "log magnitude", "fixed")
+"""Residual-map colour scales: a robust symmetric limit per map (default) or one for all maps
+(both from residual percentiles, :func:`explorer.panels.robust_limit`), log10 of |residual|,
+or the fixed ``Settings.limit_px``."""
+COMPONENTS = ("row", "column", "row and column")
+"""Which residual the maps show: the scanline (row) residual, the column residual, or both."""
+STATUS_NAMES = ("valid", "refused", "not converged", "outside image")
+"""Per-point status codes of :attr:`MethodRun.status` (0..3): *refused* = the method declined to
+answer (outside its training / validity domain, e.g. lrm/prm height extrapolation); *not
+converged* = its iteration or training failed there; *outside image* = converged to a (row,
+column) off the image."""
+DEFAULT_METHODS = ("lrm", "prm", "mlp", "nr")
+"""Methods checked at start when registered (the direct / fast ones)."""
+PARAM_ALIASES = {
+    "layers": ("hidden_layers", "n_hidden_layers", "layers", "n_layers", "num_layers"),
+    "neurons": ("neurons", "hidden_neurons", "n_neurons", "hidden_units", "units", "width",
+                "hidden_size"),
+}
+"""Constructor parameter names that receive the GUI's MLP layers / neurons controls, for any
+method whose constructor, ``default_params`` dict or numpydoc ``Parameters`` declares them."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything the explorer's output depends on (one value per GUI control)."""
+
+    preset: str = "WSU"
+    relief_m: float = 0.0
+    attitude_rate_scale: float = 1.0
+    jitter_scale: float = 1.0
+    scop_density: int = 100
+    scp_count: int = 50_000
+    methods: tuple[str, ...] = ()
+    color_method: str | None = None
+    mlp_layers: int = 1
+    mlp_neurons: int = 10
+    limit_px: float = 1.0
+    colour_mode: str = "per method"
+    component: str = "row"
+    diff: tuple[str, str] | None = None
+    """Two methods whose row-residual difference (first minus second) gets its own map."""
+    show_scops: bool = True
+    sensor_distance: str = "compressed"
+    height_exaggeration: float = 1.0
+    selection: tuple = ("worst",)
+    """("worst",): the SCP with the largest |residual| of ``color_method``;
+    ("image", row, col): the ground point of that image point on the terrain;
+    ("scp", index): that SCP (picked in a residual map)."""
+    sweep: bool = True
+
+    @property
+    def scene_key(self) -> tuple:
+        return (self.preset, float(self.relief_m), float(self.attitude_rate_scale), float(self.jitter_scale))
+
+
+@dataclass
+class FitRecord:
+    """A fitted (or fit-free) method instance and what fitting cost."""
+
+    method: BestScanlineMethod | None
+    fit_s: float
+    n_scops: int
+    params: dict
+    error: str | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass
+class MethodRun:
+    """One method's evaluation on the current SCPs (or why there is none)."""
+
+    name: str
+    label: str
+    evaluation: Evaluation | None
+    fit: FitRecord
+    subsampled: bool = False
+    error: str | None = None
+    key: tuple = ()
+    """The evaluation's cache key (identifies its content for redraw decisions)."""
+
+    status: np.ndarray | None = None
+    """int8 (M,) aligned with ``evaluation.evaluated_index``: codes of :data:`STATUS_NAMES`."""
+
+    @property
+    def ok(self) -> bool:
+        return self.evaluation is not None
+
+    def status_counts(self) -> dict[str, int]:
+        """Points per status name (only the non-zero ones)."""
+        if self.status is None:
+            return {}
+        counts = np.bincount(self.status.astype(np.int64), minlength=len(STATUS_NAMES))
+        return {STATUS_NAMES[k]: int(c) for k, c in enumerate(counts) if c}
+
+
+@dataclass
+class Selection:
+    """The selected ground point and what the colour method did with it."""
+
+    ground: np.ndarray
+    exact_row: float
+    exact_col: float
+    source: str
+    method: str | None = None
+    est_row: float | None = None
+    trace_rows: np.ndarray | None = None
+
+
+class _LRU:
+    """A small least-recently-used cache, safe to share between the GUI worker and the fit thread
+    (the lock guards the dict only; values are computed outside it)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._d: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+
+    def peek(self, key: Hashable) -> Any:
+        with self._lock:
+            if key in self._d:
+                self._d.move_to_end(key)
+                return self._d[key]
+        return None
+
+    def get_or(self, key: Hashable, make: Callable[[], Any]) -> Any:
+        hit = self.peek(key)
+        if hit is not None:
+            return hit
+        value = make()
+        with self._lock:
+            self._d[key] = value
+            while len(self._d) > self.size:
+                self._d.popitem(last=False)
+        return value
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+
+def _docstring_params(cls: type) -> set[str]:
+    doc = inspect.getdoc(cls) or ""
+    m = re.search(r"Parameters\n-+\n(.*?)(?:\n\n[A-Z][a-z]+\n-+\n|\Z)", doc, re.S)
+    if not m:
+        return set()
+    return set(re.findall(r"^(\w+)\s*:", m.group(1), re.M))
+
+
+def accepted_params(cls: type) -> dict[str, Any]:
+    """Constructor parameters a method class declares, with defaults where known.
+
+    Looks at the ``__init__`` signature (named parameters), a ``DEFAULTS`` /
+    ``default_params`` / ``defaults`` class dict and the numpydoc ``Parameters`` section
+    of the class docstring.  Unknown defaults are ``inspect.Parameter.empty``.
+    """
+    out: dict[str, Any] = {}
+    for name in _docstring_params(cls):
+        out[name] = inspect.Parameter.empty
+    for attr in ("DEFAULTS", "default_params", "DEFAULT_PARAMS", "defaults", "param_defaults"):
+        d = getattr(cls, attr, None)
+        if isinstance(d, dict):
+            out.update(d)
+    try:
+        sig = inspect.signature(cls.__init__)
+    except (TypeError, ValueError):  # pragma: no cover
+        sig = None
+    if sig is not None:
+        for p in list(sig.parameters.values())[1:]:
+            if p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL) or p.name == "scene":
+                continue
+            out[p.name] = p.default
+    out.pop("scene", None)
+    out.pop("self", None)
+    return out
+
+
+def control_default(control: str, names: list[str], fallback: int) -> int:
+    """Initial value of a GUI control (``"layers"`` / ``"neurons"``): the default the first
+    method of ``names`` declaring an accepted alias gives it, else ``fallback``."""
+    reg = registry()
+    for n in names:
+        acc = accepted_params(reg[n])
+        for alias in PARAM_ALIASES[control]:
+            v = acc.get(alias, inspect.Parameter.empty)
+            if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+                return int(v)
+    return fallback
+
+
+def gui_params(cls: type, settings: Settings) -> dict[str, Any]:
+    """The GUI's MLP controls as constructor params of ``cls`` (only those it accepts)."""
+    acc = accepted_params(cls)
+    params: dict[str, Any] = {}
+    for control, value in (("layers", settings.mlp_layers), ("neurons", settings.mlp_neurons)):
+        for alias in PARAM_ALIASES[control]:
+            if alias in acc:
+                params[alias] = int(value)
+                break
+    return params
+
+
+class ExplorerModel:
+    """Scenes, points, fits and evaluations with caches; no GUI.
+
+    Parameters
+    ----------
+    locate_budget_s : float or None
+        Ground-to-image time allowed per method on the SCPs; a method projected to need
+        more (from a probe on ``probe_points``) is evaluated on a seeded subsample that
+        fits the budget (at least ``min_subsample`` points).  None: always all SCPs.
+    sweep_points : int
+        SCPs (seeded subsample) used for the accuracy-vs-density sweep.
+    seed : int
+        Seed of the SCOP / SCP heights and of every subsample.
+    scenes : mapping of str to Scene, optional
+        Fixed scenes by id (real sensors loaded by :mod:`explorer.app.sources`); a
+        ``Settings.preset`` naming one of them selects it (the relief / attitude / jitter
+        controls do not apply), any other id is built as a preset.
+    """
+
+    def __init__(
+        self,
+        *,
+        locate_budget_s: float | None = 0.25,
+        probe_points: int = 2000,
+        min_subsample: int = 2000,
+        sweep_points: int = 5000,
+        seed: int = 0,
+        scenes: Mapping[str, Scene] | None = None,
+    ) -> None:
+        self.fixed_scenes: dict[str, Scene] = dict(scenes or {})
+        self.locate_budget_s = locate_budget_s
+        self.probe_points = probe_points
+        self.min_subsample = min_subsample
+        self.sweep_points = sweep_points
+        self.seed = seed
+        self._scenes = _LRU(8)
+        self._scops = _LRU(32)
+        self._scps = _LRU(4)
+        self._fits = _LRU(128)
+        self._evals = _LRU(64)
+        self._probes = _LRU(128)
+        self._plans = _LRU(256)
+        self.counters: dict[str, int] = {"scene": 0, "scops": 0, "scps": 0, "fit": 0, "evaluate": 0}
+        self.per_point_s: dict[tuple, float] = {}
+        """Measured ground-to-image seconds per point by (method, params), from evaluations."""
+        self.fit_seconds: dict[str, float] = {}
+        """Last measured fit time per learned method (decides whether to wait for its fits)."""
+
+    # ---------------------------------------------------------------- inputs
+    def scene(self, s: Settings) -> Scene:
+        """The scene of ``s.preset``: a fixed scene by that id, else the preset with the controls."""
+        fixed = self.fixed_scenes.get(s.preset)
+        if fixed is not None:
+            return fixed
+
+        def make() -> Scene:
+            self.counters["scene"] += 1
+            return build_scene(s.preset, relief_m=s.relief_m, attitude_rate_scale=s.attitude_rate_scale,
+                               jitter_amplitude_scale=s.jitter_scale)
+        return self._scenes.get_or(s.scene_key, make)
+
+    def scops(self, s: Settings, density: int | None = None) -> PointSet:
+        density = int(density or s.scop_density)
+
+        def make() -> PointSet:
+            self.counters["scops"] += 1
+            return simulate_points(self.scene(s), density, kind="scop", seed=self.seed)
+        return self._scops.get_or((s.scene_key, density), make)
+
+    def scps(self, s: Settings) -> PointSet:
+        def make() -> PointSet:
+            self.counters["scps"] += 1
+            return simulate_points(self.scene(s), int(s.scp_count), kind="scp", seed=self.seed)
+        return self._scps.get_or((s.scene_key, int(s.scp_count)), make)
+
+    # --------------------------------------------------------------- methods
+    @staticmethod
+    def label(name: str) -> str:
+        cls = registry().get(name)
+        return f"{name} ({cls.label})" if cls is not None and cls.label and cls.label != name else name
+
+    @staticmethod
+    def fit_key(name: str, s: Settings, density: int | None = None) -> tuple:
+        """Cache key of a fit: (scene, SCOP density or None, method, params)."""
+        cls = registry()[name]
+        density = int(density or s.scop_density)
+        params = gui_params(cls, s)
+        return (s.scene_key, density if cls.needs_fit else None, name, tuple(sorted(params.items())))
+
+    def cached_fit(self, name: str, s: Settings, density: int | None = None) -> FitRecord | None:
+        """The fit if it is already done (never computes)."""
+        return self._fits.peek(self.fit_key(name, s, density))
+
+    def fit(self, name: str, s: Settings, density: int | None = None) -> FitRecord:
+        """Create and fit ``name`` (cached by scene, SCOPs, method and params)."""
+        density = int(density or s.scop_density)
+        cls = registry()[name]
+        params = gui_params(cls, s)
+        key = self.fit_key(name, s, density)
+
+        def make() -> FitRecord:
+            self.counters["fit"] += 1
+            scene = self.scene(s)
+            scops = self.scops(s, density) if cls.needs_fit else None
+            # (warnings are not captured: catch_warnings is not thread-safe and fits run on two
+            # threads; learned methods report a failed training in fit_info["converged"])
+            try:
+                m = create(name, scene, **params)
+                t0 = time.perf_counter()
+                if m.needs_fit:
+                    m.fit(scops)
+                fit_s = time.perf_counter() - t0 if m.needs_fit else 0.0
+                err = None
+            except Exception as exc:  # a method failing must not take the explorer down
+                m, fit_s, err = None, 0.0, f"{type(exc).__name__}: {exc}"
+            msgs = []
+            if m is not None and m.fit_info.get("converged") is False:
+                details = ", ".join(f"{k} {m.fit_info[k]:.3g}" if isinstance(m.fit_info[k], float)
+                                    else f"{k} {m.fit_info[k]}" for k in ("stop_reason", "val_rmse_px", "epochs")
+                                    if k in m.fit_info)
+                msgs.append("training did not converge" + (f" ({details})" if details else "")
+                            + "; its points are flagged not converged")
+            if cls.needs_fit:
+                self.fit_seconds[name] = fit_s
+            return FitRecord(m, fit_s, len(scops) if scops is not None else 0, params, err, msgs)
+        return self._fits.get_or(key, make)
+
+    def _projection(self, name: str, rec: FitRecord, s: Settings, scps: PointSet) -> tuple[float, float]:
+        """(projected seconds for all SCPs, marginal seconds per point) of ground-to-image.
+
+        Uses the per-point time measured by an earlier evaluation of the method when there is
+        one; else times ``probe_points`` points and, if the naive projection exceeds the
+        budget, 8x as many to separate the fixed overhead from the per-point cost (a small
+        probe overstates the per-point cost of fast vectorised methods).
+        """
+        known = self.per_point_s.get((name, tuple(sorted(rec.params.items()))))
+        if known is not None:
+            return known * len(scps), known
+        key = (s.scene_key, rec.n_scops, name, tuple(sorted(rec.params.items())), len(scps))
+
+        def timed(n: int) -> float:
+            sub = scps.sample(n, self.seed + 1)
+            t0 = time.perf_counter()
+            rec.method.ground_to_image(sub.ground)
+            return time.perf_counter() - t0
+
+        def make() -> tuple[float, float]:
+            n_all = len(scps)
+            n1 = min(self.probe_points, n_all)
+            t1 = timed(n1)
+            est = t1 * n_all / max(n1, 1)
+            if est <= self.locate_budget_s or n1 == n_all:
+                return est, t1 / max(n1, 1)
+            n2 = min(8 * n1, n_all)
+            t2 = timed(n2)
+            per = max(t2 - t1, 1e-3 * t2) / (n2 - n1) if n2 > n1 else t2 / n2
+            return t2 + per * (n_all - n2), per
+        return self._probes.get_or(key, make)
+
+    def evaluate(self, name: str, s: Settings, *, max_points: int | None = None,
+                 density: int | None = None, fit: FitRecord | None = None) -> MethodRun:
+        """Fit (cached; or use ``fit``) and evaluate ``name`` on the SCPs within the time budget
+        (cached).  ``fit`` must be the fit of ``name`` on ``density`` SCOPs (default the settings')."""
+        rec = fit if fit is not None else self.fit(name, s, density)
+        fkey = self.fit_key(name, s, density)
+        if rec.method is None:
+            return MethodRun(name, self.label(name), None, rec, error=rec.error)
+        scps = self.scps(s)
+        if max_points is None and self.locate_budget_s is not None:
+            plan_key = (fkey, int(s.scp_count))
+
+            def plan() -> tuple[int | None]:  # decided once per input, so a revisit is a cache hit
+                projected, per_point = self._projection(name, rec, s, scps)
+                if projected > self.locate_budget_s:
+                    return (max(self.min_subsample, int(self.locate_budget_s / per_point)),)
+                return (None,)
+            (max_points,) = self._plans.get_or(plan_key, plan)
+        if max_points is not None and max_points >= len(scps):
+            max_points = None
+        key = (fkey, int(s.scp_count), max_points)
+
+        def make() -> MethodRun:
+            self.counters["evaluate"] += 1
+            recorder = _Recording(rec.method)
+            try:
+                # fit=False: fits are cached separately, so changing the SCPs never retrains
+                ev = evaluate_method(recorder, scps, max_points=max_points, seed=self.seed, fit=False)
+            except Exception as exc:
+                return MethodRun(name, self.label(name), None, rec, error=f"{type(exc).__name__}: {exc}")
+            status = point_status(recorder.result)
+            ev = dataclasses.replace(ev, n_scops=rec.n_scops, fit_s=rec.fit_s)
+            if ev.n_evaluated >= 5000:  # large enough for the per-point time to dominate
+                self.per_point_s[(name, tuple(sorted(rec.params.items())))] = ev.locate_s / ev.n_evaluated
+            return MethodRun(name, self.label(name), ev, rec, subsampled=max_points is not None, key=key,
+                             status=status)
+        return self._evals.get_or(key, make)
+
+    def sweep(self, name: str, s: Settings, densities=SCOP_DENSITIES,
+              get_fit: Callable[[int], FitRecord | None] | None = None) -> list[Evaluation]:
+        """Evaluations of ``name`` at each SCOP density on ``sweep_points`` SCPs (one if it needs
+        no fit).  ``get_fit(density)`` may return None for a fit not ready yet (skipped)."""
+        cls = registry()[name]
+        out = []
+        for d in (densities if cls.needs_fit else densities[:1]):
+            rec = get_fit(d) if get_fit is not None else self.fit(name, s, d)
+            if rec is None:
+                continue
+            run = self.evaluate(name, s, max_points=self.sweep_points, density=d, fit=rec)
+            if run.evaluation is not None:
+                out.append(run.evaluation)
+        return out
+
+    def selection(self, s: Settings, runs: dict[str, MethodRun]) -> Selection:
+        """Resolve ``s.selection`` and trace the colour method on it."""
+        scene = self.scene(s)
+        run = runs.get(s.color_method) if s.color_method else None
+        sel = None
+        if s.selection[0] == "worst" and run is not None and run.ok:
+            ev = run.evaluation
+            res = np.abs(ev.residual_row)
+            if np.isfinite(res).any():
+                i = int(ev.evaluated_index[int(np.nanargmax(res))])
+                scps = self.scps(s)
+                sel = Selection(scps.ground[i].copy(), float(scps.row[i]), float(scps.col[i]),
+                                f"worst SCP of {s.color_method}")
+        if sel is None and s.selection[0] == "scp":
+            scps = self.scps(s)
+            i = int(s.selection[1])
+            if 0 <= i < len(scps):
+                sel = Selection(scps.ground[i].copy(), float(scps.row[i]), float(scps.col[i]),
+                                f"SCP {i} (picked in a map)")
+        if sel is None:
+            if s.selection[0] == "image":
+                row, col = float(s.selection[1]), float(s.selection[2])
+            else:
+                row, col = (scene.n_rows - 1) / 2.0, (scene.n_columns - 1) / 2.0
+            g = scene.image_to_ground(np.array([row]), np.array([col]))[0]
+            if not np.isfinite(g).all():
+                g = scene.image_to_ground(np.array([row]), np.array([col]), height=scene.terrain.mean_height)[0]
+            sel = Selection(g, row, col, "image point")
+        if run is not None and run.fit.method is not None:
+            sel.method = s.color_method
+            try:
+                r = run.fit.method.ground_to_image(sel.ground[None, :], trace=True)
+                sel.est_row = float(r.row[0])
+                if r.trace:
+                    sel.trace_rows = np.array([float(np.asarray(a).ravel()[0]) for a in r.trace])
+            except Exception:  # tracing is a nicety; the result stays valid without it
+                sel.trace_rows = None
+        return sel
+
+
+class _Recording:
+    """A method seen through ``evaluate_method`` that keeps its last :class:`ScanlineResult`
+    (the evaluation keeps residuals only; the status flags come from the result)."""
+
+    def __init__(self, method: BestScanlineMethod) -> None:
+        self._method = method
+        self.name = method.name
+        self.needs_fit = method.needs_fit
+        self.result: Any = None
+
+    def ground_to_image(self, ground: np.ndarray, **kw: Any) -> Any:
+        self.result = self._method.ground_to_image(ground, **kw)
+        return self.result
+
+
+def point_status(result: Any) -> np.ndarray:
+    """Status codes (N,) int8 of a :class:`~explorer.methods.base.ScanlineResult`
+    (:data:`STATUS_NAMES`): 1 refused where the method's ``info["in_domain"]`` is False,
+    else 2 where it did not converge, else 3 where (row, col) is off the image, else 0."""
+    n = len(result)
+    status = np.zeros(n, np.int8)
+    status[~np.asarray(result.inside, bool)] = 3
+    status[~np.asarray(result.converged, bool)] = 2
+    dom = result.info.get("in_domain") if isinstance(result.info, dict) else None
+    if dom is not None and np.shape(dom) == (n,):
+        status[~np.asarray(dom, bool)] = 1
+    return status
+
+
+def status_text(counts: Mapping[str, int], total: int) -> str:
+    """The flagged points of a run in words, e.g. ``"refused (outside its domain, e.g. height
+    extrapolation): 12 (0.5%); not converged: 1 of 2,000"``; "" when every point is valid."""
+    words = {"refused": "refused (outside its domain, e.g. height extrapolation)",
+             "not converged": "not converged", "outside image": "outside the image"}
+    parts = [f"{words[k]}: {count_text(v, total)}" for k, v in counts.items() if k != "valid" and v]
+    return "; ".join(parts)
+
+
+def summary_markdown(runs: dict[str, MethodRun], n_scps: int) -> str:
+    """A markdown table of the runs (RMSE, dr_max, CE/point, times, subsample)."""
+    lines = ["| method | RMSE px | dr_max px | CE/pt | fit s | g2i s | evaluated |",
+             "|---|---|---|---|---|---|---|"]
+    notes = []
+    for n, r in runs.items():
+        if not r.ok:
+            lines.append(f"| {n} | - | - | - | - | - | failed |")
+            notes.append(f"**{n}** failed: {r.error}")
+            continue
+        e = r.evaluation
+        ev = f"{e.n_evaluated:,}" + (" (subsample)" if r.subsampled else "")
+        lines.append(f"| {n} | {e.rmse_px:.3g} | {e.dr_max_px:.3g} | {e.ce_evals_per_point:.1f} | "
+                     f"{e.fit_s:.3g} | {e.locate_s:.3g} | {ev} |")
+        if r.subsampled:
+            notes.append(f"**{n}** is slow: evaluated on a seeded subsample of {e.n_evaluated:,} of "
+                         f"{n_scps:,} SCPs (time budget).")
+        for w in r.fit.warnings:
+            notes.append(f"**{n}**: {w}")
+        flagged = status_text(r.status_counts(), e.n_evaluated)
+        if flagged:
+            notes.append(f"**{n}**: {flagged}")
+    return "\n".join(lines + [""] + [f"- {t}" for t in notes])
+
+
+def safe_available() -> tuple[list[str], str | None]:
+    """Registered method names, and an error text when discovering them failed."""
+    try:
+        return available(), None
+    except Exception as exc:  # a broken method module must not stop the explorer
+        try:
+            return available(), f"method discovery: {type(exc).__name__}: {exc}"
+        except Exception:
+            return [], f"method discovery: {type(exc).__name__}: {exc}"
+

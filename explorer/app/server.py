@@ -1,0 +1,186 @@
+"""Serving the explorer: the listening address checked before anything starts, then :func:`serve`.
+
+:func:`check_listen_address` turns every address problem into one
+:class:`~explorer.errors.InputError` naming it -- a port outside 0..65535, a busy port (viser
+would silently move to the next one), a ``--host`` that is not an address of this machine or
+does not resolve (viser would retry forever) -- before a server exists.  :func:`serve` prints
+the URL as soon as the server listens and runs until Ctrl-C / SIGTERM; :func:`run_explore`
+is ``pushbroom explore`` (source validation first, then ``--export`` or serving).
+"""
+
+from __future__ import annotations
+
+import errno
+import signal
+import socket
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from explorer.errors import InputError
+
+RESOLVE_TIMEOUT_S = 3.0
+"""How long a host name may take to resolve before it is an error (no network: no hang)."""
+
+
+def _resolve(host: str, port: int) -> list[tuple]:
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["infos"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            box["error"] = exc
+
+    th = threading.Thread(target=run, daemon=True)
+    th.start()
+    th.join(RESOLVE_TIMEOUT_S)
+    if th.is_alive():
+        raise InputError(f"--host {host!r} did not resolve within {RESOLVE_TIMEOUT_S:g} s")
+    if "error" in box:
+        raise InputError(f"--host {host!r} does not resolve to an address ({box['error']})")
+    return box["infos"]
+
+
+def check_listen_address(host: str, port: int) -> None:
+    """Raise :class:`InputError` unless a server can listen on ``host``:``port`` now.
+
+    Parameters
+    ----------
+    host : str
+        Interface name or address (must be an address of this machine).
+    port : int
+        0..65535; 0 picks a free port (always fine).
+    """
+    if not isinstance(port, int) or isinstance(port, bool) or not 0 <= port <= 65535:
+        raise InputError(f"--port {port!r} is not a port number (0..65535; 0 picks a free one)")
+    infos = _resolve(host, port)
+    last: OSError | None = None
+    for family, kind, proto, _, addr in infos:
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
+            try:
+                s.bind(addr)
+                return
+            except OSError as exc:
+                last = exc
+                if exc.errno == errno.EADDRINUSE:
+                    raise InputError(f"port {port} on {host} is busy (another program listens there); "
+                                     "choose another --port, or --port 0 for a free one") from None
+    if last is not None and last.errno == errno.EADDRNOTAVAIL:
+        raise InputError(f"--host {host!r} is not an address of this machine (use 127.0.0.1, or 0.0.0.0 "
+                         "for every interface)")
+    raise InputError(f"cannot listen on {host}:{port}: {last}")
+
+
+def serve(preset: str | None = None, host: str = "127.0.0.1", port: int = 8080, *,
+          methods: list[str] | None = None, ready: Callable[[Any], None] | None = None,
+          stop_event: threading.Event | None = None, sources: list | None = None, **app_kwargs: Any) -> int:
+    """Run the explorer until Ctrl-C / SIGTERM (or ``stop_event``), then stop cleanly.
+
+    Prints the URL as soon as the server listens; the scene fills in as it is computed.
+
+    Parameters
+    ----------
+    preset : str, optional
+        Scene shown first (a preset id or a source's label).
+    host, port
+        ``port=0`` picks a free port (the printed URL names it); a busy port or a host that
+        is not local is an :class:`InputError` (:func:`check_listen_address`).
+    methods : list of str, optional
+        Methods checked at start (default :data:`explorer.app.model.DEFAULT_METHODS` that are
+        registered).
+    ready : callable, optional
+        Called with the :class:`~explorer.app.gui.ExplorerApp` (its ``url`` set) once the server
+        listens.
+    stop_event : threading.Event, optional
+        Stop when set (for running in a thread); Ctrl-C and SIGTERM stop the main thread.
+    sources : list of explorer.app.sources.Source, optional
+        Loaded scenes offered first in the scene dropdown.
+    **app_kwargs
+        Passed to :class:`~explorer.app.gui.ExplorerApp`.
+
+    Returns
+    -------
+    int
+        0 after a clean stop (worker joined, server stopped, port released).
+    """
+    check_listen_address(host, port)
+    import viser
+
+    from explorer.app.gui import ExplorerApp
+
+    t0 = time.perf_counter()
+    server = viser.ViserServer(host=host, port=port, label="pushbroom explorer", verbose=False)
+    if port and server.get_port() != port:  # taken between the check and the bind
+        server.stop()
+        raise InputError(f"port {port} on {host} is busy (another program listens there); "
+                         "choose another --port, or --port 0 for a free one")
+    url = f"http://{host}:{server.get_port()}"
+    print(f"pushbroom explorer: {url}  (Ctrl-C to stop)", flush=True)
+    app = None
+    stop = stop_event or threading.Event()
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        loading = server.gui.add_markdown("**Loading the methods...**")
+        app = ExplorerApp(server, preset=preset, methods=methods, sources=sources or [], **app_kwargs)
+        loading.remove()
+        app.url = url
+        app.startup_s = time.perf_counter() - t0
+        if ready is not None:
+            ready(app)
+        while not stop.wait(0.25):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if app is not None:
+            app.close()
+        server.stop()
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+        print("pushbroom explorer: stopped", flush=True)
+    return 0
+
+
+def run_explore(args: Any) -> int:
+    """``pushbroom explore``: validate the source (and the address), then export or serve.
+
+    ``args`` has the source options (``preset``, ``scene``, ``rpc``, ``dimap``, ``dg``, ``isd``,
+    ``dem``), ``host``, ``port``, ``methods`` and optionally ``export``, ``scops``, ``scps``,
+    ``seed``.  Every problem is raised as an :mod:`explorer.errors` error before a URL is
+    printed.
+    """
+    from explorer.app.sources import source_from_args
+
+    methods = [m for m in args.methods.split(",") if m] if getattr(args, "methods", None) else None
+    export = getattr(args, "export", None)
+    if export is None:
+        check_listen_address(args.host, args.port)  # fail before the (slow) source is loaded
+    source = source_from_args(args)
+    scops = getattr(args, "scops", None) or 100
+    scps = getattr(args, "scps", None) or 50_000
+    seed = getattr(args, "seed", None) or 0
+    if export is not None:
+        from explorer.app.export import run_export
+
+        run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed)
+        return 0
+    if methods is not None:
+        from explorer.methods import available
+
+        names = available()
+        unknown = [m for m in methods if m not in names]
+        if unknown:
+            raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(names)}")
+    from explorer.app.model import ExplorerModel
+
+    return serve(source.label, host=args.host, port=args.port, methods=methods,
+                 sources=[source] if source.scene is not None else [],
+                 model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops)
+
+
+__all__ = ["check_listen_address", "run_explore", "serve"]

@@ -1,0 +1,283 @@
+"""What the explorer shows: one source, resolved and validated before any server starts.
+
+``pushbroom explore`` takes exactly one of ``--preset ID``, ``--scene scene.json``,
+``--rpc FILE [--dem DEM]``, ``--dimap FILE [--dem DEM]``, ``--dg FILE [--dem DEM]`` or
+``--isd FILE``.  :func:`load_source` turns it into a :class:`Source` -- a preset id, or a
+:class:`~explorer.scene.Scene` built by the same library functions as the ``scene``
+commands:
+
+* ``--scene``: :func:`explorer.real.linescan.load_scene` (MPC or rigorous line-scan JSON);
+* ``--rpc``: :func:`explorer.real.from_rpc.scene_from_rpc` (MPC space resection, the papers'
+  pipeline; with ``--dem`` the GCP heights and the terrain come from the DEM);
+* ``--dimap`` / ``--dg``: the rigorous line-scan model of the metadata
+  (:func:`explorer.real.dimap.rigorous_scene_from_dimap`,
+  :func:`explorer.real.worldview.rigorous_scene_from_dg`) converted to an MPC scene
+  (``to_mpc_scene``, degree 3) as ``scene from-dimap --out`` writes it; ``--dem`` resamples
+  the DEM onto the scene's local frame as its terrain;
+* ``--isd``: :func:`explorer.real.csm.scene_from_isd` (USGS CSM line-scan ISD).
+
+Every problem is an :mod:`explorer.errors` error naming the input -- an unknown or wrongly
+cased preset (with the right spelling suggested), a missing or unreadable file, a DEM that
+does not cover the image footprint -- so the command fails with one line before it prints a
+URL.  No viser, no plotly here.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from explorer.errors import InputError, SceneFileError
+
+SOURCE_KINDS = ("preset", "scene", "rpc", "dimap", "dg", "isd")
+"""The source options of ``pushbroom explore`` (``--<kind>``)."""
+DEM_KINDS = ("rpc", "dimap", "dg")
+"""Sources that take ``--dem``."""
+MPC_DEGREE = 3
+"""Degree of the MPC fitted to a rigorous DIMAP / DG model (as ``scene from-dimap --degree``)."""
+COVERAGE_GRID = 21
+"""Image points per side checked against the DEM (the footprint must be covered)."""
+
+
+@dataclass
+class Source:
+    """A resolved explorer source.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`SOURCE_KINDS`.
+    label : str
+        What the GUI calls it (the scene dropdown entry): the preset id, or the file name
+        and the sensor.
+    scene : Scene or None
+        The loaded scene; None for a preset (built by the model with the GUI's controls).
+    path, dem : str or None
+        The files it came from.
+    info : dict
+        JSON-ready description (sensor, fit residuals, ...), written into the export.
+    """
+
+    kind: str
+    label: str
+    scene: Any = None
+    path: str | None = None
+    dem: str | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def preset(self) -> str | None:
+        """The preset id of a preset source, else None."""
+        return self.label if self.kind == "preset" else None
+
+    def to_dict(self) -> dict:
+        """JSON-ready: kind, label, files and info."""
+        return {"kind": self.kind, "label": self.label, "path": self.path, "dem": self.dem, **self.info}
+
+
+# ------------------------------------------------------------------ validation
+def resolve_preset(name: str) -> str:
+    """The preset id ``name`` names exactly.
+
+    Raises
+    ------
+    InputError
+        For an unknown id, suggesting the right case (``wsu`` -> ``WSU``) or the closest ids.
+    """
+    from explorer.presets import preset_ids
+
+    ids = preset_ids()
+    if name in ids:
+        return name
+    same_case = [i for i in ids if i.lower() == str(name).lower()]
+    if same_case:
+        raise InputError(f"unknown preset {name!r}: preset ids are case-sensitive; did you mean {same_case[0]!r}?")
+    close = difflib.get_close_matches(str(name), ids, n=3, cutoff=0.5)
+    hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+    raise InputError(f"unknown preset {name!r}; {hint}presets: {', '.join(ids)}")
+
+
+def readable_file(path: str | os.PathLike, what: str) -> Path:
+    """``path`` as a Path if it is a readable regular file, else :class:`InputError` naming it."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{what} {str(path)!r}: no such file")
+    if p.is_dir():
+        raise InputError(f"{what} {str(path)!r} is a directory, not a file")
+    if not os.access(p, os.R_OK):
+        raise InputError(f"{what} {str(path)!r} is not readable (permission denied)")
+    return p
+
+
+def check_dem_covers(scene: Any, dem_path: str, n: int = COVERAGE_GRID) -> None:
+    """Raise :class:`InputError` unless the scene's terrain has a height under every point of an
+    ``n`` x ``n`` image grid (the image footprint, pixel edges included)."""
+    rows = np.linspace(-0.5, scene.n_rows - 0.5, n)
+    cols = np.linspace(-0.5, scene.n_columns - 0.5, n)
+    rr, cc = np.repeat(rows, n), np.tile(cols, n)
+    h = np.asarray(scene.terrain.heights, dtype=np.float64) if hasattr(scene.terrain, "heights") else None
+    h_ref = float(np.nanmean(h)) if h is not None and np.isfinite(h).any() else scene.terrain.mean_height
+    g = scene.image_to_ground(rr, cc, height=h_ref)
+    z = scene.terrain.height(g[:, 0], g[:, 1])
+    missing = int((~np.isfinite(z)).sum())
+    if missing:
+        lon, lat, _ = scene.frame.enu_to_geodetic(g) if scene.frame is not None else (g[:, 0], g[:, 1], None)
+        raise InputError(
+            f"DEM {dem_path!r} does not cover the image footprint: no height at {missing} of {n * n} image "
+            f"points (footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f})")
+
+
+def _dem_terrain(scene: Any, dem_path: str) -> Any:
+    """``scene`` with the DEM resampled onto its local frame over the footprint (+5 %)."""
+    from explorer.real.from_rpc import load_dem, terrain_from_dem
+
+    if scene.frame is None:
+        raise InputError(f"--dem {dem_path!r}: the scene has no geodetic frame to place the DEM in")
+    height_source = load_dem(dem_path)
+    lo_h, hi_h = float(height_source.min), float(height_source.max)
+    n = COVERAGE_GRID
+    rows = np.linspace(-0.5, scene.n_rows - 0.5, n)
+    cols = np.linspace(-0.5, scene.n_columns - 0.5, n)
+    g = scene.image_to_ground(np.repeat(rows, n), np.tile(cols, n), height=0.5 * (lo_h + hi_h))
+    lon, lat, _ = scene.frame.enu_to_geodetic(g)
+    missing = int((~np.isfinite(np.asarray(height_source.height(lon, lat), dtype=np.float64))).sum())
+    if missing:
+        raise InputError(
+            f"DEM {dem_path!r} does not cover the image footprint: no height at {missing} of {n * n} image "
+            f"points (footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f})")
+    corners = np.vstack([scene.footprint(lo_h), scene.footprint(hi_h)])
+    lo, hi = corners[:, :2].min(0), corners[:, :2].max(0)
+    pad = 0.05 * (hi - lo)
+    terrain = terrain_from_dem(height_source, scene.frame, (lo[0] - pad[0], hi[0] + pad[0], lo[1] - pad[1],
+                                                            hi[1] + pad[1]))
+    if not np.isfinite(terrain.heights).any():
+        raise InputError(f"DEM {dem_path!r} does not cover the image footprint at all")
+    return scene.with_terrain(terrain)
+
+
+def _dimap_sensor(path: Path) -> str:
+    head = path.read_bytes()[:20000].decode("utf-8", "replace")
+    m = re.search(r"<DATASET_NAME>DS_([A-Z]+)(\d?[A-Z]?)_", head)
+    names = {"PHR": "Pleiades", "SPOT": "SPOT"}
+    if m:
+        return f"{names.get(m.group(1), m.group(1))} {m.group(2)}".strip()
+    return "DIMAP"
+
+
+# ---------------------------------------------------------------------- loading
+def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
+    """Resolve and load one explorer source (see the module docstring).
+
+    Parameters
+    ----------
+    kind : str
+        One of :data:`SOURCE_KINDS`.
+    value : str
+        The preset id or the file.
+    dem : str, optional
+        DEM (GeoTIFF, EGM96 heights, or SRTM ``.hgt``) for ``rpc`` / ``dimap`` / ``dg``.
+
+    Raises
+    ------
+    InputError
+        Unknown preset (with a suggestion), missing / unreadable file, ``--dem`` with a kind
+        that takes none, a DEM not covering the footprint.
+    SceneFileError, RPCFormatError
+        A file that is not what its option says (from the readers).
+    """
+    if kind not in SOURCE_KINDS:
+        raise InputError(f"unknown source kind {kind!r}; one of {', '.join(SOURCE_KINDS)}")
+    if dem is not None and kind not in DEM_KINDS:
+        raise InputError(f"--dem goes with --rpc, --dimap or --dg, not --{kind}")
+    if kind == "preset":
+        return Source("preset", resolve_preset(value))
+    path = readable_file(value, {"scene": "scene file", "rpc": "RPC file", "dimap": "DIMAP file",
+                                 "dg": "DigitalGlobe XML", "isd": "ISD file"}[kind])
+    if dem is not None:
+        readable_file(dem, "DEM")
+    info: dict[str, Any] = {}
+    if kind == "scene":
+        from explorer.real.linescan import load_scene
+
+        try:
+            scene = load_scene(path)
+        except (KeyError, ValueError, TypeError) as exc:
+            if isinstance(exc, SceneFileError):
+                raise
+            raise SceneFileError(f"scene file {str(path)!r}: {exc}") from exc
+        sensor = str(scene.metadata.get("source", "scene")) if isinstance(scene.metadata, dict) else "scene"
+        info.update(sensor=sensor, model=type(scene).__name__)
+    elif kind == "rpc":
+        from explorer.real.from_rpc import scene_from_rpc
+
+        try:
+            scene, report = scene_from_rpc(path, dem=dem, n_check=400, seed=0)
+        except ValueError as exc:
+            if dem is None or isinstance(exc, (InputError, SceneFileError)) or type(exc).__name__ == "RPCFormatError":
+                raise
+            raise InputError(f"--rpc {str(path)!r} with DEM {dem!r}: {exc}") from exc
+        sensor = f"RPC {report.info.get('rpc_format', '')}".strip()
+        info.update(sensor=sensor, model="MPC by space resection", resection=report.to_dict())
+    elif kind in ("dimap", "dg"):
+        if kind == "dimap":
+            from explorer.real.dimap import rigorous_scene_from_dimap
+
+            rigorous, _ = rigorous_scene_from_dimap(path)
+            sensor = _dimap_sensor(path) + " DIMAP"
+        else:
+            from explorer.real.worldview import read_dg_metadata, rigorous_scene_from_dg
+
+            rigorous = rigorous_scene_from_dg(path)
+            sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
+        scene, fit = rigorous.to_mpc_scene(degree=MPC_DEGREE)
+        info.update(sensor=sensor, model=f"MPC degree {MPC_DEGREE} fitted to the rigorous model",
+                    mpc_fit=fit.to_dict())
+    else:  # isd
+        try:
+            from explorer.real.csm import scene_from_isd
+        except ImportError as exc:
+            raise InputError(f"--isd {str(path)!r}: reading USGS CSM ISDs needs explorer.real.csm, "
+                             f"which this installation lacks ({exc})") from exc
+        scene = scene_from_isd(path)
+        info.update(sensor=f"CSM {scene.metadata.get('sensor', 'line scan')}"
+                    if isinstance(scene.metadata, dict) else "CSM line scan", model=type(scene).__name__)
+    if dem is not None and kind in ("dimap", "dg"):
+        scene = _dem_terrain(scene, dem)
+    if dem is not None:
+        check_dem_covers(scene, dem)
+    label = f"{path.name} ({info['sensor']})"
+    info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns))
+    return Source(kind, label, scene, str(path), dem, info)
+
+
+def source_from_args(args: Any) -> Source:
+    """The one source of parsed ``explore`` arguments (attributes named as :data:`SOURCE_KINDS`;
+    none given: the default preset).
+
+    Raises
+    ------
+    InputError
+        Two sources, or ``--dem`` without a source that takes it.
+    """
+    given = [(k, getattr(args, k)) for k in SOURCE_KINDS if getattr(args, k, None) is not None]
+    if len(given) > 1:
+        raise InputError("give one source: " + " and ".join(f"--{k}" for k, _ in given) + " were both given")
+    dem = getattr(args, "dem", None)
+    if not given:
+        if dem is not None:
+            raise InputError("--dem goes with --rpc, --dimap or --dg")
+        from explorer.presets import default_preset_id
+
+        return load_source("preset", default_preset_id())
+    kind, value = given[0]
+    return load_source(kind, value, dem=dem)
+
+
+__all__ = ["DEM_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers", "load_source", "readable_file",
+           "resolve_preset", "source_from_args"]

@@ -1,0 +1,392 @@
+"""What the explorer draws: the update stages of :class:`explorer.app.gui.ExplorerApp`.
+
+:class:`Views` is the drawing half of the app (a mixin): :meth:`Views.update` takes a
+:class:`~explorer.app.model.Settings`, asks the model for the numbers and redraws only what
+changed -- the scene (ground, DEM mesh, orbit), the SCP cloud, the panels, the selected point,
+the accuracy sweep -- each stage keyed by what it depends on.  It also frames the camera of
+every open browser on a new footprint, resets the view, and exports.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import threading
+import time
+import zipfile
+from collections.abc import Hashable
+from typing import Any
+
+import numpy as np
+
+from explorer.app.model import SCOP_DENSITIES, MethodRun, Selection, Settings, summary_markdown
+from explorer.methods import registry
+from explorer.panels import diverging_rgb
+from explorer.points import PointSet
+from explorer.scene import Scene
+
+
+class Superseded(Exception):
+    """A newer update request arrived; the current one stops at its next checkpoint."""
+
+
+class Views:
+    """Drawing stages of the explorer app (mixed into :class:`~explorer.app.gui.ExplorerApp`)."""
+
+    # set by ExplorerApp
+    server: Any
+    model: Any
+    handles: dict[str, Any]
+    nodes: dict[str, Any]
+    _sent: dict[str, Hashable]
+    _F: Any
+    _B: Any
+
+    # ---------------------------------------------------------------- helpers
+    def _put(self, key: str, handles: dict[str, Any]) -> None:
+        """Remember the nodes a builder made, removing the previous ones of this group."""
+        for n in [n for n in self.nodes if n.startswith(key)]:
+            if n not in handles:
+                with contextlib.suppress(Exception):
+                    self.nodes[n].remove()
+                del self.nodes[n]
+        self.nodes.update(handles)
+
+    def _changed(self, group: str, key: Hashable) -> bool:
+        if self._sent.get(group) == key:
+            return False
+        self._sent[group] = key
+        return True
+
+    def _frame_key(self, s: Settings) -> tuple:
+        return (s.scene_key, s.sensor_distance, s.height_exaggeration)
+
+    # ----------------------------------------------------------------- update
+    def update(self, s: Settings, gen: int | None = None) -> dict[str, float]:
+        """Recompute and redraw what ``s`` changed.
+
+        Returns
+        -------
+        dict
+            Stage timings in seconds: scene, methods, cloud, panels, selection, total (the
+            scene and panels are up to date), sweep (accuracy-vs-density, after total).
+        """
+        times: dict[str, float] = {}
+        t_start = time.perf_counter()
+        self._check(gen)
+        for stage in ("scene", "methods", "cloud", "panels", "selection"):
+            t0 = time.perf_counter()
+            getattr(self, f"_update_{stage}")(s, gen)
+            times[stage] = time.perf_counter() - t0
+            self._check(gen)
+        self.last_update_s = time.perf_counter() - t_start
+        times["total"] = self.last_update_s
+        self.last_times = times
+        scps = self.model.scps(s)
+        self._status(self._done_text(self.runs, self.pending, scps), 100.0 if not self.pending else 70.0,
+                     busy=bool(self.pending))
+        if gen is not None:
+            with self._lock:  # the scene and panels now show this request (see wait_update)
+                self._completed_gen = max(self._completed_gen, gen)
+                self._lock.notify_all()
+        self._check(gen)
+        t0 = time.perf_counter()
+        self._update_sweep(s, gen)
+        times["sweep"] = time.perf_counter() - t0
+        self.last_times = times
+        busy = self.fits is not None and self.fits.busy
+        self._status(self._done_text(self.runs, self.pending, scps) + (" (training in the background)" if busy else ""),
+                     100.0 if not busy else 85.0, busy=busy)
+        return times
+
+    def _update_scene(self, s: Settings, gen: int | None) -> None:
+        """Scene, SCOPs and SCPs; ground (DEM mesh), orbit and camera on a new scene / frame."""
+        B, m = self._B, self.model  # noqa: N806
+        self._status(f"building scene {s.preset}", 2)
+        scene = m.scene(s)
+        self._check(gen)
+        scops = m.scops(s)
+        m.scps(s)
+        self.scene = scene
+        frame_key = self._frame_key(s)
+        if self._changed("frame", frame_key):
+            self.frame = B.DisplayFrame.for_scene(scene, sensor_distance=s.sensor_distance,
+                                                  height_exaggeration=s.height_exaggeration)
+            with self.server.atomic():
+                self._put("/ground", B.add_ground(self.server.scene, scene, self.frame))
+                self._put("/orbit", B.add_orbit(self.server.scene, scene, self.frame))
+            self._frame_camera(scene, (s.preset, s.sensor_distance))
+            fixed = s.preset in m.fixed_scenes
+            with self.quiet():
+                self.handles["sel_row"].max = float(scene.n_rows - 1)
+                self.handles["sel_col"].max = float(scene.n_columns - 1)
+                for key in ("relief", "rates", "jitter"):
+                    self.handles[key].disabled = fixed
+        if self._changed("scops", (frame_key, s.scop_density)):
+            self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
+
+    def _update_methods(self, s: Settings, gen: int | None) -> None:
+        """Fit (cached / background) and evaluate every checked method within the time budget."""
+        m = self.model
+        scps = m.scps(s)
+        runs: dict[str, MethodRun] = {}
+        pending: dict[str, str] = {}
+        self._status("training" if any(registry()[n].needs_fit for n in s.methods) else "evaluating", 5)
+        fits = self._get_fits([(n, None) for n in s.methods], s, 0, self.fit_wait_s, gen)
+        for i, name in enumerate(s.methods):
+            self._status(f"{name} ({i + 1}/{len(s.methods)}) on {len(scps):,} SCPs",
+                         5 + 60 * i / max(len(s.methods), 1))
+            rec = fits[(name, None)]
+            if rec is None:
+                pending[name] = self._pending_text(name, s)
+            else:
+                runs[name] = m.evaluate(name, s, fit=rec)
+            self._check(gen)
+        self.runs, self.pending = runs, pending
+
+    def _update_cloud(self, s: Settings, gen: int | None) -> None:
+        """The SCP cloud in the 3D view, coloured by the colour method's row residual."""
+        B, F = self._B, self._F  # noqa: N806
+        scps, scops = self.model.scps(s), self.model.scops(s)
+        cm = s.color_method
+        run = self.runs.get(cm) if cm else None
+        ev = run.evaluation if run is not None and run.ok else None
+        ev_key = run.key if ev is not None else None
+        limit = s.limit_px
+        if ev is not None and s.colour_mode != "fixed":
+            from explorer.panels import robust_limit
+
+            limit = robust_limit(ev.residual_row)
+        if not self._changed("scps", (self._frame_key(s), s.scp_count, cm, ev_key, limit)):
+            return
+        if ev is not None:
+            idx_all, res_all = np.asarray(ev.evaluated_index), np.asarray(ev.residual_row)
+        else:
+            idx_all, res_all = np.arange(len(scps)), np.full(len(scps), np.nan)
+        pos = F.decimation_index(len(idx_all), self.max_cloud_points)
+        idx, res = idx_all[pos], res_all[pos]
+        colors = diverging_rgb(res, limit) if ev is not None else np.full((len(idx), 3), 200, np.uint8)
+        self._put("/points/scps", B.add_points(self.server.scene, "/points/scps", self.frame, scps.ground[idx],
+                                               colors, size_km=B.point_size_km(self.frame, len(idx))))
+        self.cloud_index, self.cloud_residual = idx, res
+        if ev is not None:
+            what = f"coloured by **{cm}** row residual (+-{limit:.3g} px, magenta: no valid row)"
+        elif cm in self.pending:
+            what = f"grey until **{cm}** has trained"
+        else:
+            what = "grey (no method to colour by)"
+        n_eval = len(idx_all)
+        sub = f" ({cm} evaluated on a subsample of {n_eval:,})" if n_eval < len(scps) else ""
+        dec = f"; the 3D view shows an evenly strided {len(idx):,} of {n_eval:,}" if len(idx) < n_eval else ""
+        self.handles["cloud_text"].content = f"SCPs: {len(scps):,}{sub}, {what}{dec}. SCOPs (gold): {len(scops)}."
+
+    def _update_panels(self, s: Settings, gen: int | None) -> None:
+        """Residual maps, timing bars and the summary table."""
+        F, m = self._F, self.model  # noqa: N806
+        scene, scps, scops = m.scene(s), m.scps(s), m.scops(s)
+        runs, pending = self.runs, self.pending
+        ok = {n: r.evaluation for n, r in runs.items() if r.ok}
+        maps_key = (tuple((n, runs[n].key) for n in ok), s.limit_px, s.colour_mode, s.component, s.diff,
+                    s.show_scops, s.scop_density, tuple(pending), self.methods_ready.is_set())
+        if not self._changed("maps", maps_key):
+            return
+        if ok:
+            fig = F.residual_maps(ok, scps, control=scops if s.show_scops else None, shape=scene.shape,
+                                  limit_px=s.limit_px if s.colour_mode == "fixed" else None,
+                                  mode=s.colour_mode, component=s.component, difference=s.diff,
+                                  status={n: runs[n].status for n in ok}, max_points=self.max_map_points)
+        else:
+            fig = F.empty_figure("waiting for " + ", ".join(pending) if pending else self._no_method_text())
+        self._set_figure("maps", fig)
+        self._set_figure("timing", F.timing_bars(ok, colors=F.method_colors(self.method_names)) if ok else
+                         F.empty_figure(self._no_method_text()))
+        notes = []
+        sub = [n for n in ok if runs[n].subsampled]
+        if sub:
+            notes.append(f"Subsampled to stay responsive: {', '.join(sub)} evaluated on a seeded subsample "
+                         "(time budget); **Export** evaluates every SCP.")
+        if self.max_map_points is not None and any(len(e.evaluated_index) > self.max_map_points
+                                                   for e in ok.values()):
+            notes.append(f"Each map draws an evenly strided {self.max_map_points:,} of its points; the RMSE "
+                         "in its title and the export use all of them.")
+        if ok:
+            notes.append("Click a point in a map to select it in the 3D view.")
+        self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
+        text = summary_markdown(runs, len(scps))
+        if pending:
+            text += "\n" + "\n".join(f"- **{n}**: {t}" for n, t in pending.items())
+        self.handles["summary"].content = text
+
+    def _update_selection(self, s: Settings, gen: int | None) -> None:
+        """The selected point, its scanline plane, ray and the colour method's search path."""
+        B, m = self._B, self.model  # noqa: N806
+        scene = m.scene(s)
+        sel = m.selection(s, self.runs)
+        self.selection = sel
+        run = self.runs.get(s.color_method) if s.color_method else None
+        ev_key = run.key if run is not None and run.ok else None
+        if not self._changed("selection", (self._frame_key(s), sel.ground.tobytes(), sel.method, ev_key)):
+            return
+        rows = np.array([0.0, (scene.n_rows - 1) / 2.0, scene.n_rows - 1.0, sel.exact_row])
+        h_mean = scene.terrain.mean_height
+        heights = np.array([h_mean, h_mean, h_mean, sel.ground[2]])
+        names = ["first scanline (row 0)", "middle scanline", f"last scanline (row {scene.n_rows - 1})", ""]
+        with self.server.atomic():
+            self._put("/scanlines", B.add_scanline_planes(self.server.scene, scene, self.frame, rows, heights, names))
+            self._put("/selected", B.add_selection(
+                self.server.scene, scene, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
+                label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))
+        self._selection_text(sel)
+        with self.quiet():
+            if sel.source != "image point":
+                self.handles["sel_row"].value = round(sel.exact_row * 2) / 2
+                self.handles["sel_col"].value = round(sel.exact_col * 2) / 2
+
+    def _update_sweep(self, s: Settings, gen: int | None) -> None:
+        """Accuracy vs SCOP density: evaluate what is trained, queue the rest (low priority)."""
+        F, m = self._F, self.model  # noqa: N806
+        wanted = {m.fit_key(n, s) for n in s.methods}
+        if s.sweep and s.methods:
+            sweeps: dict[str, list] = {}
+            jobs = [(n, d) for n in s.methods for d in
+                    (SCOP_DENSITIES if registry()[n].needs_fit else SCOP_DENSITIES[:1])]
+            wanted |= {m.fit_key(n, s, d) for n, d in jobs}
+            fits = self._get_fits(jobs, s, 1, self.fit_wait_s, gen)
+            self._check(gen)
+            for name in s.methods:
+                sweeps[name] = m.sweep(name, s, get_fit=lambda d, n=name: fits.get((n, d)))
+                self._check(gen)
+            sweep_key = (s.scene_key, tuple((n, tuple((e.n_scops, e.rmse_px, e.dr_max_px) for e in v))
+                                            for n, v in sweeps.items()))
+            if self._changed("sweep", sweep_key):
+                self.sweeps = sweeps
+                self._set_figure("accuracy", F.accuracy_vs_density(sweeps, colors=F.method_colors(self.method_names)))
+        elif self._changed("sweep", ("off", bool(s.methods), self.methods_ready.is_set())):
+            self.sweeps = {}
+            self._set_figure("accuracy", F.empty_figure("sweep off" if s.methods else self._no_method_text()))
+        if self.fits is not None:
+            self.fits.keep(wanted)
+
+    # ------------------------------------------------------------------- text
+    def _no_method_text(self) -> str:
+        return "no method checked" if self.methods_ready.is_set() else "loading the methods..."
+
+    def _done_text(self, runs: dict[str, MethodRun], pending: dict[str, str], scps: PointSet) -> str:
+        failed = [n for n, r in runs.items() if not r.ok]
+        sub = [n for n, r in runs.items() if r.subsampled]
+        name = self.handles["preset"].value if self.scene is not None else ""
+        txt = f"{name}: updated in {self.last_update_s:.2f} s ({len(scps):,} SCPs)"
+        if sub:
+            txt += f"; on a subsample (slow): {', '.join(sub)}"
+        if pending:
+            txt += f"; training: {', '.join(pending)}"
+        if failed:
+            txt += f"; failed: {', '.join(failed)}"
+        return txt
+
+    def _set_figure(self, key: str, fig: Any) -> None:
+        h = self.handles[key]
+        h.figure = fig
+        meta = fig.layout.meta
+        if isinstance(meta, dict) and "height_over_width" in meta:
+            # viser's client draws height = width * aspect (its docstring says width/height)
+            h.aspect = float(meta["height_over_width"])
+
+    def _selection_text(self, sel: Selection) -> None:
+        lines = [f"**{sel.source}**: row {sel.exact_row:.3f}, col {sel.exact_col:.3f}, height {sel.ground[2]:.1f} m"]
+        if sel.method is not None and sel.est_row is not None:
+            err = sel.est_row - sel.exact_row
+            lines.append(f"{sel.method}: row {sel.est_row:.4f} (error {err:+.3g} px)")
+            if sel.trace_rows is not None and len(sel.trace_rows):
+                tr = sel.trace_rows
+                shown = " -> ".join(f"{r:.2f}" for r in tr[:12]) + (" -> ..." if len(tr) > 12 else "")
+                lines.append(f"visited {len(tr)} scanlines: {shown}")
+        self.handles["sel_text"].content = "  \n".join(lines)
+
+    # ----------------------------------------------------------------- camera
+    def _camera_for(self, scene: Scene) -> tuple[tuple, tuple, float]:
+        """(position, look_at, far) framing the footprint and the (displayed) track."""
+        frame = self.frame
+        _, pos = self._B.track_positions(scene, 3)
+        track = frame.sensor(pos)
+        mid = track[1]
+        look = 0.5 * mid
+        flight = track[2] - track[0]
+        flight[2] = 0.0
+        flight /= max(np.linalg.norm(flight), 1e-12)
+        side = np.cross(flight, [0.0, 0.0, 1.0])
+        dist = max(np.linalg.norm(mid), frame.diagonal_km)
+        view = 1.0 * side - 0.35 * flight + np.array([0.0, 0.0, 0.1])
+        cam = look + 1.15 * dist * view / np.linalg.norm(view)
+        far = float(max(5000.0, 4 * np.linalg.norm(cam)))
+        return tuple(float(v) for v in cam), tuple(float(v) for v in look), far
+
+    def _apply_camera(self, clients: list[Any]) -> None:
+        pos, look, far = self.camera_pose
+        for client in clients:
+            with contextlib.suppress(Exception):
+                with client.atomic():
+                    client.camera.far = far
+                    client.camera.look_at = look
+                    client.camera.position = pos
+
+    def _frame_camera(self, scene: Scene, key: Hashable) -> None:
+        """Point the initial camera at the ground and track and, on a new scene, every open browser's."""
+        pos, look, far = self._camera_for(scene)
+        self.camera_pose = (pos, look, far)
+        self.server.initial_camera.far = far
+        self.server.initial_camera.look_at = look
+        self.server.initial_camera.position = pos
+        if self._changed("camera", key):
+            self._apply_camera(list(self.server.get_clients().values()))
+
+    def reset_view(self) -> None:
+        """Frame the current footprint and track again in every open browser."""
+        if self.camera_pose is not None:
+            self._apply_camera(list(self.server.get_clients().values()))
+
+    # ----------------------------------------------------------------- export
+    def export_bytes(self, s: Settings | None = None) -> bytes:
+        """A zip of ``summary.json``, ``residuals.csv`` and ``panels.html`` for the current settings
+        (every SCP, no subsample; :func:`explorer.app.export.export_files`)."""
+        from explorer.app.export import export_files
+
+        s = s or self.settings()
+        files = export_files(self.model.scene(s), s, source=self._source_info(s), seed=self.model.seed,
+                             fits={n: self.model.fit(n, s) for n in s.methods})
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+            for name, data in files.items():
+                zf.writestr(zipfile.ZipInfo(name, date_time=(2000, 1, 1, 0, 0, 0)), data)
+        return buf.getvalue()
+
+    def _source_info(self, s: Settings) -> dict:
+        for src in getattr(self, "sources", []):
+            if src.label == s.preset:
+                return src.to_dict()
+        return {"kind": "preset", "label": s.preset, "relief_m": s.relief_m,
+                "attitude_rate_scale": s.attitude_rate_scale, "jitter_scale": s.jitter_scale}
+
+    def export_to_client(self, client: Any = None) -> None:
+        """Compute the export (in a thread) and send the zip to ``client`` (or every client)."""
+        s = self.settings()
+
+        def run() -> None:
+            self._status("exporting every SCP (no subsample)...", None)
+            try:
+                data = self.export_bytes(s)
+            except Exception as exc:  # shown, never fatal
+                self._status(f"export failed: {type(exc).__name__}: {exc}", None, busy=False)
+                return
+            target = client if client is not None else self.server
+            target.send_file_download("pushbroom-export.zip", data, save_immediately=True)
+            self.exports += 1
+            self._status(f"exported {len(data):,} bytes (pushbroom-export.zip)", None, busy=False)
+
+        if self.background:
+            threading.Thread(target=run, name="explorer-export", daemon=True).start()
+        else:
+            run()
+
+
+__all__ = ["Superseded", "Views"]
