@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from explorer.errors import InputError
-from explorer.geometry.terrain import FlatTerrain
+from explorer.geometry.dem_intersection import intersect_rays
+from explorer.geometry.terrain import FlatTerrain, GridDEM
 from explorer.io_atomic import atomic_path
 from explorer.scene import Scene
 
@@ -145,6 +146,12 @@ def image_grid(
     if layers == 1 and isinstance(scene.terrain, FlatTerrain) and not jitter_px:
         ground = _grid_on_plane(scene, rows, cols, scene.terrain.height_m)
         return PointSet(rr, cc, ground, scene.scanline_time(rr), (gr, gc, 1))
+    if layers == 1 and isinstance(scene.terrain, GridDEM) and not jitter_px and \
+            type(scene).image_to_ground is Scene.image_to_ground:
+        origin, direction = _grid_rays(scene, rows, cols)
+        ground, _ = intersect_rays(origin, direction, scene.terrain.height_grid())
+        ok = np.isfinite(ground[:, 0])
+        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
     if layers == 1:
         ground = scene.image_to_ground(rr, cc)
         ok = np.isfinite(ground[:, 0])
@@ -163,6 +170,24 @@ def image_grid(
     ground = np.concatenate(parts)
     r3, c3 = np.tile(rr, layers), np.tile(cc, layers)
     return PointSet(r3, c3, ground, scene.scanline_time(r3), (gr, gc, layers))
+
+
+def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lines of sight of a regular grid: orientation once per grid row, broadcast over the columns.
+
+    Returns origins and (unnormalised) directions, each (len(rows) * len(cols), 3), row-major.
+    """
+    t = scene.scanline_time(rows)
+    centres = scene.exterior.position(t)  # (gr, 3)
+    rot = scene.exterior.rotation(t)  # (gr, 3, 3)
+    xd, yd = scene.interior.detector_focal_plane(cols)
+    x, y = scene.interior.undistort(xd, yd)
+    v = np.stack([x, y, np.full_like(x, -scene.interior.focal_length_m)], axis=-1)  # (gc, 3)
+    direction = np.empty((rows.size, cols.size, 3))
+    for k in range(3):
+        direction[:, :, k] = rot[:, k, :] @ v.T
+    origin = np.broadcast_to(centres[:, None, :], direction.shape).reshape(-1, 3)
+    return origin, direction.reshape(-1, 3)
 
 
 def _grid_on_plane(scene: Scene, rows: np.ndarray, cols: np.ndarray, height: float) -> np.ndarray:

@@ -22,19 +22,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from explorer._resources import assets_dir
+from explorer.errors import InputError
+from explorer.geometry.dem_intersection import HeightGrid
 
 __all__ = [
     "DEFAULT_ASSETS_DIR",
     "GeoDEM",
     "Geoid",
     "read_geotiff_dem",
+    "height_grid_of",
     "read_hgt",
+    "require_coverage",
 ]
 
 FloatArray = NDArray[np.float64]
 
 #: Folder of the DEM/geoid assets shipped with the package (the checkout's ``assets/dem``).
 DEFAULT_ASSETS_DIR = assets_dir("dem")
+
+#: SRTM's void value, used as no-data when a file has no no-data tag.
+SRTM_NODATA = -32768.0
 
 _SNAP = 1e-9  # fractional indices this close to an integer are snapped to it (node exactness)
 
@@ -173,13 +180,36 @@ class GeoDEM:
         """Bilinear height (metres), NaN where undefined (see :meth:`height_and_mask`)."""
         return self.height_and_mask(x, y)[0]
 
+    @property
+    def is_geographic(self) -> bool:
+        """True when the CRS is longitude/latitude (or not stated: then assumed lon/lat degrees)."""
+        return _crs_is_geographic(self.crs)
+
+    def height_grid(self) -> HeightGrid:
+        """The grid in the compiled kernel's layout (cached): see :mod:`explorer.geometry.dem_intersection`.
+
+        Raises
+        ------
+        InputError
+            If the DEM is in a projected CRS (read it with ``read_geotiff_dem``, which reprojects).
+        """
+        cached = self.__dict__.get("_height_grid")
+        if cached is None:
+            if not self.is_geographic:
+                raise InputError(f"DEM {self.source_path or ''} is in a projected CRS ({self.crs[:60]}); "
+                                 "read it with read_geotiff_dem(..., to_geographic=True) to use it with an RPC")
+            cached = _grid_of(self.heights, self.transform)
+            object.__setattr__(self, "_height_grid", cached)
+        return cached
+
 
 def read_geotiff_dem(
-    path: str | Path, *, band: int = 1, vertical_reference: str = "unknown"
+    path: str | Path, *, band: int = 1, vertical_reference: str = "unknown", to_geographic: bool = True
 ) -> GeoDEM:
-    """Read a single-band DEM raster with rasterio.
+    """Read a single-band DEM raster with rasterio (any CRS GDAL reads).
 
-    Nodata (the file's nodata value or GDAL mask) becomes NaN. Values are cell-centre heights.
+    No-data: the file's nodata value or GDAL mask; without either, the SRTM convention (-32768) when
+    the file holds that value.  Both become NaN.  Values are cell-centre heights.
 
     Parameters
     ----------
@@ -188,14 +218,37 @@ def read_geotiff_dem(
         1-based band index.
     vertical_reference : str
         What the heights are measured from (files rarely say): ``"ellipsoid"``, ``"egm96"``...
+    to_geographic : bool
+        A DEM in a projected CRS (UTM...) is reprojected on read to WGS84 longitude/latitude at about its
+        own resolution, bilinear (no-data cells stay no-data: a node next to one is NaN), so that the
+        lines of sight of an RPC (which live in longitude/latitude) are walked on it directly.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read as a raster, or the band does not exist.
     """
     import rasterio
+    from rasterio.errors import RasterioIOError
 
-    with rasterio.open(path) as dataset:
+    try:
+        dataset = rasterio.open(path)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read DEM {path}: {exc}") from exc
+    with dataset:
+        if not 1 <= band <= dataset.count:
+            raise InputError(f"DEM {path} has {dataset.count} band(s), band {band} requested")
         data = dataset.read(band, masked=True).astype(np.float64)
         heights = np.ma.filled(data, np.nan)
+        if dataset.nodata is None and not np.ma.is_masked(data):
+            heights[heights == SRTM_NODATA] = np.nan  # SRTM voids in a file without a no-data tag
         transform = tuple(dataset.transform)[:6]
         crs = dataset.crs.to_string() if dataset.crs else ""
+        if to_geographic and dataset.crs is not None and not dataset.crs.is_geographic:
+            heights, transform, crs = _reproject_to_lonlat(heights, dataset.transform, dataset.crs,
+                                                           dataset.width, dataset.height)
+    if b_or_d_nonzero(transform):
+        raise InputError(f"DEM {path}: rotated geotransforms are not supported")
     return GeoDEM(
         heights=heights,
         transform=transform,  # type: ignore[arg-type]
@@ -203,6 +256,77 @@ def read_geotiff_dem(
         vertical_reference=vertical_reference,
         source_path=str(path),
     )
+
+
+def b_or_d_nonzero(transform: tuple[float, ...]) -> bool:
+    """True when an affine geotransform (rasterio order) has rotation terms."""
+    return transform[1] != 0 or transform[3] != 0
+
+
+def _reproject_to_lonlat(heights: FloatArray, transform, crs, width: int, height: int):
+    """Warp a projected DEM to WGS84 lon/lat (bilinear, NaN no-data); returns heights, transform, crs."""
+    from rasterio.warp import Resampling, calculate_default_transform, reproject
+
+    dst_transform, dst_width, dst_height = calculate_default_transform(
+        crs, "EPSG:4326", width, height, *_bounds_of(transform, width, height))
+    out = np.full((dst_height, dst_width), np.nan)
+    reproject(heights, out, src_transform=transform, src_crs=crs, src_nodata=np.nan, dst_transform=dst_transform,
+              dst_crs="EPSG:4326", dst_nodata=np.nan, resampling=Resampling.bilinear)
+    return out, tuple(dst_transform)[:6], "EPSG:4326"
+
+
+def _bounds_of(transform, width: int, height: int) -> tuple[float, float, float, float]:
+    from rasterio.transform import array_bounds
+
+    south, west, north, east = array_bounds(height, width, transform)
+    return west, south, east, north
+
+
+def _crs_is_geographic(crs: str) -> bool:
+    if not crs:
+        return True
+    try:
+        from pyproj import CRS
+
+        return bool(CRS.from_user_input(crs).is_geographic)
+    except Exception:  # noqa: BLE001 - an unparsable CRS string: keep the old behaviour (lon/lat)
+        return True
+
+
+def _grid_of(heights: FloatArray, transform: tuple[float, ...]) -> HeightGrid:
+    a, _, c, _, e, f = transform
+    return HeightGrid.from_array(heights, c + 0.5 * a, f + 0.5 * e, a, e)
+
+
+def height_grid_of(dem: object) -> HeightGrid | None:
+    """The kernel grid of a DEM object (GeoDEM, EllipsoidalDEM, HeightGrid), or None for other height sources."""
+    if isinstance(dem, HeightGrid):
+        return dem
+    fn = getattr(dem, "height_grid", None)
+    return fn() if callable(fn) else None
+
+
+def require_coverage(grid: HeightGrid, lon: ArrayLike, lat: ArrayLike, what: str = "the footprint",
+                     source: str | None = None) -> None:
+    """Raise :class:`InputError` unless every (lon, lat) lies inside the DEM's node grid.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+    lon, lat : array_like
+        Degrees, e.g. the image corners on the ground.
+    what, source : str
+        Named in the message.
+    """
+    u, v = grid.to_grid(lon, lat)
+    ny, nx = grid.heights.shape
+    inside = (u >= 0) & (u <= nx - 1) & (v >= 0) & (v <= ny - 1)
+    if not np.all(inside):
+        x1, y1 = grid.x0 + (nx - 1) * grid.dx, grid.y0 + (ny - 1) * grid.dy
+        raise InputError(
+            f"DEM {source or ''} does not cover {what}: DEM lon [{min(grid.x0, x1):.5f}, {max(grid.x0, x1):.5f}], "
+            f"lat [{min(grid.y0, y1):.5f}, {max(grid.y0, y1):.5f}]; needed lon "
+            f"[{np.nanmin(lon):.5f}, {np.nanmax(lon):.5f}], lat [{np.nanmin(lat):.5f}, {np.nanmax(lat):.5f}]")
 
 
 _HGT_NAME = re.compile(r"([NS])(\d{1,2})([EW])(\d{1,3})", re.I)
@@ -337,3 +461,20 @@ class EllipsoidalDEM:
     def height(self, lon: ArrayLike, lat: ArrayLike) -> FloatArray:
         """Ellipsoidal height (metres), NaN where the DEM is undefined."""
         return self.geoid.orthometric_to_ellipsoidal(self.dem.height(lon, lat), lon, lat)
+
+    def height_grid(self) -> HeightGrid:
+        """The DEM's grid with the undulation added at each node (cached).
+
+        Bilinear interpolation of ``h + N`` between nodes differs from ``bilinear(h) + bilinear(N)`` by the
+        undulation's curvature over one DEM cell (below a millimetre for EGM96 and DEM cells up to 1 km).
+        """
+        cached = self.__dict__.get("_height_grid")
+        if cached is None:
+            base = self.dem.height_grid()
+            ny, nx = base.heights.shape
+            lon = base.x0 + base.dx * np.arange(nx)
+            lat = base.y0 + base.dy * np.arange(ny)
+            glon, glat = np.meshgrid(lon, lat)
+            cached = _grid_of(base.heights + self.geoid.geoid_height(glon, glat), self.dem.transform)
+            object.__setattr__(self, "_height_grid", cached)
+        return cached

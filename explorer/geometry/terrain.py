@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from explorer.geometry.dem_intersection import HeightGrid, intersect_rays
+
 
 @dataclass(frozen=True)
 class FlatTerrain:
@@ -126,6 +128,14 @@ class GridDEM:
         )
         return np.where(inside, z, np.nan)
 
+    def height_grid(self) -> HeightGrid:
+        """The grid in the compiled kernel's layout (built once; the heights must not change afterwards)."""
+        cached = self.__dict__.get("_height_grid")
+        if cached is None or cached.heights.shape != self.heights.shape:
+            cached = HeightGrid.from_array(self.heights, self.x0, self.y0, self.dx, self.dy)
+            self.__dict__["_height_grid"] = cached
+        return cached
+
     def to_dict(self) -> dict:
         d = {
             "kind": "grid",
@@ -237,76 +247,28 @@ def intersect_dem(
     direction: np.ndarray,
     dem: GridDEM,
     *,
-    step_fraction: float = 0.25,
-    refine_iterations: int = 80,
-) -> np.ndarray:
-    """Robust ray/DEM intersection: the first crossing of the ray below the surface.
+    return_flags: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Exact first intersection of rays with the bilinear DEM surface (compiled kernel).
 
-    The ray is marched from the plane Z = max height down to Z = min height with a
-    horizontal step of ``step_fraction`` of a DEM cell, so no ridge wider than a
-    quarter cell is skipped; the bracketed crossing is then refined by bisection to
-    machine precision.  Vectorised over rays: the Python loop runs over steps only.
+    The ray is walked cell by cell from the plane Z = max height down to Z = min height and, in each cell
+    that may hold a hit, the bilinear patch is intersected exactly (a quadratic), so no ridge is skipped
+    however thin; see :mod:`explorer.geometry.dem_intersection`.
 
     Parameters
     ----------
     origin, direction : ndarray, shape (N, 3)
         Ray origins (above the terrain) and directions (pointing down), metres.
     dem : GridDEM
+    return_flags : bool
+        Also return the per-ray flag (OK, OUTSIDE_DEM, NODATA, NO_INTERSECTION).
 
     Returns
     -------
     ndarray, shape (N, 3)
-        Ground points; NaN rows where the ray leaves the DEM or meets no-data first.
+        Ground points; NaN rows where the ray leaves the DEM, meets no-data first or misses it.
+    flags : ndarray of int8, shape (N,)
+        With ``return_flags``.
     """
-    n = origin.shape[0]
-    zmax, zmin = dem.max_height + 1e-6, dem.min_height - 1e-6
-    lam_top = (zmax - origin[:, 2]) / direction[:, 2]
-    lam_bot = (zmin - origin[:, 2]) / direction[:, 2]
-    horiz = np.hypot(direction[:, 0], direction[:, 1])
-    step_len = step_fraction * min(dem.dx, dem.dy) / np.maximum(horiz, 1e-12)
-    n_steps = np.maximum(np.ceil((lam_bot - lam_top) / step_len), 1).astype(np.int64)
-    dlam = (lam_bot - lam_top) / n_steps
-
-    def gap(lam: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        p = origin[idx] + lam[:, None] * direction[idx]
-        return p[:, 2] - dem.height(p[:, 0], p[:, 1])
-
-    lo = np.full(n, np.nan)
-    hi = np.full(n, np.nan)
-    active = np.arange(n)
-    g_prev = gap(lam_top, active)
-    failed = ~np.isfinite(g_prev)
-    active = active[~failed]
-    g_prev = g_prev[~failed]
-    k = 0
-    while active.size:
-        k += 1
-        lam_k = lam_top[active] + k * dlam[active]
-        g = gap(lam_k, active)
-        crossed = np.isfinite(g) & (g <= 0)
-        lo[active[crossed]] = lam_k[crossed] - dlam[active[crossed]]
-        hi[active[crossed]] = lam_k[crossed]
-        gone = ~np.isfinite(g) | (k >= n_steps[active])
-        keep = ~(crossed | gone)
-        active = active[keep]
-    found = np.isfinite(lo)
-    idx = np.nonzero(found)[0]
-    base = origin[idx] + lo[idx, None] * direction[idx]
-    d = direction[idx]
-    a = np.zeros(idx.size)
-    b = hi[idx] - lo[idx]
-
-    def gap_from_base(delta: np.ndarray) -> np.ndarray:
-        p = base + delta[:, None] * d
-        return p[:, 2] - dem.height(p[:, 0], p[:, 1])
-
-    for _ in range(refine_iterations):
-        m = 0.5 * (a + b)
-        below = gap_from_base(m) <= 0
-        b = np.where(below, m, b)
-        a = np.where(below, a, m)
-        if np.all(b - a <= 1e-12):
-            break
-    out = np.full((n, 3), np.nan)
-    out[idx] = base + (0.5 * (a + b))[:, None] * d
-    return out
+    points, flags = intersect_rays(origin, direction, dem.height_grid())
+    return (points, flags) if return_flags else points

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from explorer.errors import ConvergenceError
+from explorer.errors import ConvergenceError, InputError
 from explorer.rpc import _kernels
 from explorer.rpc._kernels import horner_rpc00b
 
@@ -568,8 +568,20 @@ class RationalFunctionModel:
         height_tol: float = 1e-4,
         tol: float = 1e-10,
         max_iter: int = 50,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
-        """Intersect each pixel's line of sight with a DEM.
+        return_flags: bool = False,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]] | tuple[FloatArray, ...]:
+        """Intersect each pixel's line of sight with a DEM: the first intersection from the sensor.
+
+        A gridded DEM (:class:`~explorer.terrain_io.GeoDEM`, :class:`~explorer.terrain_io.EllipsoidalDEM`
+        or a :class:`~explorer.geometry.dem_intersection.HeightGrid` in lon/lat) goes through the compiled
+        kernel (:meth:`explorer.rpc.inverse.RPCInverse.on_dem`: the line of sight walked cell by cell
+        between the DEM's highest and lowest heights, exact per bilinear cell, then refined on the exact RPC
+        to 1e-9 px and 1e-6 m; ``h_min``, ``h_max``, ``n_levels``, ``height_tol``, ``tol`` and ``max_iter``
+        do not apply).  With ``return_flags=True`` a fifth array gives the reason of each failure
+        (``explorer.geometry.dem_intersection``: OK, OUTSIDE_DEM, NODATA, NO_INTERSECTION, NOT_CONVERGED).
+
+        Any other height source (a callable, or an object with ``height(lon, lat)``) goes through the
+        sampled search below (slow; kept for such sources):
 
         The line of sight is sampled at ``n_levels`` heights from ``h_max`` down to ``h_min``
         (each level localised with :meth:`localization`); the first level (from the top) where
@@ -608,6 +620,22 @@ class RationalFunctionModel:
         shape = row_a.shape
         row_f = row_a.ravel()
         col_f = col_a.ravel()
+        from explorer.terrain_io import height_grid_of
+
+        grid = height_grid_of(dem)
+        if grid is not None:
+            from explorer.geometry.dem_intersection import OK, OUTSIDE_DEM
+            from explorer.rpc.inverse import RPCInverse
+
+            inverse = RPCInverse.for_model(self, grid.z_min - 1.0, grid.z_max + 1.0)
+            lon_k, lat_k, h_k, flags = inverse.on_dem(row_f, col_f, grid)
+            if flags.size and np.all(flags == OUTSIDE_DEM):
+                source = getattr(dem, "source_path", None) or getattr(getattr(dem, "dem", None), "source_path", "")
+                raise InputError(f"DEM {source or ''} does not cover any of the {flags.size} pixel(s)' lines of "
+                                 f"sight (DEM lon from {grid.x0:.5f}, lat from {grid.y0:.5f}; first pixel "
+                                 f"row {row_f[0]:.1f}, col {col_f[0]:.1f})")
+            out = (lon_k.reshape(shape), lat_k.reshape(shape), h_k.reshape(shape), (flags == OK).reshape(shape))
+            return (*out, flags.reshape(shape)) if return_flags else out
         height_fn = dem.height if hasattr(dem, "height") else dem
         if h_min is None or h_max is None:
             if hasattr(dem, "min") and hasattr(dem, "max"):
@@ -666,9 +694,7 @@ class RationalFunctionModel:
             lon_out[fi] = np.where(good, lon_f, np.nan)
             lat_out[fi] = np.where(good, lat_f, np.nan)
             found[fi] = good
-        return (
-            lon_out.reshape(shape),
-            lat_out.reshape(shape),
-            h_out.reshape(shape),
-            found.reshape(shape),
-        )
+        out = (lon_out.reshape(shape), lat_out.reshape(shape), h_out.reshape(shape), found.reshape(shape))
+        if return_flags:  # the sampled search does not tell the reasons apart
+            return (*out, np.where(found, 0, 3).astype(np.int8).reshape(shape))
+        return out

@@ -1,0 +1,504 @@
+"""Line of sight against a gridded DEM: the first intersection from the sensor, compiled.
+
+One kernel serves every image-to-ground-on-terrain path of the package: the rigorous scenes (a straight ray
+in the local ENU frame against a :class:`~explorer.geometry.terrain.GridDEM`) and the rational function
+model (the line of sight between two heights against a lon/lat DEM, see :mod:`explorer.rpc.inverse`).
+
+Algorithm (the choice is documented in ``docs/performance.md#image-to-ground-on-terrain``)
+-----------------------------------------------------------------------------------------
+The search segment runs from the DEM's highest height down to its lowest height (outside that slab
+there can be no intersection).  In grid coordinates ``(u, v, z)`` -- ``u`` the fractional node column,
+``v`` the fractional node row, ``z`` the height -- the segment is straight, and over one DEM cell the
+bilinear surface restricted to the segment is a quadratic in the segment parameter.  So the segment is
+walked cell by cell in the order the sensor sees them (Amanatides & Woo's grid traversal, the walk of
+Duvenhage's "Using an implicit min/max kd-tree for doing efficient terrain line of sight calculations",
+2009, as in Orekit Rugged), and in each cell whose highest corner is above the segment's lowest point
+the quadratic is solved exactly; the smallest root is the first intersection, so a ridge in front of a
+valley is hit however thin it is.  A two-level min/max hierarchy (tiles of :data:`TILE` x :data:`TILE`
+cells with their maximum height; a tile with a no-data node has +inf) skips the tiles the segment
+passes over without entering a cell.
+
+GDAL's RPC transformer instead iterates the height (localise at h, look up the DEM there, repeat):
+cheap when it converges, but it can converge to a farther crossing behind a ridge or oscillate on
+steep slopes, and it knows nothing of holes it jumps over; the cell walk is exact and its cost is the
+number of cells the segment crosses (usually one to three).
+
+Flags (one per point, never a silent wrong point)
+-------------------------------------------------
+:data:`OK` (0) intersection found; :data:`OUTSIDE_DEM` (1) the segment leaves the DEM's node grid
+before a hit (or starts outside it), so the first intersection is unknown; :data:`NODATA` (2) the walk
+reached a cell with a no-data node before a hit; :data:`NO_INTERSECTION` (3) the line never reaches the
+terrain (pointing up, or a segment that ends above the surface); :data:`NOT_CONVERGED` (4) an iterative
+refinement (RPC) did not converge.  Heights and points are NaN where the flag is not :data:`OK`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from explorer._numba import NUMBA_AVAILABLE, njit, prange
+from explorer.errors import InputError
+
+__all__ = [
+    "FLAG_NAMES",
+    "NODATA",
+    "NOT_CONVERGED",
+    "NO_INTERSECTION",
+    "OK",
+    "OUTSIDE_DEM",
+    "TILE",
+    "HeightGrid",
+    "intersect_rays",
+    "intersect_segments",
+]
+
+OK = 0
+OUTSIDE_DEM = 1
+NODATA = 2
+NO_INTERSECTION = 3
+NOT_CONVERGED = 4
+FLAG_NAMES = {OK: "ok", OUTSIDE_DEM: "outside DEM", NODATA: "no-data", NO_INTERSECTION: "no intersection",
+              NOT_CONVERGED: "not converged"}
+
+#: Cells per side of a tile of the min/max hierarchy.
+TILE = 16
+
+#: Points per chunk of the public wrappers (bounds the temporaries to a few tens of MB).
+CHUNK = 1 << 20
+
+
+@dataclass(frozen=True)
+class HeightGrid:
+    """A regular grid of heights with its tile maxima, in the kernel's layout.
+
+    Node ``(i, j)`` (row ``i``, column ``j``) lies at ``x = x0 + j * dx``, ``y = y0 + i * dy`` in the DEM's
+    horizontal coordinates (metres of a local frame, or degrees); ``dx``, ``dy`` may be negative.
+
+    Attributes
+    ----------
+    heights : ndarray, shape (ny, nx), float64, C-contiguous
+        Metres; NaN marks no-data.
+    tile_max : ndarray, shape (ceil((ny-1)/TILE), ceil((nx-1)/TILE))
+        Highest node of each tile of cells (nodes on the tile's border included); +inf when the tile
+        touches a no-data node.
+    x0, y0, dx, dy : float
+        Node (0, 0) and spacing.
+    z_min, z_max : float
+        Lowest and highest valid height, metres.
+    """
+
+    heights: np.ndarray
+    tile_max: np.ndarray
+    x0: float
+    y0: float
+    dx: float
+    dy: float
+    z_min: float
+    z_max: float
+
+    @classmethod
+    def from_array(cls, heights: np.ndarray, x0: float, y0: float, dx: float, dy: float) -> HeightGrid:
+        """Grid from heights (NaN = no-data) and the position of node (0, 0) and the spacing."""
+        h = np.ascontiguousarray(heights, dtype=np.float64)
+        if h.ndim != 2 or min(h.shape) < 2:
+            raise InputError(f"DEM heights must be a 2-D grid of at least 2 x 2 nodes, got shape {h.shape}")
+        if not (np.isfinite(dx) and np.isfinite(dy) and dx != 0 and dy != 0):
+            raise InputError(f"DEM spacing must be finite and non-zero, got dx={dx}, dy={dy}")
+        finite = np.isfinite(h)
+        if not finite.any():
+            raise InputError("DEM has no valid height (every node is no-data)")
+        ny, nx = h.shape
+        nty, ntx = -(-(ny - 1) // TILE), -(-(nx - 1) // TILE)
+        filled = np.where(finite, h, np.inf)
+        tile_max = np.empty((nty, ntx))
+        for ti in range(nty):
+            i0, i1 = ti * TILE, min((ti + 1) * TILE, ny - 1)
+            rows = filled[i0:i1 + 1]
+            for tj in range(ntx):
+                j0, j1 = tj * TILE, min((tj + 1) * TILE, nx - 1)
+                tile_max[ti, tj] = rows[:, j0:j1 + 1].max()
+        return cls(h, tile_max, float(x0), float(y0), float(dx), float(dy),
+                   float(h[finite].min()), float(h[finite].max()))
+
+    def to_grid(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional node coordinates (u = column, v = row) of horizontal positions."""
+        return (np.asarray(x, np.float64) - self.x0) / self.dx, (np.asarray(y, np.float64) - self.y0) / self.dy
+
+
+# --------------------------------------------------------------------------------------------- kernel
+def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
+    """Smallest s in [sa, sb] where the segment meets the bilinear patch of cell (i, j); -1 if none.
+
+    Returns -2.0 when the cell has a no-data corner.
+    """
+    h00 = h[i, j]
+    h01 = h[i, j + 1]
+    h10 = h[i + 1, j]
+    h11 = h[i + 1, j + 1]
+    if math.isnan(h00) or math.isnan(h01) or math.isnan(h10) or math.isnan(h11):
+        return -2.0
+    z_low = za + dz * sb if dz < 0.0 else za + dz * sa
+    if z_low > max(max(h00, h01), max(h10, h11)):
+        return -1.0
+    a0 = ua - j
+    b0 = va - i
+    p = h01 - h00
+    q = h10 - h00
+    r = h00 - h01 - h10 + h11
+    # f(s) = z(s) - h(s) = c0 + c1 s + c2 s^2
+    c0 = za - (h00 + p * a0 + q * b0 + r * a0 * b0)
+    c1 = dz - (p * du + q * dv + r * (a0 * dv + b0 * du))
+    c2 = -r * du * dv
+    fa = c0 + sa * (c1 + sa * c2)
+    if fa <= 0.0:
+        return sa
+    fb = c0 + sb * (c1 + sb * c2)
+    scale = abs(c0) + abs(c1) * max(abs(sa), abs(sb)) + abs(c2) * max(sa * sa, sb * sb)
+    if abs(c2) * (sb - sa) * (sb - sa) <= 1e-14 * scale:  # linear over the cell
+        if fb > 0.0:
+            return -1.0
+        s = sa - fa * (sb - sa) / (fb - fa)
+    else:
+        if fb > 0.0:
+            # both ends above: a hit only if the parabola dips below inside (convex, vertex inside)
+            if c2 <= 0.0:
+                return -1.0
+            sv = -c1 / (2.0 * c2)
+            if not (sa < sv < sb) or c0 + sv * (c1 + sv * c2) > 0.0:
+                return -1.0
+        disc = c1 * c1 - 4.0 * c2 * c0
+        if disc < 0.0:
+            disc = 0.0
+        qq = -0.5 * (c1 + math.copysign(math.sqrt(disc), c1))
+        r1 = qq / c2
+        r2 = c0 / qq if qq != 0.0 else r1
+        lo = min(r1, r2)
+        hi = max(r1, r2)
+        s = lo if (fb > 0.0 or lo >= sa - 1e-9 * (sb - sa)) else hi
+    if not (sa <= s <= sb):
+        s = min(max(s, sa), sb)
+        if fb <= 0.0 and abs(c0 + s * (c1 + s * c2)) > 1e-9 * scale:
+            # round-off in the root formula: bisection on the bracket [sa, sb] (f(sa) > 0 >= f(sb))
+            lo_s = sa
+            hi_s = sb
+            for _ in range(200):
+                mid = 0.5 * (lo_s + hi_s)
+                if mid <= lo_s or mid >= hi_s:
+                    break
+                if c0 + mid * (c1 + mid * c2) > 0.0:
+                    lo_s = mid
+                else:
+                    hi_s = mid
+            s = hi_s
+    # one Newton polish on the exact quadratic (round-off of the root formula)
+    fs = c0 + s * (c1 + s * c2)
+    ds = c1 + 2.0 * c2 * s
+    if ds != 0.0:
+        s2 = s - fs / ds
+        if sa <= s2 <= sb:
+            s = s2
+    return s
+
+
+def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
+    """First intersection of the segment (ua, va, za) -> (ub, vb, zb) (grid coordinates) with the DEM.
+
+    Returns ``(s, flag)``: the segment parameter in [0, 1] of the hit (NaN when the flag is not OK).
+    """
+    ny = h.shape[0]
+    nx = h.shape[1]
+    du = ub - ua
+    dv = vb - va
+    dz = zb - za
+    if not (dz < 0.0):
+        return math.nan, NO_INTERSECTION
+    if not (math.isfinite(ua) and math.isfinite(va) and math.isfinite(ub) and math.isfinite(vb)):
+        return math.nan, OUTSIDE_DEM
+    # clip to the node box [0, nx-1] x [0, ny-1]
+    s0 = 0.0
+    s1 = 1.0
+    eps = 1e-12
+    for axis in range(2):
+        a = ua if axis == 0 else va
+        d = du if axis == 0 else dv
+        top = (nx - 1.0) if axis == 0 else (ny - 1.0)
+        if d == 0.0:
+            if a < -eps or a > top + eps:
+                return math.nan, OUTSIDE_DEM
+        else:
+            t_lo = (0.0 - a) / d
+            t_hi = (top - a) / d
+            if t_lo > t_hi:
+                t_lo, t_hi = t_hi, t_lo
+            s0 = max(s0, t_lo)
+            s1 = min(s1, t_hi)
+    if s0 > 1e-12 or s1 < s0:
+        return math.nan, OUTSIDE_DEM  # the search starts outside the DEM: its first intersection is unknown
+    s0 = 0.0
+    leaves = s1 < 1.0 - 1e-12
+    # fast path: the whole segment inside the grid and inside one cell (coarse DEMs, short segments)
+    if not leaves:
+        j = min(int(ua), nx - 2)
+        i = min(int(va), ny - 2)
+        if j == min(int(ub), nx - 2) and i == min(int(vb), ny - 2):
+            s_hit = _cell_hit(h, i, j, ua, va, za, du, dv, dz, 0.0, 1.0)
+            if s_hit == -2.0:
+                return math.nan, NODATA
+            if s_hit >= 0.0:
+                return s_hit, OK
+            return math.nan, NO_INTERSECTION
+    # ---- coarse walk over tiles, fine walk over the cells of the tiles that may hold a hit
+    tile = TILE
+    nty = tile_max.shape[0]
+    ntx = tile_max.shape[1]
+    step_u = 1 if du > 0.0 else -1
+    step_v = 1 if dv > 0.0 else -1
+    u0 = min(max(ua, 0.0), nx - 1.0)
+    v0 = min(max(va, 0.0), ny - 1.0)
+    if du >= 0.0:
+        tj = int(math.floor(u0 / tile))
+    else:
+        tj = int(math.ceil(u0 / tile)) - 1
+    if dv >= 0.0:
+        ti = int(math.floor(v0 / tile))
+    else:
+        ti = int(math.ceil(v0 / tile)) - 1
+    tj = min(max(tj, 0), ntx - 1)
+    ti = min(max(ti, 0), nty - 1)
+    s_cur = s0
+    for _ in range(nty + ntx + 4):
+        # exit of tile (ti, tj)
+        if du > 0.0:
+            su = ((tj + 1) * tile - ua) / du
+        elif du < 0.0:
+            su = (tj * tile - ua) / du
+        else:
+            su = math.inf
+        if dv > 0.0:
+            sv = ((ti + 1) * tile - va) / dv
+        elif dv < 0.0:
+            sv = (ti * tile - va) / dv
+        else:
+            sv = math.inf
+        s_exit = min(min(su, sv), s1)
+        if s_exit < s_cur:
+            s_exit = s_cur
+        z_low = za + dz * s_exit
+        if tile_max[ti, tj] >= z_low:
+            # fine walk over the cells of this tile between s_cur and s_exit
+            um = ua + du * s_cur
+            vm = va + dv * s_cur
+            if du >= 0.0:
+                j = int(math.floor(um))
+            else:
+                j = int(math.ceil(um)) - 1
+            if dv >= 0.0:
+                i = int(math.floor(vm))
+            else:
+                i = int(math.ceil(vm)) - 1
+            j = min(max(j, max(tj * tile, 0)), min((tj + 1) * tile, nx - 1) - 1)
+            i = min(max(i, max(ti * tile, 0)), min((ti + 1) * tile, ny - 1) - 1)
+            c_cur = s_cur
+            for _k in range(2 * tile + 4):
+                if du > 0.0:
+                    cu = (j + 1 - ua) / du
+                elif du < 0.0:
+                    cu = (j - ua) / du
+                else:
+                    cu = math.inf
+                if dv > 0.0:
+                    cv = (i + 1 - va) / dv
+                elif dv < 0.0:
+                    cv = (i - va) / dv
+                else:
+                    cv = math.inf
+                c_exit = min(min(cu, cv), s_exit)
+                if c_exit < c_cur:
+                    c_exit = c_cur
+                s_hit = _cell_hit(h, i, j, ua, va, za, du, dv, dz, c_cur, c_exit)
+                if s_hit == -2.0:
+                    return math.nan, NODATA
+                if s_hit >= 0.0:
+                    return s_hit, OK
+                if c_exit >= s_exit:
+                    break
+                if cu < cv:
+                    j += step_u
+                    if j < tj * tile or j >= min((tj + 1) * tile, nx - 1):
+                        break
+                else:
+                    i += step_v
+                    if i < ti * tile or i >= min((ti + 1) * tile, ny - 1):
+                        break
+                c_cur = c_exit
+        if s_exit >= s1:
+            break
+        if su < sv:
+            tj += step_u
+            if tj < 0 or tj >= ntx:
+                break
+        else:
+            ti += step_v
+            if ti < 0 or ti >= nty:
+                break
+        s_cur = s_exit
+    if leaves:
+        return math.nan, OUTSIDE_DEM
+    return math.nan, NO_INTERSECTION
+
+
+def _segments_loop_py(h, tile_max, ua, va, za, ub, vb, zb, s_out, flag_out):
+    for k in prange(ua.shape[0]):
+        s, f = _first_hit(h, tile_max, ua[k], va[k], za[k], ub[k], vb[k], zb[k])
+        s_out[k] = s
+        flag_out[k] = f
+
+
+def _rays_loop_py(h, tile_max, x0, y0, dx, dy, z_top, z_bot, origin, direction, out, flag_out):
+    """ENU rays against the grid: segment from height z_top down to z_bot (or from the origin if lower)."""
+    for k in prange(origin.shape[0]):
+        ox = origin[k, 0]
+        oy = origin[k, 1]
+        oz = origin[k, 2]
+        ddx = direction[k, 0]
+        ddy = direction[k, 1]
+        ddz = direction[k, 2]
+        if not (ddz < 0.0) or not (oz > z_bot):
+            out[k, 0] = math.nan
+            out[k, 1] = math.nan
+            out[k, 2] = math.nan
+            flag_out[k] = NO_INTERSECTION
+            continue
+        lam_a = (z_top - oz) / ddz
+        if lam_a < 0.0:
+            lam_a = 0.0
+        lam_b = (z_bot - oz) / ddz
+        ua = (ox + lam_a * ddx - x0) / dx
+        va = (oy + lam_a * ddy - y0) / dy
+        ub = (ox + lam_b * ddx - x0) / dx
+        vb = (oy + lam_b * ddy - y0) / dy
+        za = oz + lam_a * ddz
+        zb = oz + lam_b * ddz
+        s, f = _first_hit(h, tile_max, ua, va, za, ub, vb, zb)
+        flag_out[k] = f
+        if f == OK:
+            lam = lam_a + s * (lam_b - lam_a)
+            out[k, 0] = ox + lam * ddx
+            out[k, 1] = oy + lam * ddy
+            out[k, 2] = oz + lam * ddz
+        else:
+            out[k, 0] = math.nan
+            out[k, 1] = math.nan
+            out[k, 2] = math.nan
+
+
+def _bilinear_py(h, u, v):
+    """Bilinear height at fractional node (u, v) with the cell's partial derivatives; flag for holes.
+
+    Returns ``(z, dz_du, dz_dv, flag)``.
+    """
+    ny = h.shape[0]
+    nx = h.shape[1]
+    if not (u >= 0.0 and u <= nx - 1.0 and v >= 0.0 and v <= ny - 1.0):
+        return math.nan, 0.0, 0.0, OUTSIDE_DEM
+    j = min(int(u), nx - 2)
+    i = min(int(v), ny - 2)
+    a = u - j
+    b = v - i
+    h00 = h[i, j]
+    h01 = h[i, j + 1]
+    h10 = h[i + 1, j]
+    h11 = h[i + 1, j + 1]
+    if math.isnan(h00) or math.isnan(h01) or math.isnan(h10) or math.isnan(h11):
+        return math.nan, 0.0, 0.0, NODATA
+    p = h01 - h00
+    q = h10 - h00
+    r = h00 - h01 - h10 + h11
+    return h00 + p * a + q * b + r * a * b, p + r * b, q + r * a, OK
+
+
+if NUMBA_AVAILABLE:
+    _cell_hit = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_hit_py)
+    _first_hit = njit(cache=True, fastmath=False, error_model="numpy")(_first_hit_py)
+    bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
+    _segments_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_segments_loop_py)
+    _rays_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
+else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
+    _cell_hit = _cell_hit_py
+    _first_hit = _first_hit_py
+    bilinear = _bilinear_py
+    _segments_loop = _segments_loop_py
+    _rays_loop = _rays_loop_py
+
+first_hit = _first_hit
+
+
+def intersect_segments(
+    grid: HeightGrid, ua: np.ndarray, va: np.ndarray, za: np.ndarray, ub: np.ndarray, vb: np.ndarray,
+    zb: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """First intersection of straight segments in grid coordinates with the DEM surface.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+    ua, va, za : ndarray, shape (N,)
+        Start of each segment (the end nearer the sensor): fractional node column, row and height (metres).
+    ub, vb, zb : ndarray, shape (N,)
+        End of each segment; ``zb < za``.
+
+    Returns
+    -------
+    s : ndarray, shape (N,)
+        Segment parameter of the hit in [0, 1] (point = start + s (end - start)); NaN unless the flag is OK.
+    flag : ndarray of int8, shape (N,)
+        :data:`OK`, :data:`OUTSIDE_DEM`, :data:`NODATA` or :data:`NO_INTERSECTION`.
+    """
+    arrays = [np.ascontiguousarray(np.ravel(a), dtype=np.float64) for a in (ua, va, za, ub, vb, zb)]
+    n = arrays[0].shape[0]
+    if any(a.shape[0] != n for a in arrays):
+        raise InputError("segment coordinate arrays must all have the same length")
+    s = np.empty(n)
+    flag = np.empty(n, np.int8)
+    for start in range(0, n, CHUNK):
+        sl = slice(start, min(start + CHUNK, n))
+        _segments_loop(grid.heights, grid.tile_max, *(a[sl] for a in arrays), s[sl], flag[sl])
+    return s, flag
+
+
+def intersect_rays(origin: np.ndarray, direction: np.ndarray, grid: HeightGrid) -> tuple[np.ndarray, np.ndarray]:
+    """First intersection of rays (local ENU, metres) with a DEM grid in the same frame.
+
+    Parameters
+    ----------
+    origin : ndarray, shape (N, 3)
+        Ray origins (perspective centres), metres.
+    direction : ndarray, shape (N, 3)
+        Directions (any length, pointing down: ``direction[:, 2] < 0``).
+    grid : HeightGrid
+        Heights are the ``up`` coordinate; ``x`` east, ``y`` north.
+
+    Returns
+    -------
+    points : ndarray, shape (N, 3)
+        Intersections, metres; NaN rows where the flag is not :data:`OK`.
+    flag : ndarray of int8, shape (N,)
+    """
+    origin = np.ascontiguousarray(origin, dtype=np.float64)
+    direction = np.ascontiguousarray(direction, dtype=np.float64)
+    if origin.ndim != 2 or origin.shape[1] != 3 or direction.shape != origin.shape:
+        raise InputError(f"origin and direction must both have shape (N, 3), got {origin.shape} and {direction.shape}")
+    n = origin.shape[0]
+    out = np.empty((n, 3))
+    flag = np.empty(n, np.int8)
+    # the slab [z_min, z_max] widened by a hair so a hit on the highest/lowest node is inside the segment
+    pad = 1e-9 * max(1.0, abs(grid.z_max), abs(grid.z_min))
+    z_top, z_bot = grid.z_max + pad, grid.z_min - pad
+    for start in range(0, n, CHUNK):
+        sl = slice(start, min(start + CHUNK, n))
+        _rays_loop(grid.heights, grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot,
+                   origin[sl], direction[sl], out[sl], flag[sl])
+    return out, flag
