@@ -97,8 +97,8 @@ def _grid(
         x0 = c * (w + hgap)
         y1 = 1.0 - r * (h + vgap)
         sx = "" if k == 0 else str(k + 1)
-        xa: dict = {"domain": [x0, x0 + w], "anchor": f"y{sx}"}
-        ya: dict = {"domain": [y1 - h, y1], "anchor": f"x{sx}"}
+        xa: dict = {"domain": [max(x0, 0.0), min(x0 + w, 1.0)], "anchor": f"y{sx}"}
+        ya: dict = {"domain": [max(y1 - h, 0.0), min(y1, 1.0)], "anchor": f"x{sx}"}
         if shared and k > 0:
             xa["matches"] = "x"
             ya["matches"] = "y"
@@ -123,8 +123,7 @@ def _label(name: str, labels: Mapping[str, str] | None) -> str:
 PLOTLY_CONFIG = {
     "displaylogo": False,
     "showSendToCloud": False,
-    "showEditInChartStudio": False,
-    "modeBarButtonsToRemove": ["sendDataToCloud", "editInChartStudio"],
+    "modeBarButtonsToRemove": ["sendDataToCloud"],
 }
 """Plotly config of every panel: no "share to cloud" / Chart Studio button, nothing leaves the machine."""
 STATUS_STYLE = {

@@ -1,5 +1,7 @@
-"""Plotly panels: the figures carry exactly the model's numbers, on one fixed diverging
-colour scale centred at 0; the colour helpers map values to the right ends."""
+"""Plotly panels: the figures carry exactly the model's numbers; colour scales are symmetric
+about 0 with limits from the residual percentiles (per map, shared, log magnitude) or fixed;
+points without a residual are named by why; titles keep clear of the maps; the export page
+opens offline.  The colour helpers map values to the right ends."""
 
 from __future__ import annotations
 
@@ -57,9 +59,10 @@ def test_residual_maps_hold_the_residuals(results):
     scene, scops, scps, evs = results
     fig = F.residual_maps(evs, scps, control=scops, shape=scene.shape, limit_px=0.02, max_points=None)
     for name, ev in evs.items():
-        (tr,) = [t for t in fig.data if t.name == name]
+        (tr,) = [t for t in fig.data if t.name == f"{name} row"]
         ok = np.isfinite(ev.residual_row)
-        np.testing.assert_array_equal(np.asarray(tr.customdata), ev.residual_row[ok])
+        np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 0], ev.residual_row[ok])
+        np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 1], ev.evaluated_index[ok])
         np.testing.assert_array_equal(np.asarray(tr.marker.color), ev.residual_row[ok])
         np.testing.assert_array_equal(np.asarray(tr.x), scps.col[ev.evaluated_index[ok]])
         np.testing.assert_array_equal(np.asarray(tr.y), scps.row[ev.evaluated_index[ok]])
@@ -89,10 +92,10 @@ def test_residual_maps_decimate_and_name_it(results):
     scene, scops, scps, evs = results
     fig = F.residual_maps(evs, scps, shape=scene.shape, max_points=100)
     ev = evs["toy_poly"]
-    (tr,) = [t for t in fig.data if t.name == "toy_poly"]
+    (tr,) = [t for t in fig.data if t.name == "toy_poly row"]
     assert len(tr.x) == 100
     pos = F.decimation_index(len(ev.residual_row), 100)
-    np.testing.assert_array_equal(np.asarray(tr.customdata), ev.residual_row[pos])
+    np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 0], ev.residual_row[pos])
     assert "100 drawn" in fig.layout.annotations[0].text
     assert np.all(np.diff(pos) > 0) and len(np.unique(np.diff(pos))) <= 2  # an even stride
 
@@ -104,9 +107,10 @@ def test_invalid_points_get_their_own_trace(results):
     res[[3, 10]] = np.nan
     bad = dataclasses.replace(ev, residual_row=res)
     fig = F.residual_maps({"m": bad}, scps, max_points=None)
-    (inv,) = [t for t in fig.data if t.name == "no valid row"]
+    (inv,) = [t for t in fig.data if "not converged" in t.name]
     np.testing.assert_array_equal(np.asarray(inv.x), scps.col[ev.evaluated_index[[3, 10]]])
-    (tr,) = [t for t in fig.data if t.name == "m"]
+    assert inv.name.endswith(f"2 of {len(res):,}") and "%" not in inv.name  # no percentage of two points
+    (tr,) = [t for t in fig.data if t.name == "m row"]
     assert len(tr.x) == len(res) - 2
     assert fig.layout.yaxis.autorange == "reversed"
 
@@ -148,3 +152,114 @@ def test_timing_bars(results):
 def test_empty_inputs():
     fig = F.residual_maps({}, simulate_points(build_scene("WSU"), 10, kind="scp"))
     assert fig.layout.annotations[0].text == "no method evaluated"
+
+
+def _scaled(ev, factor: float):
+    return dataclasses.replace(ev, residual_row=ev.residual_row * factor, residual_col=ev.residual_col * factor)
+
+
+def test_automatic_per_map_limits_show_structure_at_1e_10_and_10_px(results):
+    _, _, scps, evs = results
+    ev = evs["toy_poly"]
+    unit = ev.residual_row / np.nanmax(np.abs(ev.residual_row))
+    tiny = dataclasses.replace(ev, residual_row=unit * 1e-10)
+    big = dataclasses.replace(ev, residual_row=unit * 10.0)
+    fig = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None)  # default: per map
+    assert fig.layout.meta["mode"] == "per method"
+    for k, (name, e) in enumerate((("tiny", tiny), ("big", big))):
+        axis = fig.layout[f"coloraxis{k + 1 if k else ''}"]
+        lim = np.percentile(np.abs(e.residual_row), 99)
+        assert axis.cmax == pytest.approx(lim, rel=1e-12) and axis.cmin == pytest.approx(-lim, rel=1e-12)
+        assert f"{lim:.2g}" in axis.colorbar.title.text and "p99" in axis.colorbar.title.text
+        (tr,) = [t for t in fig.data if t.name == f"{name} row"]
+        assert tr.marker.coloraxis == f"coloraxis{k + 1 if k else ''}"
+        colours = diverging_rgb(np.asarray(tr.marker.color), axis.cmax)
+        assert len(np.unique(colours, axis=0)) > 20  # structure, not one flat colour
+    # shared: one limit over both maps -- the tiny map then sits at the centre colour
+    shared = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None, mode="shared")
+    lim = np.percentile(np.abs(np.concatenate([tiny.residual_row, big.residual_row])), 99)
+    assert shared.layout.coloraxis.cmax == pytest.approx(lim, rel=1e-12)
+    # log magnitude: log10 |residual| on one scale from the 1st to the 99th percentile
+    log = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None, mode="log magnitude")
+    (tr,) = [t for t in log.data if t.name == "tiny row"]
+    np.testing.assert_allclose(np.asarray(tr.marker.color), np.log10(np.abs(tiny.residual_row)), rtol=1e-12)
+    allv = np.log10(np.abs(np.concatenate([tiny.residual_row, big.residual_row])))
+    assert log.layout.coloraxis.cmin == pytest.approx(np.percentile(allv, 1))
+    assert log.layout.coloraxis.cmax == pytest.approx(np.percentile(allv, 99))
+    with pytest.raises(ValueError, match="mode"):
+        F.residual_maps({"big": big}, scps, mode="linear")
+
+
+def test_row_column_and_difference_maps(results):
+    _, _, scps, evs = results
+    fig = F.residual_maps(evs, scps, max_points=None, component="row and column",
+                          difference=("toy_poly", "toy_bisect"))
+    names = [t.name for t in fig.data if t.type == "scattergl" and t.showlegend is False]
+    assert names == ["toy_poly row", "toy_poly column", "toy_bisect row", "toy_bisect column",
+                     "toy_poly minus toy_bisect (row)"]
+    poly, bis = evs["toy_poly"], evs["toy_bisect"]
+    (col,) = [t for t in fig.data if t.name == "toy_poly column"]
+    ok = np.isfinite(poly.residual_col)
+    np.testing.assert_array_equal(np.asarray(col.customdata)[:, 0], poly.residual_col[ok])
+    (diff,) = [t for t in fig.data if t.name.startswith("toy_poly minus")]
+    idx = np.asarray(diff.customdata)[:, 1].astype(int)  # SCP indexes both methods evaluated
+    assert set(idx) <= set(bis.evaluated_index) and len(idx) == np.isfinite(bis.residual_row).sum()
+    pos_b = np.searchsorted(bis.evaluated_index, idx)
+    expect = poly.residual_row[idx] - bis.residual_row[pos_b]  # toy_poly evaluated every SCP
+    np.testing.assert_allclose(np.asarray(diff.customdata)[:, 0], expect, rtol=0, atol=0)
+
+
+def test_refused_points_are_named_refused(results):
+    _, _, scps, evs = results
+    ev = evs["toy_poly"]
+    res = ev.residual_row.copy()
+    res[:40] = np.nan
+    status = np.zeros(len(res), np.int8)
+    status[:37] = 1  # refused (outside the method's domain)
+    status[37:40] = 2  # not converged
+    fig = F.residual_maps({"m": dataclasses.replace(ev, residual_row=res)}, scps, status={"m": status},
+                          max_points=None)
+    (ref,) = [t for t in fig.data if "refused" in t.name]
+    (nc,) = [t for t in fig.data if "not converged" in t.name]
+    assert len(ref.x) == 37 and len(nc.x) == 3 and "invalid" not in ref.name
+    assert ref.name.endswith(f"37 ({100 * 37 / len(res):.2g}%)")
+    np.testing.assert_array_equal(np.asarray(ref.x), scps.col[ev.evaluated_index[:37]])
+
+
+def test_titles_keep_clear_of_the_maps_and_many_scops_stay_small(results):
+    scene, _, scps, evs = results
+    scops = simulate_points(scene, 1000, kind="scop")
+    five = {f"m{k}": evs["toy_poly"] for k in range(5)}
+    fig = F.residual_maps(five, scps, control=scops, shape=scene.shape, component="row and column")
+    meta = fig.layout.meta
+    height = fig.layout.height
+    inner = height - fig.layout.margin.t - fig.layout.margin.b
+    doms = [fig.layout[f"yaxis{k + 1 if k else ''}"].domain for k in range(10)]
+    tops = sorted({round(d[1], 9) for d in doms}, reverse=True)
+    bottoms = sorted({round(d[0], 9) for d in doms}, reverse=True)
+    assert len(tops) == 4  # 10 maps on 3 columns
+    for upper_bottom, lower_top in zip(bottoms[:-1], tops[1:], strict=True):
+        gap_px = (upper_bottom - lower_top) * inner
+        # room for a two-line title above the lower map and the tick labels under the upper one
+        assert gap_px >= meta["title_px"] + meta["axis_px"] - 1e-6
+    assert fig.layout.margin.t >= meta["title_px"]  # the first row's titles
+    for a in fig.layout.annotations:
+        assert a.yanchor == "bottom" and a.text.count("<br>") == 1
+    scop = [t for t in fig.data if t.name.startswith("SCOPs")]
+    assert scop[0].marker.size <= 4 and scop[0].showlegend  # small, and one legend entry hides them all
+    assert all(t.legendgroup == "scop" for t in scop)
+    hidden = F.residual_maps(five, scps, control=scops, show_control=False)
+    assert not [t for t in hidden.data if t.name.startswith("SCOPs")]
+
+
+def test_panels_html_opens_offline_and_is_deterministic(results):
+    scene, scops, scps, evs = results
+    figs = [("maps", F.residual_maps(evs, scps, control=scops, shape=scene.shape)), ("timing", F.timing_bars(evs))]
+    page = F.figures_html(figs, "export", ["note"])
+    assert page == F.figures_html(figs, "export", ["note"])  # no random element ids
+    assert "<script src=" not in page.replace(" ", "") and "cdn.plot.ly" not in page.split("/*")[0]
+    assert page.count('id="panel-') == 2 and "Plotly.newPlot" in page
+    assert len(page) > 3_000_000  # plotly.js inlined
+    assert F.PLOTLY_CONFIG["showSendToCloud"] is False
+    assert "sendDataToCloud" in F.PLOTLY_CONFIG["modeBarButtonsToRemove"]
+    assert '"showSendToCloud": false' in page and '"displaylogo": false' in page
