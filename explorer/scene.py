@@ -15,6 +15,7 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import SceneFileError, as_points, check_finite
+from explorer.geometry.bracket import bracket_best_scanline
 from explorer.geometry.collinearity import ideal_focal_plane
 from explorer.geometry.exterior import ExteriorOrientation, LineTiming
 from explorer.geometry.frames import LocalFrame
@@ -240,6 +241,36 @@ class Scene:
         )
         return float(np.linalg.norm(g[1] - g[0])), float(np.linalg.norm(g[3] - g[2]))
 
+    def ground_to_image(
+        self, ground: np.ndarray, *, row_guess: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Exact ground -> image of the model (:class:`explorer.sensor.Sensor`): the best scanline and
+        its column by bracketing the along-track residual (:func:`explorer.geometry.bracket.bracket_best_scanline`).
+
+        A reference projection independent of the methods under study (vectorised, tens of collinearity
+        evaluations per point): use :func:`explorer.methods.create` for speed.
+
+        Parameters
+        ----------
+        ground : ndarray, shape (N, 3)
+            Local ENU metres.
+        row_guess : ndarray, shape (N,), optional
+            Approximate rows, to start the bracket there.
+
+        Returns
+        -------
+        row, col : ndarray, shape (N,)
+            Fractional image coordinates (0-based, pixel centre); NaN where the residual has no root
+            within the image +- a quarter of its height.
+        """
+        row, col, _ = bracket_best_scanline(self, ground, row_guess=row_guess)
+        return row, col
+
+    def time_range(self) -> tuple[float, float]:
+        """(earliest, latest) exposure time of the image, seconds: the first and last scanline's outer edges."""
+        t = self.scanline_time(np.array([-0.5, self.n_rows - 0.5]))
+        return float(np.min(t)), float(np.max(t))
+
     def with_terrain(self, terrain: Terrain) -> Scene:
         """A copy of the scene on another terrain."""
         return replace(self, terrain=terrain)
@@ -292,17 +323,18 @@ class Scene:
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:
-        """Read a scene JSON file (an MPC scene, or a rigorous line-scan scene of
-        :mod:`explorer.real.linescan`); raises :class:`SceneFileError` on malformed files."""
+        """Read a scene JSON file of this class; raises :class:`SceneFileError` on malformed files.
+
+        :func:`explorer.real.load_scene` reads either an MPC scene or a rigorous line-scan scene."""
         path = Path(path)
         try:
             d = json.loads(path.read_text())
         except json.JSONDecodeError as exc:
             raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
         if cls is Scene and isinstance(d, dict) and d.get("format") == RIGOROUS_SCENE_FORMAT:
-            from explorer.real.linescan import RigorousLineScanScene
-
-            return RigorousLineScanScene.from_dict(d, source=str(path))
+            raise SceneFileError(
+                f"{path}: a rigorous line-scan scene; load it with explorer.load_scene (explorer.real.load_scene)"
+            )
         return cls.from_dict(d, source=str(path))
 
 

@@ -103,7 +103,8 @@ def _torch_kernels() -> tuple[types.FunctionType, types.FunctionType]:
         # np.clip(np.floor(x), 0, last).astype(int64); NaN maps to 0 (numpy's cast would be undefined)
         return torch.clamp(torch.nan_to_num(torch.floor(x), nan=0.0), 0, last).to(torch.int64)
 
-    names = dict(vars(kernels))
+    # the globals the evaluator and seed functions were defined with, with the table lookup swapped
+    names = {**kernels._ce_fixed_py.__globals__, **kernels._seed_full_py.__globals__}
     names["_table_index"] = _table_index
     seed_row = types.FunctionType(kernels._seed_row_py.__code__, names, "_seed_row_py")
     names["_seed_row_py"] = seed_row

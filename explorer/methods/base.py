@@ -10,8 +10,12 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
+import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -23,6 +27,9 @@ from explorer.points import PointSet
 from explorer.scene import Scene
 
 _REGISTRY: dict[str, type[BestScanlineMethod]] = {}
+_DISCOVERED = False
+#: Method modules that failed to import during :func:`discover`: module name -> error.
+DISCOVERY_ERRORS: dict[str, str] = {}
 _UNSET = object()
 
 
@@ -201,10 +208,29 @@ def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:
     return cls
 
 
+def discover() -> None:
+    """Import every method module of this package once so their ``@register`` decorators run.
+
+    Plug-in discovery by file name (``importlib``): every public module next to this one is a
+    method module.  A module that fails to import does not hide the others: its error is kept in
+    :data:`DISCOVERY_ERRORS` and reported with a warning (the test suite asserts there is none).
+    """
+    global _DISCOVERED
+    if _DISCOVERED:
+        return
+    for mod in pkgutil.iter_modules([str(Path(__file__).parent)]):
+        if mod.name in ("base",) or mod.name.startswith("_"):
+            continue
+        try:
+            importlib.import_module(f"{__package__}.{mod.name}")
+        except Exception as exc:  # noqa: BLE001 - reported, never swallowed silently
+            DISCOVERY_ERRORS[mod.name] = f"{type(exc).__name__}: {exc}"
+            warnings.warn(f"method module {mod.name!r} failed to import: {exc}", RuntimeWarning, stacklevel=2)
+    _DISCOVERED = True
+
+
 def registry() -> dict[str, type[BestScanlineMethod]]:
     """Name -> class of every registered method (after discovering all method modules)."""
-    from explorer.methods import discover
-
     discover()
     return dict(_REGISTRY)
 

@@ -25,10 +25,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from explorer.errors import InputError, as_points
-from explorer.geometry.exterior import ExteriorOrientation, LineTiming
+from explorer.geometry.bracket import bracket_best_scanline
+from explorer.geometry.collinearity import ideal_focal_plane
+from explorer.geometry.exterior import ExteriorOrientation, LineTiming, polyval_ascending
 from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
-from explorer.geometry.rotations import opk_from_rotation
+from explorer.geometry.rotations import opk_from_rotation, rotation_from_opk
 from explorer.geometry.terrain import FlatTerrain, Terrain
 from explorer.scene import Scene
 
@@ -59,20 +61,10 @@ def project_to_image(
     tol_rows: float = 1e-10,
     max_iter: int = 100,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ground -> image for any scene: solve the best-scanline condition by bracketing.
+    """Ground -> image for any scene by bracketing the best-scanline condition (Illinois regula falsi).
 
-    The along-track residual is sampled at ``n_bracket`` rows spanning the image plus
-    ``margin_fraction`` of its height on each side (or, with ``row_guess``, at the guess +- 2
-    rows first); the sign change is refined by the Illinois variant of regula falsi until the
-    bracket is below ``tol_rows``.  Independent of the best-scanline methods under study.
-
-    Parameters
-    ----------
-    scene : Scene
-    ground : ndarray, shape (N, 3)
-        Local ENU metres.
-    row_guess : ndarray, shape (N,), optional
-        Approximate rows (e.g. from an RPC); speeds up the bracket.
+    :func:`explorer.geometry.bracket.bracket_best_scanline` (the code behind
+    :meth:`explorer.scene.Scene.ground_to_image`), independent of the best-scanline methods under study.
 
     Returns
     -------
@@ -80,71 +72,8 @@ def project_to_image(
         Fractional image coordinates (0-based, pixel centre); NaN where no root was bracketed.
     converged : ndarray of bool, shape (N,)
     """
-    ground = as_points(ground)
-    n = ground.shape[0]
-
-    def f(rows: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        return scene.along_track_residual(ground[idx], scene.scanline_time(rows))
-
-    lo = np.full(n, np.nan)
-    hi = np.full(n, np.nan)
-    flo = np.full(n, np.nan)
-    fhi = np.full(n, np.nan)
-    todo = np.arange(n)
-    if row_guess is not None:
-        g = np.asarray(row_guess, dtype=np.float64)
-        ok = np.isfinite(g)
-        idx = todo[ok]
-        a, b = g[ok] - 2.0, g[ok] + 2.0
-        fa, fb = f(a, idx), f(b, idx)
-        good = np.sign(fa) != np.sign(fb)
-        lo[idx[good]], hi[idx[good]] = a[good], b[good]
-        flo[idx[good]], fhi[idx[good]] = fa[good], fb[good]
-        todo = np.setdiff1d(todo, idx[good])
-    if todo.size:
-        margin = margin_fraction * scene.n_rows
-        grid = np.linspace(-margin, scene.n_rows - 1 + margin, n_bracket)
-        vals = np.stack([f(np.full(todo.size, r), todo) for r in grid])  # (K, m)
-        change = np.sign(vals[:-1]) != np.sign(vals[1:])
-        has = change.any(axis=0)
-        k = np.argmax(change, axis=0)
-        cols = np.arange(todo.size)
-        sel = todo[has]
-        lo[sel], hi[sel] = grid[k[has]], grid[k[has] + 1]
-        flo[sel], fhi[sel] = vals[k[has], cols[has]], vals[k[has] + 1, cols[has]]
-    active = np.flatnonzero(np.isfinite(lo))
-    converged = np.zeros(n, dtype=bool)
-    side = np.zeros(n, dtype=np.int8)
-    for _ in range(max_iter):
-        if active.size == 0:
-            break
-        a, b, fa, fb = lo[active], hi[active], flo[active], fhi[active]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            m = (a * fb - b * fa) / (fb - fa)
-        bad = ~np.isfinite(m) | (m <= np.minimum(a, b)) | (m >= np.maximum(a, b))
-        m = np.where(bad, 0.5 * (a + b), m)
-        fm = f(m, active)
-        left = np.sign(fm) == np.sign(fa)  # root in [m, b]
-        new_lo = np.where(left, m, a)
-        new_hi = np.where(left, b, m)
-        new_flo = np.where(left, fm, fa)
-        new_fhi = np.where(left, fb, fm)
-        # Illinois: halve the function value of the end point that stayed twice in a row
-        s = side[active]
-        new_fhi = np.where(left & (s == 1), 0.5 * new_fhi, new_fhi)
-        new_flo = np.where(~left & (s == -1), 0.5 * new_flo, new_flo)
-        side[active] = np.where(left, 1, -1)
-        lo[active], hi[active], flo[active], fhi[active] = new_lo, new_hi, new_flo, new_fhi
-        done = (np.abs(new_hi - new_lo) < tol_rows) | (fm == 0)
-        converged[active[done]] = True
-        lo[active[fm == 0]] = m[fm == 0]
-        hi[active[fm == 0]] = m[fm == 0]
-        active = active[~done]
-    row = np.where(converged, 0.5 * (lo + hi), np.nan)
-    col = np.full(n, np.nan)
-    if converged.any():
-        col[converged] = scene.column_at_row(ground[converged], row[converged])
-    return row, col, converged
+    return bracket_best_scanline(scene, ground, row_guess=row_guess, margin_fraction=margin_fraction,
+                                 n_bracket=n_bracket, tol_rows=tol_rows, max_iter=max_iter)
 
 
 def image_residuals(

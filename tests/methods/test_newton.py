@@ -223,6 +223,7 @@ def test_compiled_evaluator_gives_the_same_rows(preset):
 def test_compiled_evaluator_on_a_curved_detector_and_without_numba_support(monkeypatch):
     """The general (non branch-free) evaluator inside the compiled loop, and the fallback to numpy."""
     import explorer.geometry.kernels as kernels
+    import explorer.geometry.kernels.residual as kernels_residual  # where collinearity_params_or_none reads it
 
     base = _curved_scene()
     inner = base.interior
@@ -240,6 +241,7 @@ def test_compiled_evaluator_on_a_curved_detector_and_without_numba_support(monke
     assert np.all(fast.valid)
     assert np.max(np.abs(fast.row - row)) < 1e-9 and np.max(np.abs(fast.col - col)) < 1e-8
     monkeypatch.setattr(kernels, "NUMBA_AVAILABLE", False)
+    monkeypatch.setattr(kernels_residual, "NUMBA_AVAILABLE", False)
     auto = create("nr", scene)
     assert auto.kernel_params is None
     with pytest.raises(ValueError, match="numba"):

@@ -1,0 +1,213 @@
+"""The package's import graph: no circle, one direction between layers (``docs/dev/architecture.md``).
+
+Imports are read from the source with :mod:`ast`, function-level ones included (a lazy import is still
+an edge: it may not close a circle either); ``if TYPE_CHECKING:`` blocks are type annotations only and
+are left out.  Discovery by ``importlib`` (the method registry) is not an import statement.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "explorer"
+
+#: Lowest first; a module may import only from its own layer or lower ones (docs/dev/architecture.md).
+LAYERS = [
+    ["explorer.errors", "explorer._numba", "explorer._lazy", "explorer._resources", "explorer._log",
+     "explorer.io_atomic"],
+    ["explorer.geometry"],
+    ["explorer.sensor", "explorer.scene"],
+    ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],
+    ["explorer.real", "explorer.methods"],
+    ["explorer.evaluate", "explorer.bench_defaults", "explorer.bench", "explorer.ortho", "explorer.warmup"],
+    ["explorer.panels", "explorer.scene3d"],
+    ["explorer.app", "explorer.notebook", "explorer.commands", "explorer.cli", "explorer.__main__", "explorer"],
+]
+MODEL_LAYERS = 6  # layers below this never import the GUI libraries
+GUI_LIBRARIES = ("viser", "plotly", "IPython", "ipywidgets")
+
+
+def module_files() -> dict[str, Path]:
+    """Dotted module name -> file, for every module of the package."""
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        out[".".join(parts)] = path
+    return out
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _import_nodes(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement at any depth, except inside ``if TYPE_CHECKING:``."""
+    found: list[ast.Import | ast.ImportFrom] = []
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node.test):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            found.append(node)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(tree)
+    return found
+
+
+def imported_names(name: str, path: Path) -> list[tuple[str, int]]:
+    """(absolute dotted name, line) of every runtime import of a module."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+    for node in _import_nodes(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(a.name, node.lineno) for a in node.names]
+            continue
+        if node.level:
+            base = package.split(".")[: len(package.split(".")) - node.level + 1]
+            module = ".".join(base + ([node.module] if node.module else []))
+        else:
+            module = node.module or ""
+        out += [(f"{module}.{a.name}", node.lineno) for a in node.names]
+    return out
+
+
+def import_graph() -> dict[str, dict[str, int]]:
+    """Module -> {imported package module: line}; ``from a import b`` counts as ``a.b`` when that is a module."""
+    files = module_files()
+
+    def resolve(dotted: str) -> str | None:
+        while dotted and dotted not in files:
+            dotted = dotted.rpartition(".")[0]
+        return dotted or None
+
+    graph: dict[str, dict[str, int]] = {}
+    for name, path in files.items():
+        edges: dict[str, int] = {}
+        for dotted, line in imported_names(name, path):
+            target = resolve(dotted)
+            if target is not None and target != name:
+                edges.setdefault(target, line)
+        graph[name] = edges
+    return graph
+
+
+def cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                found.append(sorted(comp))
+
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 10 * len(graph) + 100))
+    try:
+        for v in graph:
+            if v not in index:
+                strongconnect(v)
+    finally:
+        sys.setrecursionlimit(limit)
+    return found
+
+
+def layer_of(module: str) -> int | None:
+    best = None
+    for k, prefixes in enumerate(LAYERS):
+        for p in prefixes:
+            if module == p or module.startswith(p + "."):
+                if best is None or len(p) > best[1]:
+                    best = (k, len(p))
+    return None if best is None else best[0]
+
+
+def test_the_cycle_finder_finds_a_planted_circle():
+    graph = {"a": {"b": 1}, "b": {"c": 1}, "c": {"a": 1}, "d": {"a": 1}}
+    assert cycles(graph) == [["a", "b", "c"]]
+    graph["c"] = {}
+    assert cycles(graph) == []
+
+
+def test_function_level_and_relative_imports_are_edges_type_checking_ones_are_not(tmp_path):
+    src = (
+        "from typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n    from explorer.app import gui\n"
+        "def f():\n    from explorer.scene import Scene\n    from . import points\n"
+    )
+    path = tmp_path / "mod.py"
+    path.write_text(src)
+    names = [n for n, _ in imported_names("explorer.real.mod", path)]
+    assert "explorer.scene.Scene" in names and "explorer.real.points" in names
+    assert not any(n.startswith("explorer.app") for n in names)
+
+
+def test_no_import_circle_among_explorer_modules():
+    graph = import_graph()
+    assert len(graph) > 50  # the whole package was read
+    found = cycles(graph)
+    detail = [[f"{m} -> {t} (line {graph[m][t]})" for m in comp for t in graph[m] if t in comp] for comp in found]
+    assert found == [], f"import circles: {detail}"
+
+
+def test_imports_go_one_way_between_layers():
+    graph = import_graph()
+    unlayered = sorted(m for m in graph if layer_of(m) is None)
+    assert unlayered == [], f"modules not placed in a layer (tests/test_import_graph.py LAYERS): {unlayered}"
+    upward = [
+        f"{m} (layer {layer_of(m)}) imports {t} (layer {layer_of(t)}) at line {line}"
+        for m, edges in graph.items()
+        for t, line in edges.items()
+        if layer_of(t) > layer_of(m)
+    ]
+    assert upward == []
+
+
+def test_the_scene_imports_nothing_from_real_images():
+    graph = import_graph()
+    assert not [t for t in graph["explorer.scene"] if t.startswith("explorer.real")]
+
+
+@pytest.mark.parametrize("library", GUI_LIBRARIES)
+def test_the_model_layers_never_import_gui_libraries(library):
+    files = module_files()
+    offenders = [
+        f"{name}:{line}"
+        for name, path in files.items()
+        if (layer_of(name) or 0) < MODEL_LAYERS
+        for dotted, line in imported_names(name, path)
+        if dotted == library or dotted.startswith(library + ".")
+    ]
+    assert offenders == []
