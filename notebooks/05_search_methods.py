@@ -12,13 +12,25 @@
 # ---
 
 # %% [markdown]
-# # 02 · Search methods: how each one finds the best scanline
+# # 05 · Best scanline search: SS, BWS, interpolation, NR, CPP, GDP, hybrid
 #
-# **What this teaches.** Sequential search (SS) tries every line; the bisecting window search (BWS)
-# halves the window by the sign of x; their interpolated versions add one weighted mean
-# `t = (t1/|x1| + t2/|x2|) / (1/|x1| + 1/|x2|)`; Newton-Raphson (NR) follows the derivative; CPP, GDP and
-# the hybrid method work in object space. All methods share one interface (`explorer.methods.create`)
-# and are measured the same way: RMSE and dr_max of the row, collinearity evaluations (CE) per point, time.
+# **Learning goals.** After this notebook you can
+#
+# 1. describe how each search method finds the best scanline: sequential search (SS), bisecting
+#    window search (BWS), their sub-pixel interpolation (the weighted mean of Ahooei Nezhad et
+#    al. 2020), Newton-Raphson (NR), the central perspective plane (CPP), the generic
+#    differential (GDP) and the hybrid object-space method;
+# 2. predict their cost in collinearity evaluations (CE) per point and their accuracy, and check
+#    the prediction (BWS ≈ $\log_2 N$, the interpolation error bound);
+# 3. read a method's convergence from its search trace, in a plot and in the 3D view.
+#
+# **Prerequisites.** Notebooks 01 and 04 (the along-track residual and its derivative).
+#
+# **Estimated time.** 60 minutes.
+#
+# All methods share one interface (`explorer.methods.create(name, scene)`, then
+# `ground_to_image(points)`) and are measured the same way (`explorer.evaluate.evaluate_method`):
+# RMSE and $dr_{max}$ of the row, CE per point, time.
 
 # %% tags=["parameters"]
 import os
@@ -26,6 +38,7 @@ import os
 SMALL = os.environ.get("PUSHBROOM_NB_SMALL", "0") == "1"
 PRESET = "WSU"
 N_SCPS = 500 if SMALL else 20000
+N_SS = 100 if SMALL else 2000  # the sequential searches are slow: a subsample
 METHODS = ["ss", "bws", "ss-interp", "bws-interp", "nr", "cpp", "gdp", "hybrid", "exact", "csm-secant"]
 
 # %%
@@ -34,6 +47,7 @@ import plotly.graph_objects as go
 
 from explorer.evaluate import evaluate_method
 from explorer.methods import available, create
+from explorer.notebook import interactive_figure, scene_view
 from explorer.points import simulate_points
 from explorer.presets import build_scene
 
@@ -43,41 +57,99 @@ methods = [m for m in METHODS if m in available()]
 print("methods here:", methods)
 
 # %% [markdown]
-# ## How they converge: the rows visited for one point
-# `ground_to_image(points, trace=True)` records the candidate row per iteration.
-
-# %%
-point = scps.ground[len(scps) // 3][None, :]
-exact_row = scps.row[len(scps) // 3]
-fig = go.Figure()
-for name in methods:
-    res = create(name, scene).ground_to_image(point, trace=True)
-    if res.trace:
-        path = np.array([float(r[0]) for r in res.trace])
-        path = path[np.isfinite(path)]
-        fig.add_scatter(y=np.abs(path - exact_row) + 1e-12, mode="lines+markers", name=name)
-fig.update_layout(title="|row - exact row| per iteration", yaxis_type="log", xaxis_title="iteration")
-fig
-
-# %% [markdown]
 # ## Accuracy, cost and time on the same check points
 
 # %%
-rows = []
+evals = {}
 for name in methods:
-    ev = evaluate_method(create(name, scene), scps, max_points=min(len(scps), 2000 if name == "ss" else N_SCPS))
-    rows.append(ev.summary())
-    print(f"{name:11s} RMSE {ev.rmse_px:9.2e} px  dr_max {ev.dr_max_px:9.2e} px  "
-          f"CE/pt {ev.ce_evals_per_point:7.1f}  {ev.locate_s / ev.n_evaluated * 1e6:8.2f} us/pt")
+    n = N_SS if name.startswith("ss") else None
+    evals[name] = ev = evaluate_method(create(name, scene), scps, max_points=n)
+    print(f"{name:11s} RMSE {ev.rmse_px:9.2e} px  dr_max {ev.dr_max_px:9.2e} px  CE/pt {ev.ce_evals_per_point:7.1f} "
+          f"(max {ev.ce_evals_max:4d})  {ev.locate_s / ev.n_evaluated * 1e6:9.2f} µs/pt on {ev.n_evaluated} pts")
 
 # %%
-fig = go.Figure(go.Bar(x=[r["method"] for r in rows], y=[r["ce_evals_per_point"] for r in rows]))
-fig.update_layout(title="Collinearity evaluations per point", yaxis_type="log")
+fig = go.Figure(go.Bar(x=list(evals), y=[e.ce_evals_per_point for e in evals.values()]))
+fig.update_layout(title="Collinearity evaluations per point", yaxis_type="log", height=320)
 fig
 
 # %% [markdown]
+# ## Pixel-level searches: SS and BWS
+# SS evaluates $x$ on every line and keeps the line where $|x|$ is smallest: its error is at most
+# half a line. BWS brackets the sign change of $x$ and halves the bracket, so it needs about
+# $\lceil \log_2 N \rceil$ evaluations for $N$ lines.
+
+# %%
+log2n = int(np.ceil(np.log2(scene.n_rows)))
+print(f"log2({scene.n_rows}) rounds up to {log2n}; BWS spends {evals['bws'].ce_evals_per_point:.1f} CE per point")
+assert evals["ss"].dr_max_px <= 0.5 + 1e-9 and evals["bws"].dr_max_px <= 0.5 + 1e-9
+assert log2n - 1 <= evals["bws"].ce_evals_per_point <= log2n + 6
+
+# %% [markdown]
+# ## Sub-pixel interpolation (Ahooei Nezhad et al. 2020, Eq. 4)
+# Between the two lines $t_1, t_2$ where $x$ changes sign, take the weighted mean
+#
+# $$ t = \frac{t_1/|x_1| + t_2/|x_2|}{1/|x_1| + 1/|x_2|}. $$
+#
+# With opposite signs this is exactly the zero of the straight line through $(t_1, x_1)$ and
+# $(t_2, x_2)$, $t = t_1 - x_1 (t_2 - t_1)/(x_2 - x_1)$. Its error comes from the curvature of
+# $x(t)$ only: with $s = dx/dr$ and $a = d^2x/dr^2$ (per row), it is at most $|a| / (8 |s|)$ rows.
+
+# %%
+rng = np.random.default_rng(0)
+t1, x1 = rng.normal(size=1000), rng.uniform(0.01, 1, 1000)
+t2, x2 = t1 + 1, -rng.uniform(0.01, 1, 1000)
+weighted = (t1 / np.abs(x1) + t2 / np.abs(x2)) / (1 / np.abs(x1) + 1 / np.abs(x2))
+secant = t1 - x1 * (t2 - t1) / (x2 - x1)
+assert np.allclose(weighted, secant, rtol=0, atol=1e-12)
+
+ev = evals["bws-interp"]
+sub = scps.subset(ev.evaluated_index)
+r = sub.row
+t_r = scene.scanline_time
+xm, x0, xp = (scene.along_track_residual(sub.ground, t_r(r + k)) / scene.pixel_size_m for k in (-1.0, 0.0, 1.0))
+slope, curvature = (xp - xm) / 2, xp - 2 * x0 + xm
+bound = np.abs(curvature) / (8 * np.abs(slope))
+print(f"interpolation error max {np.nanmax(np.abs(ev.residual_row)):.2e} px, bound max {bound.max():.2e} px")
+assert np.all(np.abs(ev.residual_row) <= bound + 1e-10)
+assert evals["bws-interp"].ce_evals_per_point == evals["bws"].ce_evals_per_point + 1
+
+# %% [markdown]
+# ## How they converge: the rows visited for one point
+# `ground_to_image(points, trace=True)` records the candidate row per iteration. NR and CPP
+# converge quadratically from the image centre; BWS halves the window each step.
+
+# %%
+def convergence(index=len(scps) // 3, methods_shown=("bws", "nr", "cpp", "gdp", "hybrid", "csm-secant")):
+    point = scps.ground[index][None, :]
+    exact_row = scps.row[index]
+    fig = go.Figure()
+    for name in methods_shown:
+        if name not in methods:
+            continue
+        res = create(name, scene).ground_to_image(point, trace=True)
+        if res.trace:
+            path = np.array([float(np.asarray(a).ravel()[0]) for a in res.trace])
+            path = path[np.isfinite(path)]
+            fig.add_scatter(y=np.abs(path - exact_row) + 1e-12, mode="lines+markers", name=name)
+    return fig.update_layout(title=f"|row - exact row| per iteration, SCP {index} (row {exact_row:.2f})",
+                             yaxis_type="log", xaxis_title="iteration", height=350)
+
+
+interactive_figure(convergence, index=(0, len(scps) - 1, 1))
+
+# %% [markdown]
+# ## The search in 3D
+# The scanlines BWS visited for one point, first (yellow) to last (purple), around its ray.
+
+# %%
+scene_view(scene, point=(0.85 * scene.n_rows, 0.3 * scene.n_columns), method="bws")
+
+# %% [markdown]
 # ## Exercises
-# 1. SS and BWS are "pixel-level": their dr_max is at most one pixel. Which line do they return, the
-#    nearest or the one before the sign change? Check with the residuals.
-# 2. Run on `agile`. Which methods need more iterations, and why (think of what each assumes about x(t))?
-# 3. Count: how many CE does BWS need for an image of 8300 rows? Compare with log2(8300).
+# 1. SS and BWS are "pixel-level": their $dr_{max}$ is at most half a pixel. Which line do they
+#    return, the nearest one or the one before the sign change? Check on a few points with the
+#    residuals.
+# 2. Run on `agile` (large attitude rates). Which methods need more iterations, and why (think of
+#    what each assumes about $x(t)$)?
+# 3. How many CE does BWS need for an image of 8300 rows? Compare with $\log_2 8300$ and with what
+#    `create("bws", scene)` reports on a scene of that size.
