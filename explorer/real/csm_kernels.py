@@ -1,0 +1,498 @@
+"""Compiled kernels of the USGS CSM line-scan camera (:mod:`explorer.real.csm`).
+
+Scalar functions compiled with numba (``explorer._numba``) and the ``prange`` loops over points
+that call them.  Every formula follows the conventions of usgscsm's ``UsgsAstroLsSensorModel``
+(USGS Astrogeology, the Community Sensor Model plug-in for planetary pushbroom cameras), restated
+here from its documented behaviour; ``docs/conventions.md#usgs-csm-line-scan-isds`` has the
+mapping to this project's pixels.
+
+* line -> time: ``t = t_k + dt_k (line - line_k + 0.5)`` with ``k`` the last table entry whose
+  ``line_k <= line`` (the ISD's ``line_scan_rate``, times relative to ``center_ephemeris_time``);
+* positions: Lagrange interpolation over a window centred on the time's table interval, of the
+  stated order, reduced near the table ends as usgscsm's ``lagrangeInterp`` does (8 / 6 / 4 / 2
+  samples), on the table's own (not necessarily uniform) times;
+* rotations: quaternions ``(w, x, y, z)`` per table, interpolated by slerp between neighbours
+  (mode 0) or by the same Lagrange window on the components, renormalised (mode 1);
+* optical distortion: :func:`remove_distortion` (distorted -> undistorted focal plane) and
+  :func:`apply_distortion` (its inverse), closed form in the direction each model states it and
+  solved by Newton's method (finite-difference Jacobian, to 1e-14 mm) in the other.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from explorer._numba import njit, prange
+
+# distortion model codes
+DIST_NONE = 0
+DIST_RADIAL = 1
+DIST_TRANSVERSE = 2
+DIST_KAGUYALISM = 3
+DIST_DAWNFC = 4
+DIST_LROLROCNAC = 5
+
+STATUS_OK = 0
+STATUS_BEHIND = 1  # the ground point is behind the camera (or a non-finite evaluation)
+STATUS_NO_ROOT = 2  # the detector-line residual keeps its sign over the search window
+STATUS_MAX_ITER = 3
+STATUS_MISS = 4  # image -> ground: the ray misses the (inflated) ellipsoid
+
+NEWTON_TOL_MM = 1e-14
+DIST_MAX_ITER = 60
+
+
+# --------------------------------------------------------------------------- tables
+@njit(cache=True)
+def interval_index(times, t):
+    """Index ``i`` of the table interval ``[times[i], times[i+1])`` holding ``t`` (clamped)."""
+    n = times.shape[0]
+    if n < 2:
+        return 0
+    i = np.searchsorted(times, t, side="right") - 1
+    if i < 0:
+        i = 0
+    if i > n - 2:
+        i = n - 2
+    return i
+
+
+@njit(cache=True)
+def lagrange_window(n, index, max_order):
+    """usgscsm's window: (first sample, number of samples) around table interval ``index``."""
+    if index >= 3 and index < n - 4:
+        order = 8
+    elif index >= 2 and index < n - 3:
+        order = 6
+    elif index >= 1 and index < n - 2:
+        order = 4
+    else:
+        order = 2
+    if order > max_order:
+        order = max_order
+    if order > n:
+        order = n
+    first = index - order // 2 + 1
+    if first < 0:
+        first = 0
+    if first + order > n:
+        first = n - order
+    return first, order
+
+
+@njit(cache=True)
+def lagrange_eval(times, values, t, max_order, out):
+    """Lagrange interpolation of ``values`` (n, k) at ``t`` into ``out`` (k,)."""
+    n = times.shape[0]
+    k = values.shape[1]
+    for j in range(k):
+        out[j] = 0.0
+    if n == 1:
+        for j in range(k):
+            out[j] = values[0, j]
+        return
+    first, order = lagrange_window(n, interval_index(times, t), max_order)
+    for a in range(first, first + order):
+        w = 1.0
+        for b in range(first, first + order):
+            if b != a:
+                w *= (t - times[b]) / (times[a] - times[b])
+        for j in range(k):
+            out[j] += w * values[a, j]
+
+
+@njit(cache=True)
+def quaternion_at(times, quats, t, mode, max_order, q):
+    """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` into ``q`` (4,).
+
+    ``mode`` 0: slerp between the two samples around ``t`` (linear extrapolation of the angle
+    beyond the table); 1: Lagrange on the components (usgscsm), renormalised.
+    """
+    n = times.shape[0]
+    if n == 1:
+        for j in range(4):
+            q[j] = quats[0, j]
+        return
+    if mode == 1:
+        lagrange_eval(times, quats, t, max_order, q)
+    else:
+        i = interval_index(times, t)
+        s = (t - times[i]) / (times[i + 1] - times[i])
+        dot = 0.0
+        for j in range(4):
+            dot += quats[i, j] * quats[i + 1, j]
+        if dot > 1.0:
+            dot = 1.0
+        theta = np.arccos(dot)
+        st = np.sin(theta)
+        if st < 1e-12:
+            w0 = 1.0 - s
+            w1 = s
+        else:
+            w0 = np.sin((1.0 - s) * theta) / st
+            w1 = np.sin(s * theta) / st
+        for j in range(4):
+            q[j] = w0 * quats[i, j] + w1 * quats[i + 1, j]
+    nrm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for j in range(4):
+        q[j] /= nrm
+
+
+@njit(cache=True)
+def quaternion_matrix(q, r):
+    """Active rotation matrix ``r`` (3, 3) of the unit quaternion ``q = (w, x, y, z)``."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    r[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    r[0, 1] = 2.0 * (x * y - z * w)
+    r[0, 2] = 2.0 * (x * z + y * w)
+    r[1, 0] = 2.0 * (x * y + z * w)
+    r[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    r[1, 2] = 2.0 * (y * z - x * w)
+    r[2, 0] = 2.0 * (x * z - y * w)
+    r[2, 1] = 2.0 * (y * z + x * w)
+    r[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def line_time(line, rate_lines, rate_times, rate_periods):
+    """CSM image time of a (fractional) line: ``t_k + dt_k (line - line_k + 0.5)``."""
+    k = np.searchsorted(rate_lines, line, side="right") - 1
+    if k < 0:
+        k = 0
+    return rate_times[k] + rate_periods[k] * (line - rate_lines[k] + 0.5)
+
+
+# --------------------------------------------------------------------------- exterior
+@njit(cache=True)
+def exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rotate_position,
+                s_out, m_out):
+    """Perspective centre ``s_out`` (3,) body-fixed metres and camera -> body rotation ``m_out`` (3, 3).
+
+    ``M = B(t) P(t)^T`` with ``P = C_p Q(qp(t))`` the J2000 -> sensor rotation and
+    ``B = C_b Q(qb(t))`` the J2000 -> body rotation; positions given in J2000
+    (``rotate_position``) are rotated by ``B(t)``.
+    """
+    p = np.empty(3)
+    lagrange_eval(pos_t, pos, t, pos_order, p)
+    q = np.empty(4)
+    rq = np.empty((3, 3))
+    quaternion_at(qb_t, qb, t, att_mode, att_order, q)
+    quaternion_matrix(q, rq)
+    b = cb @ rq
+    quaternion_at(qp_t, qp, t, att_mode, att_order, q)
+    quaternion_matrix(q, rq)
+    pm = cp @ rq
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                acc += b[i, k] * pm[j, k]
+            m_out[i, j] = acc
+    if rotate_position:
+        for i in range(3):
+            s_out[i] = b[i, 0] * p[0] + b[i, 1] * p[1] + b[i, 2] * p[2]
+    else:
+        for i in range(3):
+            s_out[i] = p[i]
+
+
+# --------------------------------------------------------------------------- distortion
+@njit(cache=True)
+def _closed_form(model, c, x, y):
+    """The direction of each model that has a closed form (see :func:`closed_form_is_removal`)."""
+    if model == DIST_RADIAL:
+        rr = x * x + y * y
+        dr = c[0] + rr * (c[1] + rr * c[2])
+        return x * (1.0 - dr), y * (1.0 - dr)
+    if model == DIST_TRANSVERSE:
+        f1, f2, f3, f4 = x, y, x * x, x * y
+        f5, f6, f7, f8, f9 = y * y, x * x * x, x * x * y, x * y * y, y * y * y
+        ox = c[0] + c[1] * f1 + c[2] * f2 + c[3] * f3 + c[4] * f4 + c[5] * f5 + c[6] * f6 + c[7] * f7 \
+            + c[8] * f8 + c[9] * f9
+        oy = c[10] + c[11] * f1 + c[12] * f2 + c[13] * f3 + c[14] * f4 + c[15] * f5 + c[16] * f6 \
+            + c[17] * f7 + c[18] * f8 + c[19] * f9
+        return ox, oy
+    if model == DIST_KAGUYALISM:
+        r2 = x * x + y * y
+        r = np.sqrt(r2)
+        r3 = r2 * r
+        dx = c[1] + c[2] * r + c[3] * r2 + c[4] * r3
+        dy = c[6] + c[7] * r + c[8] * r2 + c[9] * r3
+        return x + dx + c[0], y + dy + c[5]
+    if model == DIST_DAWNFC:
+        r2 = x * x + y * y
+        return x * (1.0 + c[0] * r2), y * (1.0 + c[0] * r2)
+    if model == DIST_LROLROCNAC:
+        return x, y / (1.0 + c[0] * y * y)
+    return x, y
+
+
+@njit(cache=True)
+def closed_form_is_removal(model):
+    """True where the closed form maps distorted -> undistorted (radial, Kaguya LISM, LRO NAC)."""
+    return model == DIST_RADIAL or model == DIST_KAGUYALISM or model == DIST_LROLROCNAC
+
+
+@njit(cache=True)
+def _solve_closed_form(model, c, tx, ty):
+    """Solve ``closed_form(x, y) = (tx, ty)`` by Newton (finite-difference Jacobian)."""
+    x, y = tx, ty
+    ok = False
+    for _ in range(DIST_MAX_ITER):
+        fx, fy = _closed_form(model, c, x, y)
+        ex, ey = fx - tx, fy - ty
+        h = 1e-7 * (abs(x) + abs(y) + 1e-3)
+        ax, ay = _closed_form(model, c, x + h, y)
+        bx, by = _closed_form(model, c, x, y + h)
+        j00, j10 = (ax - fx) / h, (ay - fy) / h
+        j01, j11 = (bx - fx) / h, (by - fy) / h
+        det = j00 * j11 - j01 * j10
+        if det == 0.0 or not np.isfinite(det):
+            break
+        dx = (j11 * ex - j01 * ey) / det
+        dy = (j00 * ey - j10 * ex) / det
+        x -= dx
+        y -= dy
+        if abs(dx) + abs(dy) <= NEWTON_TOL_MM * (1.0 + abs(x) + abs(y)):
+            ok = True
+            break
+    if not ok:
+        return np.nan, np.nan
+    return x, y
+
+
+@njit(cache=True)
+def remove_distortion(model, c, x, y):
+    """Distorted -> undistorted focal-plane coordinates (mm)."""
+    if model == DIST_NONE:
+        return x, y
+    if closed_form_is_removal(model):
+        return _closed_form(model, c, x, y)
+    return _solve_closed_form(model, c, x, y)
+
+
+@njit(cache=True)
+def apply_distortion(model, c, x, y):
+    """Undistorted -> distorted focal-plane coordinates (mm)."""
+    if model == DIST_NONE:
+        return x, y
+    if closed_form_is_removal(model):
+        return _solve_closed_form(model, c, x, y)
+    return _closed_form(model, c, x, y)
+
+
+@njit(parallel=True, cache=True)
+def distortion_many(model, c, x, y, remove, ox, oy):
+    """Vectorised :func:`remove_distortion` (``remove``) or :func:`apply_distortion`."""
+    for i in prange(x.shape[0]):
+        if remove:
+            ox[i], oy[i] = remove_distortion(model, c, x[i], y[i])
+        else:
+            ox[i], oy[i] = apply_distortion(model, c, x[i], y[i])
+
+
+# --------------------------------------------------------------------------- camera
+# ``cam``: float64 array of the scalar camera constants, see explorer.real.csm.CsmCamera._cam
+C_FOCAL, C_LINE_ORIGIN, C_SAMPLE_ORIGIN, C_START_LINE, C_START_SAMPLE = 0, 1, 2, 3, 4
+C_LINE_SUM, C_SAMPLE_SUM, C_TL0, C_TL1, C_TL2, C_TS0, C_TS1, C_TS2 = 5, 6, 7, 8, 9, 10, 11, 12
+C_A, C_B, C_N_LINES, C_N_SAMPLES, C_SLOPE, C_LOOK = 13, 14, 15, 16, 17, 18
+N_CAM = 19
+
+
+@njit(cache=True)
+def detector_residual(X, Y, Z, line, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb,
+                      att_mode, att_order, rot_pos, dmodel, dc):
+    """Detector-line residual (image lines) and sample of a ground point seen at ``line``.
+
+    Returns ``(residual, sample, ok)``: the residual is usgscsm's ``calcDetectorLineErr`` (zero
+    at the best line); ``ok`` is False behind the camera or for a non-finite evaluation.
+    """
+    t = line_time(line, rl, rt, rp)
+    s = np.empty(3)
+    m = np.empty((3, 3))
+    exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, s, m)
+    sg = cam[C_LOOK]
+    dx, dy, dz = sg * (X - s[0]), sg * (Y - s[1]), sg * (Z - s[2])
+    vx = m[0, 0] * dx + m[1, 0] * dy + m[2, 0] * dz
+    vy = m[0, 1] * dx + m[1, 1] * dy + m[2, 1] * dz
+    vz = m[0, 2] * dx + m[1, 2] * dy + m[2, 2] * dz
+    if not vz < 0.0:  # the camera looks along C_LOOK * (-x, -y, -f)
+        return np.nan, np.nan, False
+    f = cam[C_FOCAL]
+    xu = f * vx / vz
+    yu = f * vy / vz
+    xd, yd = apply_distortion(dmodel, dc, xu, yu)
+    det_line = cam[C_TL0] + cam[C_TL1] * xd + cam[C_TL2] * yd + cam[C_LINE_ORIGIN] - cam[C_START_LINE]
+    det_sample = cam[C_TS0] + cam[C_TS1] * xd + cam[C_TS2] * yd + cam[C_SAMPLE_ORIGIN] - cam[C_START_SAMPLE]
+    res = det_line / cam[C_LINE_SUM]
+    sample = det_sample / cam[C_SAMPLE_SUM]
+    ok = np.isfinite(res) and np.isfinite(sample)
+    return res, sample, ok
+
+
+@njit(parallel=True, cache=True)
+def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, cam, rl, rt, rp, pos_t, pos,
+                       pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, dmodel, dc,
+                       line_out, sample_out, status_out, evals_out):
+    """Best line per ground point: safeguarded secant on the detector-line residual.
+
+    From the seed (clipped to the window), a Newton step with the camera's typical slope
+    ``d residual / d line`` (``cam[C_SLOPE]``), then secant steps; once two residuals differ in
+    sign the root is bracketed, the bracket shrinks with every evaluation and a step leaving it
+    is replaced by bisection.  Stops when the step is at most ``tol`` lines and returns the last
+    iterate plus that step (the sample is the last evaluation's: it moves by less than ``tol``
+    times ``d sample / d line``).  A step pushed against a window end twice means no root.
+    """
+    for i in prange(ground.shape[0]):
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
+        x0 = min(max(seed_line[i], window_lo), window_hi)
+        f0, s0, ok = detector_residual(X, Y, Z, x0, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t,
+                                       qb, cb, att_mode, att_order, rot_pos, dmodel, dc)
+        n_eval = 1
+        status = STATUS_MAX_ITER
+        line = np.nan
+        sample = np.nan
+        if not ok:
+            status = STATUS_BEHIND
+        else:
+            slope = cam[C_SLOPE]
+            bracket = False
+            a, fa, b = window_lo, 0.0, window_hi
+            x1 = min(max(x0 - f0 / slope, window_lo), window_hi)
+            if x1 == x0:
+                x1 = min(max(x0 + (1.0 if -f0 / slope > 0 else -1.0) * 1e-3, window_lo), window_hi)
+            for _ in range(max_iter):
+                f1, s1, ok = detector_residual(X, Y, Z, x1, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp,
+                                               qb_t, qb, cb, att_mode, att_order, rot_pos, dmodel, dc)
+                n_eval += 1
+                if not ok:
+                    status = STATUS_BEHIND
+                    break
+                if f1 == 0.0:
+                    line, sample, status = x1, s1, STATUS_OK
+                    break
+                if not bracket and ((f0 < 0.0) != (f1 < 0.0)):
+                    bracket = True
+                    if x0 < x1:
+                        a, fa, b = x0, f0, x1
+                    else:
+                        a, fa, b = x1, f1, x0
+                elif bracket and a < x1 < b:
+                    if (f1 < 0.0) == (fa < 0.0):
+                        a, fa = x1, f1
+                    else:
+                        b = x1
+                denom = f1 - f0
+                step = -f1 * (x1 - x0) / denom if denom != 0.0 else -f1 / slope
+                x2 = x1 + step
+                if bracket and not (a < x2 < b):
+                    x2 = 0.5 * (a + b)
+                    step = x2 - x1
+                if abs(step) <= tol:
+                    line, sample, status = x2, s1, STATUS_OK
+                    break
+                x2c = min(max(x2, window_lo), window_hi)
+                if x2c == x1:  # pushed against a window end: the residual keeps its sign over the window
+                    status = STATUS_NO_ROOT
+                    break
+                x0, f0 = x1, f1
+                x1 = x2c
+        if status != STATUS_OK:
+            line = np.nan
+            sample = np.nan
+        line_out[i] = line
+        sample_out[i] = sample
+        status_out[i] = status
+        evals_out[i] = n_eval
+
+
+@njit(parallel=True, cache=True)
+def image_to_ground_nb(line, sample, height, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb,
+                       att_mode, att_order, rot_pos, dmodel, dc, ground_out, status_out, centre_out, look_out):
+    """Lines of sight of image points intersected with the ellipsoid inflated by ``height``.
+
+    The ellipsoid has semi-axes ``(a + h, a + h, b + h)`` as in usgscsm's ``losEllipsoidIntersect``;
+    the nearest intersection in front of the camera is returned; a ray that misses is NaN with
+    ``STATUS_MISS`` (usgscsm would return the point of the ray closest to the surface instead).
+    """
+    for i in prange(line.shape[0]):
+        t = line_time(line[i], rl, rt, rp)
+        s = np.empty(3)
+        m = np.empty((3, 3))
+        exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, s, m)
+        det_sample = sample[i] * cam[C_SAMPLE_SUM] + cam[C_START_SAMPLE]
+        det_line = cam[C_START_LINE]  # the detector line: usgscsm passes line 0 to the focal-plane mapping
+        t1 = det_line - cam[C_LINE_ORIGIN] - cam[C_TL0]
+        t2 = det_sample - cam[C_SAMPLE_ORIGIN] - cam[C_TS0]
+        m11, m12, m21, m22 = cam[C_TL1], cam[C_TL2], cam[C_TS1], cam[C_TS2]
+        det = m11 * m22 - m12 * m21
+        xd = (m22 * t1 - m12 * t2) / det
+        yd = (-m21 * t1 + m11 * t2) / det
+        xu, yu = remove_distortion(dmodel, dc, xd, yd)
+        cx, cy, cz = -xu, -yu, -cam[C_FOCAL]
+        nrm = cam[C_LOOK] / np.sqrt(cx * cx + cy * cy + cz * cz)
+        cx, cy, cz = cx * nrm, cy * nrm, cz * nrm
+        lx = m[0, 0] * cx + m[0, 1] * cy + m[0, 2] * cz
+        ly = m[1, 0] * cx + m[1, 1] * cy + m[1, 2] * cz
+        lz = m[2, 0] * cx + m[2, 1] * cy + m[2, 2] * cz
+        centre_out[i, 0], centre_out[i, 1], centre_out[i, 2] = s[0], s[1], s[2]
+        look_out[i, 0], look_out[i, 1], look_out[i, 2] = lx, ly, lz
+        ap = cam[C_A] + height[i]
+        bp = cam[C_B] + height[i]
+        k = ap * ap / (bp * bp)
+        qa = lx * lx + ly * ly + k * lz * lz
+        qb2 = lx * s[0] + ly * s[1] + k * lz * s[2]  # half of usgscsm's bt
+        qc = s[0] * s[0] + s[1] * s[1] + k * s[2] * s[2] - ap * ap
+        disc = qb2 * qb2 - qa * qc
+        scale = np.nan
+        if disc >= 0.0 and np.isfinite(disc):
+            sq = np.sqrt(disc)
+            # numerically stable roots of qa s^2 + 2 qb2 s + qc = 0
+            if qb2 >= 0.0:
+                r1 = (-qb2 - sq) / qa
+                r2 = qc / (qa * r1) if r1 != 0.0 else np.nan
+            else:
+                r2 = (-qb2 + sq) / qa
+                r1 = qc / (qa * r2) if r2 != 0.0 else np.nan
+            lo_r, hi_r = min(r1, r2), max(r1, r2)
+            if lo_r > 0.0:
+                scale = lo_r
+            elif hi_r > 0.0:
+                scale = hi_r
+        if np.isfinite(scale):
+            ground_out[i, 0] = s[0] + scale * lx
+            ground_out[i, 1] = s[1] + scale * ly
+            ground_out[i, 2] = s[2] + scale * lz
+            status_out[i] = STATUS_OK
+        else:
+            ground_out[i, 0] = np.nan
+            ground_out[i, 1] = np.nan
+            ground_out[i, 2] = np.nan
+            status_out[i] = STATUS_MISS
+
+
+@njit(parallel=True, cache=True)
+def exterior_many(times, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+                  centre_out, rot_out):
+    """Perspective centres (N, 3) and camera -> body rotations (N, 3, 3) at times (N,)."""
+    for i in prange(times.shape[0]):
+        s = np.empty(3)
+        m = np.empty((3, 3))
+        exterior_at(times[i], pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+                    s, m)
+        for a in range(3):
+            centre_out[i, a] = s[a]
+            for b in range(3):
+                rot_out[i, a, b] = m[a, b]
+
+
+@njit(parallel=True, cache=True)
+def residual_many(ground, lines, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode,
+                  att_order, rot_pos, dmodel, dc, res_out, sample_out):
+    """:func:`detector_residual` for many (point, line) pairs (NaN where invalid)."""
+    for i in prange(ground.shape[0]):
+        r, s, ok = detector_residual(ground[i, 0], ground[i, 1], ground[i, 2], lines[i], cam, rl, rt, rp, pos_t,
+                                     pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+                                     dmodel, dc)
+        res_out[i] = r if ok else np.nan
+        sample_out[i] = s if ok else np.nan
