@@ -1,14 +1,76 @@
 """pushbroom-explorer: object-to-image transformation of linear pushbroom satellite images.
 
-The model layer (``explorer.geometry``, ``explorer.scene``, ``explorer.points``,
-``explorer.methods``, ``explorer.rpc``) depends only on numpy, scipy and torch; the
-3D scene (``explorer.scene3d``) and the Plotly panels (``explorer.panels``) only read
-its results.  Conventions (pixel centre, row <-> time, frames, rotation order) are
-written once in ``docs/conventions.md``.
+The names a notebook or script needs are importable from here (``from explorer import build_scene``);
+they are imported on first use (module ``__getattr__``), so ``import explorer`` stays fast and the
+command line starts without numpy-heavy imports.  Layers and the one direction of imports:
+``docs/dev/architecture.md``; conventions (pixel centre, row <-> time, frames, rotation order):
+``docs/conventions.md``.
+
+=====================  ==================================================================
+scenes                 :class:`Scene`, :func:`build_scene`, :func:`preset_ids`,
+                       :func:`default_preset_id`, :func:`load_scene`, :class:`Sensor`,
+                       :class:`LocalFrame`
+points                 :func:`simulate_points`, :func:`image_grid`, :class:`PointSet`
+methods                :func:`available`, :func:`create`, :func:`registry`,
+                       :class:`BestScanlineMethod`, :class:`ScanlineResult`
+evaluation             :func:`evaluate_method`, :class:`Evaluation`, :func:`run_bench`
+RPC models             :func:`read_rpc`, :class:`RationalFunctionModel`, :class:`RPCSensor`
+real images            :func:`scene_from_rpc`, :func:`mpc_scene_from_sensor`,
+                       :class:`RigorousLineScanScene`
+errors                 :class:`InputError`, :class:`SceneFileError`, :class:`ConvergenceError`
+=====================  ==================================================================
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from explorer.errors import ConvergenceError, InputError, SceneFileError
 
 __version__ = "0.1.0"
 
-__all__ = ["ConvergenceError", "InputError", "SceneFileError", "__version__"]
+#: Public name -> module that defines it (imported on first access).
+_LAZY: dict[str, str] = {
+    "Scene": "explorer.scene",
+    "Sensor": "explorer.sensor",
+    "LocalFrame": "explorer.geometry.frames",
+    "build_scene": "explorer.presets",
+    "preset_ids": "explorer.presets",
+    "default_preset_id": "explorer.presets",
+    "load_scene": "explorer.real.linescan",
+    "PointSet": "explorer.points",
+    "image_grid": "explorer.points",
+    "simulate_points": "explorer.points",
+    "available": "explorer.methods",
+    "create": "explorer.methods",
+    "registry": "explorer.methods",
+    "BestScanlineMethod": "explorer.methods",
+    "ScanlineResult": "explorer.methods",
+    "Evaluation": "explorer.evaluate",
+    "evaluate_method": "explorer.evaluate",
+    "run_bench": "explorer.bench",
+    "RationalFunctionModel": "explorer.rpc",
+    "read_rpc": "explorer.rpc",
+    "RPCSensor": "explorer.rpc.sensor",
+    "scene_from_rpc": "explorer.real.from_rpc",
+    "mpc_scene_from_sensor": "explorer.real.mpc_fit",
+    "RigorousLineScanScene": "explorer.real.linescan",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name's module on first access and cache the name here."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'explorer' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+__all__ = ["ConvergenceError", "InputError", "SceneFileError", "__version__", *sorted(_LAZY)]
