@@ -8,7 +8,8 @@ commands:
 
 * ``--scene``: :func:`explorer.real.linescan.load_scene` (MPC or rigorous line-scan JSON);
 * ``--rpc``: :func:`explorer.real.from_rpc.scene_from_rpc` (MPC space resection, the papers'
-  pipeline; with ``--dem`` the GCP heights and the terrain come from the DEM);
+  pipeline, degree 3 -- agile Pleiades / SPOT need it for sub-pixel agreement, see
+  ``docs/real_images.md``; with ``--dem`` the GCP heights and the terrain come from the DEM);
 * ``--dimap`` / ``--dg``: the rigorous line-scan model of the metadata
   (:func:`explorer.real.dimap.rigorous_scene_from_dimap`,
   :func:`explorer.real.worldview.rigorous_scene_from_dg`) converted to an MPC scene
@@ -40,7 +41,8 @@ SOURCE_KINDS = ("preset", "scene", "rpc", "dimap", "dg", "isd")
 DEM_KINDS = ("rpc", "dimap", "dg")
 """Sources that take ``--dem``."""
 MPC_DEGREE = 3
-"""Degree of the MPC fitted to a rigorous DIMAP / DG model (as ``scene from-dimap --degree``)."""
+"""Degree of the MPC fitted to an RPC (``scene from-rpc --degree 3``) or to a rigorous DIMAP / DG model
+(as ``scene from-dimap --degree``)."""
 COVERAGE_GRID = 21
 """Image points per side checked against the DEM (the footprint must be covered)."""
 
@@ -217,7 +219,7 @@ def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
         from explorer.real.from_rpc import scene_from_rpc
 
         try:
-            scene, report = scene_from_rpc(path, dem=dem, n_check=400, seed=0)
+            scene, report = scene_from_rpc(path, dem=dem, degree=MPC_DEGREE, n_check=400, seed=0)
         except ValueError as exc:
             if dem is None or isinstance(exc, (InputError, SceneFileError)) or type(exc).__name__ == "RPCFormatError":
                 raise

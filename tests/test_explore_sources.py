@@ -1,0 +1,160 @@
+"""``pushbroom explore`` sources and listening address: everything is checked before a server
+starts, and every problem is one :mod:`explorer.errors` error naming the input.
+
+Real files: the shareloc Pleiades DIMAP products and their DEMs (``tests/data/rpc``,
+``assets/dem``; provenance in their PROVENANCE.md).  Truths: the DIMAP's published image size
+(49,826 rows x 39,951 columns), the DEM footprints (the 2018 product lies ~9 deg from the 2017
+DEM), the preset table, and the operating system's own answer to a bind on a busy port.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+
+import numpy as np
+import pytest
+
+from explorer.app.server import check_listen_address
+from explorer.app.sources import check_dem_covers, load_source, resolve_preset, source_from_args
+from explorer.errors import ExplorerError, InputError, SceneFileError
+from explorer.presets import build_scene, preset_ids
+from tests.real.conftest import DEM_DIR, PHR_2017, PHR_2018, RPC_DIR
+
+DEM_2017 = DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"
+RPC_PHR = RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"
+
+
+def _args(**kw) -> argparse.Namespace:
+    base = {k: None for k in ("preset", "scene", "rpc", "dimap", "dg", "isd", "dem")}
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+# --------------------------------------------------------------------- presets
+def test_presets_resolve_exactly_and_wrong_case_suggests_the_id():
+    for pid in preset_ids():
+        assert resolve_preset(pid) == pid
+    with pytest.raises(InputError, match=r"case-sensitive; did you mean 'WSU'\?"):
+        resolve_preset("wsu")
+    with pytest.raises(InputError) as err:
+        resolve_preset("bogus")
+    assert "unknown preset 'bogus'" in str(err.value) and all(p in str(err.value) for p in preset_ids())
+    src = source_from_args(_args())
+    assert src.kind == "preset" and src.scene is None and src.label in preset_ids()
+
+
+def test_one_source_only_and_dem_only_with_a_sensor_file(tmp_path):
+    with pytest.raises(InputError, match="--preset and --scene"):
+        source_from_args(_args(preset="WSU", scene="x.json"))
+    with pytest.raises(InputError, match="--dem goes with"):
+        source_from_args(_args(preset="WSU", dem=str(DEM_2017)))
+    with pytest.raises(InputError, match="--dem goes with"):
+        source_from_args(_args(dem=str(DEM_2017)))
+
+
+# ------------------------------------------------------------------------ files
+def test_missing_directory_and_unreadable_files_are_named(tmp_path):
+    with pytest.raises(InputError, match=r"scene file '.*nope.json': no such file"):
+        load_source("scene", str(tmp_path / "nope.json"))
+    with pytest.raises(InputError, match="is a directory"):
+        load_source("rpc", str(tmp_path))
+    with pytest.raises(InputError, match=r"DEM '.*missing.tif': no such file"):
+        load_source("dimap", str(PHR_2017), dem=str(tmp_path / "missing.tif"))
+    if os.geteuid() != 0:  # root reads anything
+        locked = tmp_path / "locked.json"
+        locked.write_text("{}")
+        locked.chmod(0)
+        with pytest.raises(InputError, match="not readable"):
+            load_source("scene", str(locked))
+
+
+def test_malformed_scene_file_is_a_scene_file_error(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"name": "half a scene"}))
+    with pytest.raises(SceneFileError):
+        load_source("scene", str(bad))
+    bad.write_text("{not json")
+    with pytest.raises(ExplorerError):
+        load_source("scene", str(bad))
+
+
+def test_scene_json_round_trip(tmp_path):
+    scene = build_scene("ISB", relief_m=300.0)
+    path = tmp_path / "isb.json"
+    scene.save(path)
+    src = load_source("scene", str(path))
+    assert src.kind == "scene" and src.label.startswith("isb.json (")
+    assert (src.scene.n_rows, src.scene.n_columns) == (scene.n_rows, scene.n_columns)
+    g = scene.image_to_ground(np.array([10.0, 900.0]), np.array([20.0, 700.0]))
+    np.testing.assert_allclose(src.scene.image_to_ground(np.array([10.0, 900.0]), np.array([20.0, 700.0])), g,
+                               atol=1e-6)
+
+
+def test_dimap_with_its_dem_is_named_by_file_and_sensor():
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_2017))
+    assert src.label == f"{PHR_2017.name} (Pleiades 1B DIMAP)"
+    assert (src.scene.n_rows, src.scene.n_columns) == (49826, 39951)  # the product's published size
+    check_dem_covers(src.scene, str(DEM_2017))  # a height under every point of a 21 x 21 image grid
+    g = src.scene.image_to_ground(np.array([0.0, 24912.5, 49825.0]), np.array([0.0, 19975.0, 39950.0]))
+    assert np.isfinite(g).all()
+    assert 50.0 < g[:, 2].min() and g[:, 2].max() < 400.0  # ellipsoidal heights of the Omani coast scene
+    assert src.info["mpc_fit"]["check_rmse_px"] < 0.01
+
+
+def test_dem_not_covering_the_footprint_is_rejected():
+    with pytest.raises(InputError, match=r"DEM .* does not cover the image footprint: no height at 441 of 441"):
+        load_source("dimap", str(PHR_2018), dem=str(DEM_2017))
+    with pytest.raises(InputError, match="DEM"):
+        load_source("rpc", str(RPC_PHR), dem=str(DEM_2017))
+
+
+def test_rpc_without_dem_is_an_mpc_scene_on_the_rpc_grid():
+    src = load_source("rpc", str(RPC_PHR))
+    assert src.kind == "rpc" and RPC_PHR.name in src.label and "RPC" in src.label
+    # docs/real_images.md: degree 3 on this file, 400 check points: 0.0008 px
+    assert src.info["resection"]["check_rmse_px"] < 0.01 and src.info["resection"]["degree"] == 3
+    assert src.scene.n_rows > 10_000 and src.scene.n_columns > 10_000
+
+
+def test_isd_needs_the_csm_reader_or_loads_a_scene():
+    isd_dir = RPC_DIR.parent / "usgscsm"
+    try:
+        from explorer.real.csm import scene_from_isd
+    except ImportError:
+        with pytest.raises(InputError, match="explorer.real.csm"):
+            load_source("isd", str(PHR_2017))
+        return
+
+    files = sorted(isd_dir.glob("*LineScan*.json")) if isd_dir.exists() else []
+    if not files:
+        pytest.skip("no ISD test file in tests/data/usgscsm")
+    src = load_source("isd", str(files[0]))
+    ref = scene_from_isd(files[0])
+    assert (src.scene.n_rows, src.scene.n_columns) == (ref.n_rows, ref.n_columns)
+
+
+# ------------------------------------------------------------------------ address
+def test_busy_port_is_an_error_naming_it_and_port_zero_is_free():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)
+        port = s.getsockname()[1]
+        with pytest.raises(InputError, match=f"port {port} on 127.0.0.1 is busy"):
+            check_listen_address("127.0.0.1", port)
+    check_listen_address("127.0.0.1", 0)
+
+
+@pytest.mark.parametrize("port", [70000, -1])
+def test_port_out_of_range(port):
+    with pytest.raises(InputError, match=f"--port {port} is not a port number"):
+        check_listen_address("127.0.0.1", port)
+
+
+def test_host_that_is_not_local_fails_at_once():
+    with pytest.raises(InputError, match="not an address of this machine"):
+        check_listen_address("192.0.2.1", 0)  # TEST-NET-1: never assigned to a host
+    with pytest.raises(InputError, match="--host 'no-such-host.invalid'"):
+        check_listen_address("no-such-host.invalid", 0)
