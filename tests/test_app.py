@@ -472,3 +472,109 @@ def test_fit_pool_order_priorities_and_keep():
     # priority first, then expected cost; a dropped job never runs
     assert order == ["blocker", "main-cheap", "main-dear", "sweep-cheap"]
     assert [k for k, _ in done] == order and not pool.busy
+
+
+# ------------------------------------------------------- issue 16: maps, picks, sources
+def test_a_point_picked_in_a_map_is_selected_in_the_3d_view(server):
+    app = make_app(server)
+    app.handles["color_method"].value = "toy_bisect"
+    s = app.settings()
+    scps = app.model.scps(s)
+    i = 1234
+    app.handles["pick"].value = f"scp {i}"  # what a click on that point of a residual map types
+    assert app.handles["sel_mode"].value == "picked SCP"
+    sel = app.selection
+    np.testing.assert_array_equal(sel.ground, scps.ground[i])
+    assert (sel.exact_row, sel.exact_col) == (scps.row[i], scps.col[i])
+    np.testing.assert_allclose(app.nodes["/selected/point"].position, app.frame.ground(scps.ground[i][None])[0],
+                               atol=1e-5)
+    # its search trace converges on its exact row; the ray goes to that scanline's perspective centre
+    assert abs(sel.trace_rows[-1] - scps.row[i]) < 1e-6
+    centre = app.scene.exterior.position(app.scene.scanline_time(np.array([scps.row[i]])))
+    np.testing.assert_allclose(app.nodes["/selected/ray"].points[0][1], app.frame.sensor(centre)[0], atol=1e-4)
+    assert f"SCP {i}" in app.handles["sel_text"].content
+    # the maps carry the SCP index a click sends
+    (tr,) = [t for t in app.handles["maps"].figure.data if t.name == "toy_bisect row"]
+    assert i in np.asarray(tr.customdata)[:, 1]
+
+
+def test_row_column_difference_and_colour_mode_controls_reach_the_maps(server):
+    app = make_app(server)
+    app.handles["component"].value = "row and column"
+    app.handles["diff_a"].value = "toy_poly"
+    app.handles["diff_b"].value = "toy_bisect"
+    fig = app.handles["maps"].figure
+    names = [t.name for t in fig.data if t.showlegend is False and not t.name.startswith("SCOPs")]
+    assert names == ["toy_poly row", "toy_poly column", "toy_bisect row", "toy_bisect column",
+                     "toy_poly minus toy_bisect (row)"]
+    app.handles["colour_mode"].value = "log magnitude"
+    fig = app.handles["maps"].figure
+    assert fig.layout.meta["mode"] == "log magnitude" and "log" in fig.layout.coloraxis.colorbar.title.text
+    app.handles["show_scops"].value = False
+    assert not [t for t in app.handles["maps"].figure.data if t.name.startswith("SCOPs")]
+
+
+def test_plotly_panels_have_no_share_to_cloud_button(server):
+    app = make_app(server)
+    import json
+
+    for key in ("maps", "timing", "accuracy"):
+        cfg = json.loads(app.handles[key]._plotly_json_str)["config"]
+        assert cfg["showSendToCloud"] is False and "sendDataToCloud" in cfg["modeBarButtonsToRemove"]
+
+
+def test_a_loaded_scene_is_named_and_the_preset_dropdown_still_switches(server, tmp_path):
+    from explorer.app.sources import load_source
+    from explorer.presets import build_scene
+
+    path = tmp_path / "my_sensor.json"
+    build_scene("ISB", relief_m=500.0).save(path)
+    src = load_source("scene", str(path))
+    app = make_app(server, sources=[src])
+    assert app.handles["preset"].value == src.label and app.handles["preset"].options[0] == src.label
+    assert app.scene is src.scene and app.handles["relief"].disabled  # preset sliders do not apply
+    assert src.label in app.handles["status"].content
+    pose = app.camera_pose
+    app.handles["preset"].value = "WSU"
+    assert app.scene.name == "WSU" and not app.handles["relief"].disabled
+    assert app.camera_pose != pose  # reframed on the new footprint
+    assert tuple(server.initial_camera.position) == pytest.approx(app.camera_pose[0])
+
+
+def test_gui_export_is_every_point_and_reproducible(server):
+    import io
+    import zipfile
+
+    model = ExplorerModel(locate_budget_s=1e-4, min_subsample=500, probe_points=200)
+    app = make_app(server, model=model)
+    assert app.runs["toy_bisect"].subsampled  # the view subsamples ...
+    assert "subsample" in app.handles["maps_note"].content and "Export" in app.handles["maps_note"].content
+    a, b = app.export_bytes(), app.export_bytes()
+    za, zb = zipfile.ZipFile(io.BytesIO(a)), zipfile.ZipFile(io.BytesIO(b))
+    assert sorted(za.namelist()) == ["panels.html", "residuals.csv", "summary.json"]
+    assert za.read("residuals.csv") == zb.read("residuals.csv")
+    rows = za.read("residuals.csv").decode().splitlines()
+    n = len(app.model.scps(app.settings()))
+    assert rows[0].startswith("method,scp_index,row_px,col_px,row_residual_px,col_residual_px")
+    assert sum(r.startswith("toy_bisect,") for r in rows) == n  # ... the export does not
+    import json
+
+    summary = json.loads(za.read("summary.json"))
+    assert summary["methods"]["toy_bisect"]["n_valid"] + summary["methods"]["toy_bisect"]["n_invalid"] == n
+    assert summary["settings"]["subsampled"] is False
+
+
+def test_slider_drag_is_debounced_to_the_last_value(server):
+    app = make_app(server, methods=("toy_poly",), background=True, debounce_s=0.25)
+    try:
+        assert app.wait_idle(60)
+        built = app.model.counters["scene"]
+        for relief in range(100, 2001, 100):  # a drag: 20 values, one every 20 ms
+            app.handles["relief"].value = relief
+            time.sleep(0.02)
+        assert app.wait_idle(60)
+        assert app.settings().relief_m == 2000.0 and app.scene.terrain.max_height > app.scene.terrain.min_height
+        assert app.model.counters["scene"] - built <= 2  # not 20 queued rebuilds
+        assert f"{app.scene.name}" in app.handles["status"].content
+    finally:
+        app.close()
