@@ -1,0 +1,292 @@
+"""USGS CSM line-scan cameras (explorer.real.csm) against usgscsm's asserted values, closed forms and
+round trips.  Truths: the numbers usgscsm's tests assert on its fixtures (tests/data/usgscsm), a
+straight fly-by over a sphere written in closed form here, and the distortion formulas as usgscsm
+states them (written here in numpy)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explorer.errors import SceneFileError
+from explorer.real.csm import camera_from_isd, read_isd
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "usgscsm"
+
+
+@pytest.fixture(scope="module")
+def const_velocity():
+    return read_isd(DATA / "constVelocityLineScan.json")
+
+
+@pytest.fixture(scope="module")
+def orbital():
+    return read_isd(DATA / "orbitalLineScan.json")
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    return read_isd(DATA / "ctxLineScan.json")
+
+
+# ----------------------------------------------------------------------------- usgscsm's values
+def test_const_velocity_centre_matches_usgscsm(const_velocity):
+    g = const_velocity.image_to_ground([8.0], [8.0], 0.0)
+    assert g.hit[0]
+    np.testing.assert_allclose(g.ground[0], [9.99999500000, 0.0, 0.00999999500], rtol=0, atol=1e-10)
+
+
+def test_const_velocity_off_body_is_flagged_on_the_ray(const_velocity):
+    """usgscsm returns (0.0479..., -7.9996..., 16.00005) for (0, 4), a point off the 10 m sphere; we flag
+    the miss, and usgscsm's point lies on our line of sight (same ray, different policy)."""
+    g = const_velocity.image_to_ground([0.0], [4.0], 0.0)
+    assert not g.hit[0] and np.all(np.isnan(g.ground[0]))
+    centre, look = const_velocity.rays([0.0], [4.0])
+    upstream = np.array([0.04799688020, -7.99961602495, 16.00004799688])
+    d = upstream - centre[0]
+    assert np.linalg.norm(d - np.dot(d, look[0]) * look[0]) < 1e-8
+    assert np.linalg.norm(upstream) > 10.0 + 1.0  # not on the body
+
+
+def test_orbital_centre_and_height(orbital):
+    g = orbital.image_to_ground([8.5], [8.0], 0.0)
+    np.testing.assert_allclose(g.ground[0], [999999.67004351015, 0.0, -812.35021438796923], rtol=0, atol=1e-6)
+    g100 = orbital.image_to_ground([8.5], [8.0], 100.0)
+    assert abs(np.linalg.norm(g100.ground[0]) - 1000100.0) < 1e-6
+
+
+@pytest.mark.parametrize("height", [0.0, 100.0, 4900.0])
+def test_orbital_round_trip(orbital, height):
+    lines = np.linspace(0.5, 15.5, 31)
+    samples = np.tile([0.5, 8.0, 15.5], 11)[:31]
+    g = orbital.image_to_ground(lines, samples, height)
+    r = orbital.ground_to_image(g.ground)
+    assert np.all(r.valid)
+    assert np.max(np.abs(r.line - lines)) <= 1e-6
+    assert np.max(np.abs(r.sample - samples)) <= 1e-6
+
+
+def test_ctx_round_trip_whole_image(ctx):
+    rng = np.random.default_rng(7)
+    n = 4000
+    lines = np.concatenate([rng.uniform(0, ctx.n_lines, n), [0.0, 0.0, ctx.n_lines, ctx.n_lines]])
+    samples = np.concatenate([rng.uniform(0, ctx.n_samples, n), [0.0, ctx.n_samples, 0.0, ctx.n_samples]])
+    heights = np.concatenate([rng.uniform(-1000, 1000, n), np.zeros(4)])
+    g = ctx.image_to_ground(lines, samples, heights)
+    assert g.hit.all()
+    r = ctx.ground_to_image(g.ground)
+    assert r.valid.sum() >= n  # corners sit on the image edge
+    assert np.max(np.abs(r.line - lines)) <= 1e-6
+    assert np.max(np.abs(r.sample - samples)) <= 1e-6
+    # the residual usgscsm minimises vanishes at the returned line
+    res, _ = ctx.detector_residual(g.ground, r.line)
+    assert np.max(np.abs(res)) < 1e-8
+
+
+def test_ctx_reads_mars(ctx):
+    assert ctx.semi_major_m == 3396190.0 and ctx.semi_minor_m == 3376200.0
+    assert ctx.distortion_name == "radial" and ctx.n_lines == 11264 and ctx.n_samples == 5000
+
+
+# ----------------------------------------------------------------------------- closed-form fly-by
+R_KM, H_KM, V_KM_S, F_MM, PITCH_MM = 1000.0, 50.0, 2.0, 100.0, 0.01
+
+
+def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_sample=0.0, order=None,
+              j2000_rotation_deg=0.0, distortion=None) -> dict:
+    """A camera flying straight along x at altitude H over a sphere, looking straight down."""
+    scale = 1.0 if unit == "km" else 1000.0
+    times = np.linspace(-2.0, 2.0, 41)
+    pos = np.stack([V_KM_S * times, 0 * times, np.full_like(times, R_KM + H_KM)], axis=1)
+    a = np.radians(j2000_rotation_deg)
+    # body rotation: J2000 -> body is a rotation by +a about z (quaternion w, x, y, z)
+    qb = [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+    rz_inv = np.array([[np.cos(a), np.sin(a), 0], [-np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    pos_j2000 = pos @ rz_inv.T  # so that the body-fixed positions are the straight line above
+    # pointing (J2000 -> sensor) makes the camera axes equal to the body axes
+    qp = [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+    isd = {
+        "name_model": "USGS_ASTRO_LINE_SCANNER_SENSOR_MODEL",
+        "image_lines": 400, "image_samples": 200,
+        "center_ephemeris_time": 500.0, "starting_ephemeris_time": 499.0,
+        "line_scan_rate": rates or [[0.5, -1.0, 0.005]],
+        "detector_sample_summing": sample_summing, "detector_line_summing": line_summing,
+        "focal2pixel_lines": [0.0, 1.0 / PITCH_MM, 0.0], "focal2pixel_samples": [0.0, 0.0, 1.0 / PITCH_MM],
+        "focal_length_model": {"focal_length": F_MM},
+        "detector_center": {"line": 0.0, "sample": 100.0},
+        "starting_detector_line": 0.0, "starting_detector_sample": start_sample,
+        "optical_distortion": distortion or {"radial": {"coefficients": [0.0, 0.0, 0.0]}},
+        "radii": {"semimajor": R_KM * scale, "semiminor": R_KM * scale, "unit": unit},
+        "reference_height": {"maxheight": 1000, "minheight": -1000, "unit": "m"},
+        "instrument_position": {"unit": unit, "positions": (pos_j2000 * scale).tolist(),
+                                "velocities": (np.gradient(pos_j2000, times, axis=0) * scale).tolist(),
+                                "ephemeris_times": (times + 500.0).tolist(), "reference_frame": 1},
+        "instrument_pointing": {"quaternions": [qp] * 41, "ephemeris_times": (times + 500.0).tolist(),
+                                "reference_frame": 1},
+        "body_rotation": {"quaternions": [qb] * 41, "ephemeris_times": (times + 500.0).tolist(),
+                          "time_dependent_frames": [10099, 1], "reference_frame": 1},
+    }
+    if order is not None:
+        isd["interpolation_order"] = order
+    return isd
+
+
+def flyby_truth_time(line: np.ndarray, rates) -> np.ndarray:
+    rates = np.asarray(rates or [[0.5, -1.0, 0.005]])
+    k = np.clip(np.searchsorted(rates[:, 0], line, side="right") - 1, 0, None)
+    return rates[k, 1] + rates[k, 2] * (line - rates[k, 0] + 0.5)
+
+
+def flyby_ground(line, sample, h_m, rates=None, sample_summing=1, start_sample=0.0):
+    """Closed form: time -> x; the detector direction (0, -y, -f) hits the sphere R + h."""
+    t = flyby_truth_time(line, rates)
+    x = V_KM_S * t * 1000.0
+    y_mm = (sample * sample_summing + start_sample - 100.0) * PITCH_MM
+    d = np.stack([np.zeros_like(y_mm), -y_mm, -np.full_like(y_mm, F_MM)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    s = np.stack([x, np.zeros_like(x), np.full_like(x, (R_KM + H_KM) * 1000.0)], axis=1)
+    r = R_KM * 1000.0 + h_m
+    b = np.sum(s * d, axis=1)
+    c = np.sum(s * s, axis=1) - r * r
+    lam = -b - np.sqrt(b * b - c)
+    return s + lam[:, None] * d
+
+
+VARIANTS = {
+    "km": {},
+    "metres": {"unit": "m"},
+    "two-rates": {"rates": [[0.5, -1.0, 0.005], [200.5, -1.0 + 0.005 * 200, 0.0025]]},
+    "summing": {"sample_summing": 2, "line_summing": 2, "start_sample": 10.0},
+    "order-4": {"order": 4},
+    "j2000-rotated": {"j2000_rotation_deg": 30.0},
+}
+
+
+@pytest.mark.parametrize("variant", sorted(VARIANTS))
+@pytest.mark.parametrize("interpolation", ["usgscsm", "tables"])
+def test_flyby_closed_form(variant, interpolation):
+    kw = VARIANTS[variant]
+    cam = camera_from_isd(flyby_isd(**kw), source=variant, interpolation=interpolation)
+    rng = np.random.default_rng(3)
+    n = 500
+    lines = rng.uniform(0, 400, n)
+    n_samples = 200 if kw.get("sample_summing", 1) == 1 else 90
+    samples = rng.uniform(0, n_samples, n)
+    h = rng.uniform(-500, 3000, n)
+    truth = flyby_ground(lines, samples, h, kw.get("rates"), kw.get("sample_summing", 1), kw.get("start_sample", 0.0))
+    g = cam.image_to_ground(lines, samples, h)
+    assert g.hit.all()
+    np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
+    r = cam.ground_to_image(truth)
+    # closed-form inverse: the ground's x gives the time, its (y, z) the across-track angle
+    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
+
+
+def test_flyby_miss_and_behind_are_flagged():
+    cam = camera_from_isd(flyby_isd(), source="flyby")
+    # a ray far across track misses the sphere when the detector looks beyond the limb: tilt it by
+    # placing the sample far outside the array
+    g = cam.image_to_ground([200.0], [1e6], 0.0)
+    assert not g.hit[0] and np.isnan(g.ground[0]).all()
+    # a point above the camera is behind it
+    r = cam.ground_to_image(np.array([[0.0, 0.0, (R_KM + 2 * H_KM) * 1000.0]]))
+    assert not r.valid[0] and r.status[0] == 1 and np.isnan(r.line[0])
+
+
+# ----------------------------------------------------------------------------- distortion models
+def _radial_remove(c, x, y):
+    rr = x * x + y * y
+    dr = c[0] + rr * (c[1] + rr * c[2])
+    return x * (1 - dr), y * (1 - dr)
+
+
+def _transverse_apply(c, x, y):
+    f = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y, x**3, x * x * y, x * y * y, y**3])
+    return np.asarray(c[:10]) @ f, np.asarray(c[10:]) @ f
+
+
+def _kaguya_remove(c, x, y):
+    r = np.hypot(x, y)
+    return (x + c[1] + c[2] * r + c[3] * r**2 + c[4] * r**3 + c[0],
+            y + c[6] + c[7] * r + c[8] * r**2 + c[9] * r**3 + c[5])
+
+
+MODELS = {
+    "radial": ({"radial": {"coefficients": [-0.0073, 2.8e-5, 1.3e-8]}}, [-0.0073, 2.8e-5, 1.3e-8], _radial_remove,
+               True),
+    "transverse": ({"transverse": {"x": [1e-4, 1.0, 2e-4, 1e-5, 0, 2e-6, 1e-7], "y": [2e-4, 1e-4, 1.0, 0, 3e-6]}},
+                   [1e-4, 1.0, 2e-4, 1e-5, 0, 2e-6, 1e-7, 0, 0, 0, 2e-4, 1e-4, 1.0, 0, 3e-6, 0, 0, 0, 0, 0],
+                   _transverse_apply, False),
+    "kaguyalism": ({"kaguyalism": {"x": [1e-4, 2e-4, 1e-6, 1e-8], "y": [-1e-4, 1e-4, 2e-6, 0],
+                                   "boresight_x": 0.01, "boresight_y": -0.02}},
+                   [0.01, 1e-4, 2e-4, 1e-6, 1e-8, -0.02, -1e-4, 1e-4, 2e-6, 0], _kaguya_remove, True),
+    "lrolrocnac": ({"lrolrocnac": {"coefficients": [1.8e-5]}}, [1.8e-5],
+                   lambda c, x, y: (x, y / (1 + c[0] * y * y)), True),
+    "dawnfc": ({"dawnfc": {"coefficients": [9.2e-6]}}, [9.2e-6],
+               lambda c, x, y: (x * (1 + c[0] * (x * x + y * y)), y * (1 + c[0] * (x * x + y * y))), False),
+}
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+def test_distortion_models(model):
+    spec, coef, closed, closed_removes = MODELS[model]
+    cam = camera_from_isd(flyby_isd(distortion=spec), source=model)
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-8, 8, 300), rng.uniform(-8, 8, 300)
+    fx, fy = closed(coef, x, y)
+    if closed_removes:
+        ux, uy = cam.remove_distortion(x, y)
+        bx, by = cam.apply_distortion(fx, fy)
+    else:
+        ux, uy = cam.apply_distortion(x, y)
+        bx, by = cam.remove_distortion(fx, fy)
+    np.testing.assert_allclose(ux, fx, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(uy, fy, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(bx, x, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(by, y, rtol=0, atol=1e-11)
+    # the camera with this distortion round-trips image -> ground -> image
+    lines, samples = rng.uniform(0, 400, 200), rng.uniform(0, 200, 200)
+    g = cam.image_to_ground(lines, samples, 0.0)
+    r = cam.ground_to_image(g.ground[g.hit])
+    assert np.max(np.abs(r.line - lines[g.hit])) <= 1e-6
+    assert np.max(np.abs(r.sample - samples[g.hit])) <= 1e-6
+
+
+# ----------------------------------------------------------------------------- errors
+def test_unsupported_distortion_is_named():
+    with pytest.raises(SceneFileError, match="cahvor"):
+        camera_from_isd(flyby_isd(distortion={"cahvor": {"coefficients": [1, 2]}}), source="x.json")
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda d: d.pop("focal2pixel_lines"), "focal2pixel_lines"),
+        (lambda d: d["instrument_position"].pop("positions"), "instrument_position.positions"),
+        (lambda d: d["instrument_position"]["positions"][3].__setitem__(1, float("nan")), "NaN"),
+        (lambda d: d["radii"].__setitem__("unit", "miles"), "radii.unit"),
+        (lambda d: d["focal_length_model"].__setitem__("focal_length", -5), "focal_length"),
+        (lambda d: d["line_scan_rate"].__setitem__(0, [0.5, 1.0]), "line_scan_rate"),
+        (lambda d: d.__setitem__("interpolation_method", "hermite"), "interpolation_method"),
+    ],
+)
+def test_malformed_isd_names_the_key(edit, match):
+    isd = copy.deepcopy(flyby_isd())
+    edit(isd)
+    with pytest.raises(SceneFileError, match=match):
+        camera_from_isd(isd, source="bad.json")
+
+
+def test_not_json(tmp_path):
+    p = tmp_path / "x.json"
+    p.write_text("{not json")
+    with pytest.raises(SceneFileError, match="not valid JSON"):
+        read_isd(p)
+    p.write_text(json.dumps([1, 2]))
+    with pytest.raises(SceneFileError, match="JSON object"):
+        read_isd(p)
