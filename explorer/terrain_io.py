@@ -264,21 +264,40 @@ def b_or_d_nonzero(transform: tuple[float, ...]) -> bool:
 
 
 def _reproject_to_lonlat(heights: FloatArray, transform, crs, width: int, height: int):
-    """Warp a projected DEM to WGS84 lon/lat (bilinear, NaN no-data); returns heights, transform, crs."""
-    from rasterio.warp import Resampling, calculate_default_transform, reproject
+    """Resample a projected DEM onto a WGS84 lon/lat grid of about its resolution.
+
+    Each lon/lat node is transformed exactly (PROJ) into the DEM's CRS and the DEM is interpolated there
+    bilinearly between its cell centres (NaN next to no-data, NaN outside), row block by row block.  (GDAL's
+    warper was not used: its bilinear kernel moved a plane by centimetres.)  Returns heights, transform, crs.
+    """
+    from pyproj import Transformer
+    from rasterio.warp import calculate_default_transform
 
     dst_transform, dst_width, dst_height = calculate_default_transform(
         crs, "EPSG:4326", width, height, *_bounds_of(transform, width, height))
-    out = np.full((dst_height, dst_width), np.nan)
-    reproject(heights, out, src_transform=transform, src_crs=crs, src_nodata=np.nan, dst_transform=dst_transform,
-              dst_crs="EPSG:4326", dst_nodata=np.nan, resampling=Resampling.bilinear)
+    to_src = Transformer.from_crs("EPSG:4326", crs.to_wkt() if hasattr(crs, "to_wkt") else crs, always_xy=True)
+    a, _, c, _, e, f = tuple(dst_transform)[:6]
+    sa, _, sc, _, se, sf = tuple(transform)[:6]
+    lon = c + (np.arange(dst_width) + 0.5) * a
+    out = np.empty((dst_height, dst_width))
+    rows_per_block = max(1, 4_000_000 // max(dst_width, 1))
+    for i0 in range(0, dst_height, rows_per_block):
+        i1 = min(dst_height, i0 + rows_per_block)
+        lat = f + (np.arange(i0, i1) + 0.5) * e
+        glon, glat = np.meshgrid(lon, lat)
+        x, y = to_src.transform(glon, glat)
+        fi = (np.asarray(y) - sf) / se - 0.5
+        fj = (np.asarray(x) - sc) / sa - 0.5
+        finite = np.isfinite(fi) & np.isfinite(fj)
+        value, _ = _bilinear(heights, np.where(finite, fi, -1.0), np.where(finite, fj, -1.0))
+        out[i0:i1] = np.where(finite, value, np.nan)
     return out, tuple(dst_transform)[:6], "EPSG:4326"
 
 
 def _bounds_of(transform, width: int, height: int) -> tuple[float, float, float, float]:
     from rasterio.transform import array_bounds
 
-    south, west, north, east = array_bounds(height, width, transform)
+    west, south, east, north = array_bounds(height, width, transform)
     return west, south, east, north
 
 

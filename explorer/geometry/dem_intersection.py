@@ -23,10 +23,13 @@ cheap when it converges, but it can converge to a farther crossing behind a ridg
 steep slopes, and it knows nothing of holes it jumps over; the cell walk is exact and its cost is the
 number of cells the segment crosses (usually one to three).
 
+The part of the segment outside the DEM's node grid is not searched (the terrain there is unknown): a
+line of sight that enters the DEM from outside is walked from where it enters.
+
 Flags (one per point, never a silent wrong point)
 -------------------------------------------------
 :data:`OK` (0) intersection found; :data:`OUTSIDE_DEM` (1) the segment leaves the DEM's node grid
-before a hit (or starts outside it), so the first intersection is unknown; :data:`NODATA` (2) the walk
+(or never enters it) before a hit; :data:`NODATA` (2) the walk
 reached a cell with a no-data node before a hit; :data:`NO_INTERSECTION` (3) the line never reaches the
 terrain (pointing up, or a segment that ends above the surface); :data:`NOT_CONVERGED` (4) an iterative
 refinement (RPC) did not converge.  Heights and points are NaN where the flag is not :data:`OK`.
@@ -235,12 +238,13 @@ def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
                 t_lo, t_hi = t_hi, t_lo
             s0 = max(s0, t_lo)
             s1 = min(s1, t_hi)
-    if s0 > 1e-12 or s1 < s0:
-        return math.nan, OUTSIDE_DEM  # the search starts outside the DEM: its first intersection is unknown
-    s0 = 0.0
+    if s1 < s0:
+        return math.nan, OUTSIDE_DEM
+    if s0 < 1e-12:
+        s0 = 0.0
     leaves = s1 < 1.0 - 1e-12
     # fast path: the whole segment inside the grid and inside one cell (coarse DEMs, short segments)
-    if not leaves:
+    if s0 == 0.0 and not leaves:
         j = min(int(ua), nx - 2)
         i = min(int(va), ny - 2)
         if j == min(int(ub), nx - 2) and i == min(int(vb), ny - 2):
@@ -256,8 +260,8 @@ def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
     ntx = tile_max.shape[1]
     step_u = 1 if du > 0.0 else -1
     step_v = 1 if dv > 0.0 else -1
-    u0 = min(max(ua, 0.0), nx - 1.0)
-    v0 = min(max(va, 0.0), ny - 1.0)
+    u0 = min(max(ua + du * s0, 0.0), nx - 1.0)
+    v0 = min(max(va + dv * s0, 0.0), ny - 1.0)
     if du >= 0.0:
         tj = int(math.floor(u0 / tile))
     else:
