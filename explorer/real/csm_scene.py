@@ -1,0 +1,209 @@
+"""USGS CSM line-scan camera -> the project's pushbroom :class:`~explorer.scene.Scene`.
+
+Beyond the papers.  :func:`scene_from_isd` turns an ISD (:func:`explorer.real.csm.read_isd`) into
+an MPC scene -- polynomials of the scanline time for the perspective centre and the
+``(omega, phi, kappa)`` attitude, a detector line in the focal plane -- so that every registered
+method, the bench, the 3D view and the residual maps run on it:
+
+* frame: a local east-north-up frame at the body-fixed point under the image centre (on the
+  file's ellipsoid, planetodetic normal); ``metadata["csm"]`` keeps the body radii, that origin
+  and the axes (:func:`enu_to_body_fixed`, :func:`body_fixed_to_enu`).  ``scene.frame`` is a
+  stand-in with the same latitude/longitude (its axes are right; its WGS84 origin and geodetic
+  conversions do not apply to another body);
+* pixels: scene ``(row, col)`` = CSM ``(line - 0.5, sample - 0.5)``
+  (``docs/conventions.md#usgs-csm-line-scan-isds``);
+* time: ``t = (row - reference_row) * line_period`` with the image's mean line period;
+* interior: the CSM detector line mapped through ``focal2pixel`` and the inverse of the
+  optical distortion, expressed exactly as the project's interior model with no lens
+  distortion: the across-track coordinate as a polynomial of the column
+  (``column_polynomial``, degree ``interior_degree``) and the along-track coordinate as a
+  polynomial of it (``line_curvature``);
+* exterior: the CSM centres and camera rotations sampled along the image (plus a margin) and
+  fitted by polynomials of degree ``degree``.
+
+The conversion is an approximation of the CSM camera by the MPC model; ``metadata["csm_fit"]``
+reports its size in pixels on check points the CSM camera generates (row: along-track
+residual / pitch; column: difference), and so does the log of ``pushbroom scene from-isd``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from explorer.errors import SceneFileError
+from explorer.geometry.exterior import ExteriorOrientation, LineTiming
+from explorer.geometry.frames import LocalFrame
+from explorer.geometry.interior import InteriorOrientation
+from explorer.geometry.rotations import opk_from_rotation
+from explorer.geometry.terrain import FlatTerrain
+from explorer.real.csm import CsmCamera, read_isd
+from explorer.scene import Scene
+
+__all__ = ["body_fixed_to_enu", "enu_to_body_fixed", "scene_from_camera", "scene_from_isd"]
+
+
+def _enu_axes(point: np.ndarray, a: float, b: float) -> tuple[np.ndarray, float, float]:
+    """ENU axes (columns) at a body-fixed point, from the ellipsoid normal; planetodetic lat/lon (deg)."""
+    n = np.array([point[0] / a**2, point[1] / a**2, point[2] / b**2])
+    n /= np.linalg.norm(n)
+    lat = np.arcsin(np.clip(n[2], -1, 1))
+    lon = np.arctan2(n[1], n[0])
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    axes = np.array([[-so, -sl * co, cl * co], [co, -sl * so, cl * so], [0.0, cl, sl]])
+    return axes, float(np.degrees(lat)), float(np.degrees(lon))
+
+
+def _scaled_fit(x: np.ndarray, y: np.ndarray, degree: int, scale: float) -> np.ndarray:
+    """Ascending polynomial coefficients in ``x`` fitted by least squares in ``x / scale`` (conditioning)."""
+    c = np.polynomial.polynomial.polyfit(x / scale, y, degree)
+    return c / scale ** np.arange(degree + 1)
+
+
+def body_fixed_to_enu(scene: Scene, xyz: np.ndarray) -> np.ndarray:
+    """Body-fixed metres (N, 3) -> the scene's local ENU metres (N, 3) (scenes from :func:`scene_from_isd`)."""
+    meta = scene.metadata["csm"]
+    return (np.asarray(xyz, dtype=np.float64) - np.asarray(meta["origin_body_fixed_m"])) @ np.asarray(meta["enu_axes"])
+
+
+def enu_to_body_fixed(scene: Scene, enu: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`body_fixed_to_enu`."""
+    meta = scene.metadata["csm"]
+    return np.asarray(enu, dtype=np.float64) @ np.asarray(meta["enu_axes"]).T + np.asarray(meta["origin_body_fixed_m"])
+
+
+def scene_from_isd(path: str | Path, *, degree: int = 3, interior_degree: int = 7, margin_rows: float = 64.0,
+                   n_check: int = 2000, seed: int = 0, interpolation: str = "usgscsm") -> Scene:
+    """MPC :class:`~explorer.scene.Scene` of a CSM line-scan ISD (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ISD (JSON).
+    degree : int
+        Degree of the position and attitude polynomials of the scanline time (default 3).
+    interior_degree : int
+        Degree of the column and detector-line polynomials (default 7).
+    margin_rows : float
+        The exterior is fitted over the image +- this many rows.
+    n_check : int
+        CSM check points (random image points at random heights in the ISD's reference range)
+        on which the fit is reported.
+    seed : int
+        Seed of the check points.
+    interpolation : {"usgscsm", "tables"}
+        Passed to :func:`~explorer.real.csm.read_isd`.
+
+    Returns
+    -------
+    Scene
+        ``metadata["csm"]`` (body, frame), ``metadata["csm_fit"]`` (max/rms row and column
+        residuals against the CSM camera, pixels).
+    """
+    camera = read_isd(path, interpolation=interpolation)
+    return scene_from_camera(camera, degree=degree, interior_degree=interior_degree, margin_rows=margin_rows,
+                             n_check=n_check, seed=seed)
+
+
+def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: int = 7, margin_rows: float = 64.0,
+                      n_check: int = 2000, seed: int = 0) -> Scene:
+    """:func:`scene_from_isd` for an already read :class:`~explorer.real.csm.CsmCamera`."""
+    if degree < 1 or interior_degree < 1:
+        raise ValueError(f"degree and interior_degree must be >= 1, got {degree}, {interior_degree}")
+    cam = camera
+    n_rows, n_cols = cam.n_lines, cam.n_samples
+    # ---- frame: ENU at the ground point of the image centre
+    centre = cam.image_to_ground([0.5 * n_rows], [0.5 * n_cols], 0.0)
+    if not centre.hit[0]:
+        raise SceneFileError(f"{cam.source}: the image centre does not see the body")
+    origin = centre.ground[0]
+    axes, lat0, lon0 = _enu_axes(origin, cam.semi_major_m, cam.semi_minor_m)
+    # ---- interior: the detector line, undistorted, in the project's sensor axes
+    cols = np.linspace(-0.5, n_cols - 0.5, 513)
+    samples = cols + 0.5
+    fl, fs = cam.focal2pixel_lines, cam.focal2pixel_samples
+    t1 = np.full(cols.shape, cam.starting_line - cam.line_origin - fl[0])
+    t2 = samples * cam.sample_summing + cam.starting_sample - cam.sample_origin - fs[0]
+    det = fl[1] * fs[2] - fl[2] * fs[1]
+    xd = (fs[2] * t1 - fl[2] * t2) / det
+    yd = (-fs[1] * t1 + fl[1] * t2) / det
+    xu, yu = cam.remove_distortion(xd, yd)
+    sign = cam.look_sign
+    sy = -sign * np.sign(yu[-1] - yu[0])
+    sz = sign
+    sx = sy * sz
+    s_matrix = np.diag([sx, sy, sz])  # project sensor axes -> CSM camera axes
+    x_p = -sx * sign * xu * 1e-3  # metres
+    y_p = -sy * sign * yu * 1e-3
+    if np.any(np.diff(y_p) <= 0):
+        raise SceneFileError(f"{cam.source}: the undistorted detector line is not monotonic across track")
+    half = 0.5 * n_cols
+    pc = float(np.interp(0.0, y_p, cols))  # principal column: y = 0 (refined below)
+    for _ in range(3):
+        cu = _scaled_fit(cols - pc, y_p, interior_degree, half)
+        pc -= float(cu[0] / cu[1])
+    cu = _scaled_fit(cols - pc, y_p, interior_degree, half)
+    pitch = float(cu[1])
+    column_poly = tuple(float(c / pitch) for c in cu[2:])
+    cx = _scaled_fit(y_p, x_p, interior_degree, float(np.max(np.abs(y_p))))
+    focal_m = cam.focal_length_mm * 1e-3
+    interior = InteriorOrientation(
+        focal_length_m=focal_m, detector_pitch_m=pitch, n_columns=n_cols, principal_column=pc,
+        along_track_offset_m=float(cx[0]), line_curvature=tuple(float(c) for c in cx[1:]),
+        column_polynomial=column_poly,
+    )
+    # ---- timing: mean line period, reference row at the centre
+    t_first, t_last = cam.line_time(np.array([0.5, n_rows - 0.5]))
+    period = float((t_last - t_first) / (n_rows - 1))
+    ref_row = 0.5 * (n_rows - 1)
+    t_ref = float(cam.line_time(np.array([ref_row + 0.5]))[0])
+    timing = LineTiming(period, ref_row)
+    # ---- exterior: sampled and fitted
+    rows = np.linspace(-0.5 - margin_rows, n_rows - 0.5 + margin_rows, 40 * (degree + 1) + 1)
+    tau = (rows - ref_row) * period
+    t_csm = cam.line_time(rows + 0.5)
+    centres, rot = cam.exterior(t_csm)
+    pos_enu = (centres - origin) @ axes
+    r_enu = np.einsum("ji,njk,kl->nil", axes, rot, s_matrix)  # sensor -> ENU
+    om, ph, ka = opk_from_rotation(r_enu)
+    angles = np.unwrap(np.stack([om, ph, ka]), axis=1)
+    t_scale = float(np.max(np.abs(tau)))
+    pos_c = np.stack([_scaled_fit(tau, pos_enu[:, k], degree, t_scale) for k in range(3)])
+    att_c = np.stack([_scaled_fit(tau, angles[k], degree, t_scale) for k in range(3)])
+    exterior = ExteriorOrientation(pos_c, att_c)
+    meta = {
+        "source": "usgscsm-isd", "isd": str(cam.source), "sensor": cam.metadata.get("sensor"),
+        "platform": cam.metadata.get("platform"),
+        "csm": {"semi_major_m": cam.semi_major_m, "semi_minor_m": cam.semi_minor_m,
+                "origin_body_fixed_m": origin.tolist(), "enu_axes": axes.tolist(),
+                "lat0_deg": lat0, "lon0_deg": lon0, "time_reference_s": t_ref,
+                "pixel_convention": "scene (row, col) = CSM (line - 0.5, sample - 0.5)"},
+    }
+    scene = Scene(name=str(Path(cam.source).stem), interior=interior, exterior=exterior, timing=timing,
+                  n_rows=n_rows, terrain=FlatTerrain(0.0), frame=LocalFrame(lat0, lon0, 0.0), metadata=meta)
+    if n_check:
+        scene.metadata["csm_fit"] = fit_report(scene, cam, n_check, seed)
+    return scene
+
+
+def fit_report(scene: Scene, cam: CsmCamera, n: int = 2000, seed: int = 0) -> dict:
+    """Row and column residuals (pixels) of the MPC scene against CSM check points.
+
+    Random CSM image points at random heights in the camera's reference height range go to the
+    ground through the CSM camera; the scene's along-track residual at the CSM row (divided by
+    the pitch) and its column there are compared with the CSM row and column.
+    """
+    rng = np.random.default_rng(seed)
+    lines = rng.uniform(0.0, cam.n_lines, n)
+    samples = rng.uniform(0.0, cam.n_samples, n)
+    lo, hi = cam.height_range_m
+    g = cam.image_to_ground(lines, samples, rng.uniform(lo, hi, n))
+    enu = body_fixed_to_enu(scene, g.ground[g.hit])
+    rows, cols = lines[g.hit] - 0.5, samples[g.hit] - 0.5
+    t = scene.scanline_time(rows)
+    dr = scene.along_track_residual(enu, t) / scene.pixel_size_m
+    dc = scene.column_at_time(enu, t) - cols
+    return {"n": int(enu.shape[0]), "row_max_px": float(np.max(np.abs(dr))),
+            "row_rms_px": float(np.sqrt(np.mean(dr**2))), "col_max_px": float(np.max(np.abs(dc))),
+            "col_rms_px": float(np.sqrt(np.mean(dc**2)))}
