@@ -22,6 +22,8 @@ from explorer.rpc import _kernels
 from explorer.rpc._kernels import horner_rpc00b
 
 __all__ = [
+    "LOCALIZATION_LIMIT",
+    "VALIDITY_MARGIN",
     "ConvergenceError",
     "InverseRFM",
     "RationalFunctionModel",
@@ -47,10 +49,44 @@ class HeightSource(Protocol):
 
 
 def _as_float_array(value: ArrayLike, name: str) -> FloatArray:
-    array = np.asarray(value, dtype=np.float64)
+    """float64 array of ``value``; :class:`InputError` (a ValueError) naming ``name`` on NaN or infinity."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} is not numeric ({exc})") from None
+    if array.size and np.isfinite(np.add.reduce(array, axis=None)):
+        return array  # a NaN or an infinity makes the sum non-finite (overflowing sums are checked below)
     if np.isnan(array).any():
-        raise ValueError(f"{name} contains NaN ({int(np.isnan(array).sum())} value(s))")
+        raise InputError(f"{name} contains NaN ({int(np.isnan(array).sum())} value(s))")
+    if np.isinf(array).any():
+        raise InputError(f"{name} contains infinite values ({int(np.isinf(array).sum())} value(s))")
     return array
+
+
+#: Points farther than this beyond the normalisation domain (in units of the scale: ``|u| > 1 +
+#: VALIDITY_MARGIN`` for any normalised coordinate), or outside the box the file declares widened by
+#: the same fraction of the scale, are flagged invalid by ``projection(..., return_valid=True)``,
+#: ``localization(..., return_valid=True)`` and :meth:`RationalFunctionModel.ground_validity`.
+VALIDITY_MARGIN = 0.1
+
+#: :meth:`RationalFunctionModel.localization` never reports a point converged when its solution lies
+#: beyond ``LOCALIZATION_LIMIT`` normalised longitude or latitude units (the polynomials are
+#: meaningless there and Newton lands anywhere, e.g. for row -1e6).  Image coordinates are not
+#: limited: some vendors (PlanetScope) normalise the ground over a box 9 times the image.
+LOCALIZATION_LIMIT = 2.0
+
+#: Normalised RPC00B coefficients are O(1) (numerator terms of a few units, denominators starting
+#: with 1); larger magnitudes are corrupt files (overflow in the cubic terms).
+MAX_COEFFICIENT = 1e6
+
+# names of the fields in RPC00B files, for messages
+_FILE_KEYS = {
+    "row_num": "LINE_NUM_COEFF", "row_den": "LINE_DEN_COEFF", "col_num": "SAMP_NUM_COEFF",
+    "col_den": "SAMP_DEN_COEFF", "row": "LINE", "col": "SAMP", "lat": "LAT", "lon": "LONG", "height": "HEIGHT",
+}  # fmt: skip
+
+# 7 x 7 x 7 nodes of the normalised cube [-1, 1]^3, where the denominators must not vanish
+_CUBE = np.stack(np.meshgrid(*(np.linspace(-1.0, 1.0, 7),) * 3, indexing="ij"), axis=0).reshape(3, -1)
 
 
 def _use_numba(backend: str) -> bool:
@@ -223,25 +259,70 @@ class RationalFunctionModel:
 
     def __post_init__(self) -> None:
         for name in ("row_num", "row_den", "col_num", "col_den"):
+            key = _FILE_KEYS[name]
             coefficients = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
             if coefficients.shape != (20,):
-                raise ValueError(f"{name} must have 20 coefficients, got {coefficients.size}")
+                raise InputError(f"{key} ({name}) must have 20 coefficients, got {coefficients.size}")
             if not np.isfinite(coefficients).all():
-                raise ValueError(f"{name} has non-finite coefficients")
+                k = int(np.flatnonzero(~np.isfinite(coefficients))[0])
+                raise InputError(f"{key}_{k + 1} ({name}[{k}]) is not finite: {coefficients[k]}")
+            if np.max(np.abs(coefficients)) > MAX_COEFFICIENT:
+                k = int(np.argmax(np.abs(coefficients)))
+                raise InputError(f"{key}_{k + 1} ({name}[{k}]) = {coefficients[k]:.6g} is implausibly large "
+                                 f"(normalised RPC coefficients are O(1); limit {MAX_COEFFICIENT:g})")
             object.__setattr__(self, name, coefficients)
         for name in ("row", "col", "lat", "lon", "height"):
+            key = _FILE_KEYS[name]
             offset = float(getattr(self, f"{name}_offset"))
             scale = float(getattr(self, f"{name}_scale"))
-            if not np.isfinite(offset) or not np.isfinite(scale) or scale == 0.0:
-                raise ValueError(f"{name} offset/scale must be finite, scale non-zero")
+            if not np.isfinite(offset):
+                raise InputError(f"{key}_OFF ({name}_offset) is not finite: {offset}")
+            if not np.isfinite(scale) or scale == 0.0:
+                raise InputError(f"{key}_SCALE ({name}_scale) must be finite and non-zero, got {scale}")
             object.__setattr__(self, f"{name}_offset", offset)
             object.__setattr__(self, f"{name}_scale", scale)
+        self._check_ranges()
         if self.inverse is not None:
             arrays = {
                 k: np.asarray(getattr(self.inverse, k), dtype=np.float64).reshape(20)
                 for k in ("lon_num", "lon_den", "lat_num", "lat_den")
             }
+            for k, v in arrays.items():
+                if not np.isfinite(v).all():
+                    raise InputError(f"image-to-ground {k} has non-finite coefficients")
             object.__setattr__(self, "inverse", InverseRFM(**arrays))
+        if self.validity is not None:
+            for k, v in vars(self.validity).items():
+                if v is not None and not np.isfinite(v):
+                    raise InputError(f"validity domain {k} is not finite: {v}")
+        if self.image_size is not None and not (int(self.image_size[0]) > 0 and int(self.image_size[1]) > 0):
+            raise InputError(f"image size {self.image_size} must be positive")
+
+    def _check_ranges(self) -> None:
+        """Offsets and scales in their physical ranges; denominators that never vanish on [-1, 1]^3."""
+        if not -90.0 <= self.lat_offset <= 90.0:
+            raise InputError(f"LAT_OFF (lat_offset) = {self.lat_offset:g} is outside [-90, 90] degrees")
+        if not abs(self.lat_scale) <= 90.0:
+            raise InputError(f"LAT_SCALE (lat_scale) = {self.lat_scale:g} exceeds 90 degrees")
+        if not -180.0 <= self.lon_offset <= 360.0:
+            raise InputError(f"LONG_OFF (lon_offset) = {self.lon_offset:g} is outside [-180, 360] degrees")
+        if not abs(self.lon_scale) <= 180.0:
+            raise InputError(f"LONG_SCALE (lon_scale) = {self.lon_scale:g} exceeds 180 degrees")
+        if not abs(self.height_offset) <= 1e5 or not abs(self.height_scale) <= 1e5:
+            raise InputError(f"HEIGHT_OFF / HEIGHT_SCALE ({self.height_offset:g} / {self.height_scale:g} m) "
+                             "beyond 100 km: not a ground RPC")
+        for name in ("row", "col"):
+            off, scale = getattr(self, f"{name}_offset"), getattr(self, f"{name}_scale")
+            if not (abs(off) <= 1e8 and abs(scale) <= 1e8):
+                raise InputError(f"{_FILE_KEYS[name]}_OFF / {_FILE_KEYS[name]}_SCALE ({off:g} / {scale:g} px) "
+                                 "beyond 1e8 pixels")
+        for name in ("row_den", "col_den"):
+            den = evaluate_rpc00b_polynomial(getattr(self, name), *_CUBE)
+            if not np.all(np.isfinite(den)) or np.any(den == 0.0) or np.any(np.sign(den) != np.sign(den[0])):
+                k = int(np.argmin(np.abs(den)))
+                where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
+                raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the normalised domain (near {where}): "
+                                 "the projection is singular there")
 
     # ------------------------------------------------------------------ domain
     @property
@@ -304,9 +385,71 @@ class RationalFunctionModel:
         col_n = evaluate_rpc00b_polynomial(self.col_num, x, y, z) / evaluate_rpc00b_polynomial(self.col_den, x, y, z)
         return row_n, col_n
 
+    def ground_validity(
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, margin: float = VALIDITY_MARGIN
+    ) -> NDArray[np.bool_]:
+        """True where a ground point lies in the RPC's validity domain.
+
+        Inside means every normalised coordinate within ``[-1 - margin, 1 + margin]`` and, when
+        the file declares a ground box (:attr:`validity`), inside that box widened by
+        ``margin * |scale|`` on each side.  NaN is outside.
+
+        Parameters
+        ----------
+        lon, lat : array_like
+            Degrees, broadcastable.
+        h : array_like
+            Metres above the ellipsoid.
+        margin : float
+            Tolerance beyond the domain, in units of the scales (default :data:`VALIDITY_MARGIN`).
+
+        Returns
+        -------
+        ndarray of bool, broadcast shape.
+        """
+        lon_a, lat_a, h_a = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (lon, lat, h)))
+        limit = 1.0 + margin
+        with np.errstate(invalid="ignore"):
+            x, y, z = self._normalise_ground(lon_a, lat_a, h_a)
+            ok = (np.abs(x) <= limit) & (np.abs(y) <= limit) & (np.abs(z) <= limit)
+            box = self.validity or ValidityDomain()
+            for value, lo, hi, scale in ((lon_a, box.lon_min, box.lon_max, self.lon_scale),
+                                         (lat_a, box.lat_min, box.lat_max, self.lat_scale),
+                                         (h_a, box.h_min, box.h_max, self.height_scale)):
+                if lo is not None:
+                    ok &= value >= lo - margin * abs(scale)
+                if hi is not None:
+                    ok &= value <= hi + margin * abs(scale)
+        return ok
+
+    def image_validity(self, row: ArrayLike, col: ArrayLike, *, margin: float = VALIDITY_MARGIN) -> NDArray[np.bool_]:
+        """True where an image point lies in the RPC's validity domain.
+
+        Normalised row and column within ``[-1 - margin, 1 + margin]`` and, when the file gives
+        them, inside its image box (:attr:`validity`) and its image (``-0.5 .. size - 0.5``), both
+        widened by ``margin * |scale|``.  NaN is outside.
+        """
+        row_a, col_a = np.broadcast_arrays(np.asarray(row, dtype=np.float64), np.asarray(col, dtype=np.float64))
+        limit = 1.0 + margin
+        box = self.validity or ValidityDomain()
+        with np.errstate(invalid="ignore"):
+            ok = (np.abs((row_a - self.row_offset) / self.row_scale) <= limit) & (
+                np.abs((col_a - self.col_offset) / self.col_scale) <= limit)
+            size = self.image_size or (None, None)
+            for value, lo, hi, n, scale in ((row_a, box.row_min, box.row_max, size[0], self.row_scale),
+                                            (col_a, box.col_min, box.col_max, size[1], self.col_scale)):
+                pad = margin * abs(scale)
+                if lo is not None:
+                    ok &= value >= lo - pad
+                if hi is not None:
+                    ok &= value <= hi + pad
+                if n is not None:
+                    ok &= (value >= -0.5 - pad) & (value <= n - 0.5 + pad)
+        return ok
+
     def projection(
-        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto"
-    ) -> tuple[FloatArray, FloatArray]:
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto", return_valid: bool = False
+    ) -> tuple[FloatArray, FloatArray] | tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         """Ground to image.
 
         Parameters
@@ -321,31 +464,50 @@ class RationalFunctionModel:
             is available, else numpy.  Both perform the same floating-point operations in the same
             order (bit-identical results where measured; the tests allow 1e-12 px).
 
+        return_valid : bool
+            Also return the validity flags: :meth:`ground_validity` of the input and
+            :meth:`image_validity` of the result (a point far outside the scene gets a number
+            from the polynomials, but it is an extrapolation, flagged False).
+
         Returns
         -------
         row, col : ndarray
             0-based pixel-centre image coordinates, broadcast shape of the inputs.
+        valid : ndarray of bool
+            Only with ``return_valid=True``.
 
         Raises
         ------
-        ValueError
-            If an input contains NaN (the message names it).
+        InputError
+            A ValueError: an input contains NaN or an infinity, or a latitude beyond +-90 degrees
+            (the message names it).
 
         Notes
         -----
-        Points outside :attr:`domain` are evaluated (extrapolated) without warning; use
-        :meth:`in_domain` to mask them.
+        Without ``return_valid`` points outside :attr:`domain` are evaluated (extrapolated) without
+        warning; use :meth:`ground_validity` to mask them.
         """
-        if _use_numba(backend):
-            compiled = self._projection_compiled(lon, lat, h)
-            if compiled is not None:
-                return compiled
-        lon_a = _as_float_array(lon, "lon")
-        lat_a = _as_float_array(lat, "lat")
-        h_a = _as_float_array(h, "h")
-        x, y, z = self._normalise_ground(lon_a, lat_a, h_a)
-        row_n, col_n = self.normalized_projection(x, y, z)
-        return row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset
+        result = self._projection_compiled(lon, lat, h) if _use_numba(backend) else None
+        if result is None:
+            lon_a = _as_float_array(lon, "lon")
+            lat_a = _as_float_array(lat, "lat")
+            h_a = _as_float_array(h, "h")
+            x, y, z = self._normalise_ground(lon_a, lat_a, h_a)
+            row_n, col_n = self.normalized_projection(x, y, z)
+            result = (row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset)
+        row, col = result
+        with np.errstate(invalid="ignore", over="ignore"):
+            finite = np.isfinite(np.add.reduce(row, axis=None) + np.add.reduce(col, axis=None))
+        if not finite:  # an infinite input (NaN was refused above), or the polynomials overflowed
+            for value, name in ((lon, "lon"), (lat, "lat"), (h, "h")):
+                _as_float_array(value, name)
+        lat_abs = np.abs(np.asarray(lat, dtype=np.float64))
+        if lat_abs.size and np.max(lat_abs) > 90.0:
+            k = int(np.argmax(lat_abs.ravel()))
+            raise InputError(f"lat must be within [-90, 90] degrees, got {np.asarray(lat, float).ravel()[k]:g}")
+        if return_valid:
+            return row, col, self.ground_validity(lon, lat, h) & self.image_validity(row, col)
+        return row, col
 
     def _projection_compiled(
         self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike
@@ -433,7 +595,9 @@ class RationalFunctionModel:
         max_iter: int = 50,
         residual_tol_px: float = 1e-6,
         raise_on_failure: bool = False,
-    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        return_valid: bool = False,
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]] | tuple[FloatArray, FloatArray, NDArray[np.bool_],
+                                                                  NDArray[np.bool_]]:
         """Image to ground at given heights: exact inverse of :meth:`projection` by Newton.
 
         Newton iterations on the normalised (L, P) with the analytic Jacobian of the projection,
@@ -454,13 +618,19 @@ class RationalFunctionModel:
             A converged point must also re-project within this many pixels of (row, col).
         raise_on_failure : bool
             Raise :class:`ConvergenceError` when any point fails.
+        return_valid : bool
+            Also return validity flags: converged, and inside the validity domain
+            (:meth:`image_validity` of the input, :meth:`ground_validity` of the solution).
 
         Returns
         -------
         lon, lat : ndarray
             Degrees, broadcast shape; NaN where not converged.
         converged : ndarray of bool
-            Same shape.
+            Same shape.  Never True for a solution beyond :data:`LOCALIZATION_LIMIT` normalised
+            units of longitude or latitude (e.g. row -1e6): the polynomials are meaningless there.
+        valid : ndarray of bool
+            Only with ``return_valid=True``.
 
         Raises
         ------
@@ -531,6 +701,8 @@ class RationalFunctionModel:
         lon = x * self.lon_scale + self.lon_offset
         lat = y * self.lat_scale + self.lat_offset
         ok = converged & np.isfinite(lon) & np.isfinite(lat)
+        # far outside the ground domain the polynomials are meaningless: never "converged" there
+        ok &= (np.abs(x) <= LOCALIZATION_LIMIT) & (np.abs(y) <= LOCALIZATION_LIMIT)
         if ok.any():
             r_chk, c_chk = self._pixel(x[ok], y[ok], z[ok])
             resid = np.hypot(r_chk - target_row[ok], c_chk - target_col[ok])
@@ -542,6 +714,9 @@ class RationalFunctionModel:
         if raise_on_failure and not ok.all():
             n_failed = int((~ok).sum())
             raise ConvergenceError(f"localization did not converge for {n_failed} of {ok.size} point(s)")
+        if return_valid:
+            valid = ok & self.image_validity(row_a, col_a) & self.ground_validity(lon, lat, h_a)
+            return lon, lat, ok, valid
         return lon, lat, ok
 
     def localization_strict(

@@ -19,7 +19,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from explorer.errors import SceneFileError
+from explorer.errors import InputError, SceneFileError
 from explorer.rpc.model import InverseRFM, RationalFunctionModel, ValidityDomain
 
 __all__ = [
@@ -77,6 +77,15 @@ def _from_dict(
             raise _fail(path, f"{key} has {vec.size} coefficients, expected 20")
         coeffs[key] = vec
     shift = 1.0 if one_based else 0.0
+    try:
+        return _model(path, coeffs, scalars, shift, source_format, extra)
+    except InputError as exc:  # offsets, scales, coefficients or validity box out of range
+        raise _fail(path, str(exc)) from None
+
+
+def _model(path: str | Path, coeffs: dict, scalars: dict, shift: float, source_format: str,
+           extra: dict) -> RationalFunctionModel:
+    """The model; its constructor validates every value (:class:`InputError` naming the field)."""
     return RationalFunctionModel(
         row_num=coeffs["LINE_NUM_COEFF"],
         row_den=coeffs["LINE_DEN_COEFF"],

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from explorer.errors import InputError
 from explorer.rpc import RationalFunctionModel, _kernels, read_rpc
 
 from .conftest import RPC_DIR, RPCM_READABLE, normalisation_grid
@@ -132,19 +133,27 @@ def test_zero_denominator_and_infinite_inputs_give_the_same_non_finite_values(lo
     num = np.zeros(20)
     num[0] = 1.0
     den = np.zeros(20)
-    den[1] = 1.0  # denominator = L: zero at lon = lon_offset
-    model = RationalFunctionModel(
-        row_num=num, row_den=den, col_num=num, col_den=den,
-        row_offset=0.0, col_offset=0.0, lat_offset=0.0, lon_offset=10.0, height_offset=0.0,
-        row_scale=1.0, col_scale=1.0, lat_scale=1.0, lon_scale=1.0, height_scale=1.0,
-    )  # fmt: skip
-    lon = np.array([10.0, 11.0, np.inf, -np.inf, 9.0])
+    den[0], den[1] = -2.0, 1.0  # denominator = L - 2: zero at lon = lon_offset + 2, outside the domain
+    kwargs = dict(row_offset=0.0, col_offset=0.0, lat_offset=0.0, lon_offset=10.0, height_offset=0.0,
+                  row_scale=1.0, col_scale=1.0, lat_scale=1.0, lon_scale=1.0, height_scale=1.0)
+    model = RationalFunctionModel(row_num=num, row_den=den, col_num=num, col_den=den, **kwargs)
+    lon = np.array([12.0, 11.0, 9.0, 12.0 + 1e-300])
     with np.errstate(divide="ignore", invalid="ignore"):
-        row, col = model.projection(lon, 0.0, 0.0, backend="numba")
+        row, col, valid = model.projection(lon, 0.0, 0.0, backend="numba", return_valid=True)
         row_np, col_np = model.projection(lon, 0.0, 0.0, backend="numpy")
     np.testing.assert_array_equal(row, row_np)  # NaN == NaN here
     np.testing.assert_array_equal(col, col_np)
-    assert np.isinf(row[0]) and row[1] == 1.0
+    assert np.isinf(row[0]) and row[1] == -1.0 and row[2] == -1.0 / 3.0
+    np.testing.assert_array_equal(valid, [False, True, True, False])  # |L| = 2 is outside the domain
+    # infinite inputs are refused by both paths (issue 18), naming the input
+    for backend in ("numba", "numpy"):
+        with pytest.raises(InputError, match="lon contains infinite"):
+            model.projection(np.array([11.0, np.inf]), 0.0, 0.0, backend=backend)
+    # a denominator that vanishes inside the domain (L = 0) is refused at construction
+    den_zero = np.zeros(20)
+    den_zero[1] = 1.0
+    with pytest.raises(InputError, match="LINE_DEN_COEFF"):
+        RationalFunctionModel(row_num=num, row_den=den_zero, col_num=num, col_den=den, **kwargs)
 
 
 def test_backend_argument_is_checked():

@@ -239,3 +239,116 @@ def test_bad_number_is_named(tmp_path):
     bad.write_text(text)
     with pytest.raises(RPCFormatError, match="LAT_OFF is not a number"):
         read_rpc(bad)
+
+
+# ------------------------------------------------------------ values validated at read time (issue 18)
+def _replace_line(name, key, value, tmp_path, out="bad_RPC.TXT"):
+    """A copy of an RPC00B text file with the line of ``key`` holding ``value``."""
+    lines = (RPC_DIR / name).read_text().splitlines()
+    hits = [i for i, ln in enumerate(lines) if ln.split(":")[0].strip() == key]
+    assert len(hits) == 1
+    lines[hits[0]] = f"{key}: {value}"
+    path = tmp_path / out
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("LINE_OFF", "NaN", "LINE_OFF .* not finite"),
+        ("SAMP_OFF", "inf", "SAMP_OFF .* not finite"),
+        ("SAMP_SCALE", "0", "SAMP_SCALE .* non-zero"),
+        ("LINE_SCALE", "-inf", "LINE_SCALE .* non-zero"),
+        ("LAT_OFF", "-134.9", r"LAT_OFF .* -134.9 is outside \[-90, 90\]"),
+        ("LAT_SCALE", "120", "LAT_SCALE .* exceeds 90"),
+        ("LONG_OFF", "400", r"LONG_OFF .* outside \[-180, 360\]"),
+        ("HEIGHT_SCALE", "1e9", "HEIGHT_OFF / HEIGHT_SCALE .* not a ground RPC"),
+        ("LINE_NUM_COEFF_7", "1e308", "LINE_NUM_COEFF_7 .* implausibly large"),
+        ("SAMP_DEN_COEFF_3", "nan", "SAMP_DEN_COEFF_3 .* not finite"),
+        ("LINE_DEN_COEFF_1", "0", "LINE_DEN_COEFF .* vanishes inside the normalised domain"),
+    ],
+)
+def test_corrupt_values_are_refused_naming_file_and_field(key, value, message, tmp_path):
+    path = _replace_line("test_rpc.txt", key, value, tmp_path)
+    with pytest.raises(RPCFormatError, match=f"bad_RPC.TXT: {message}"):
+        read_rpc(path)
+
+
+def test_denominator_changing_sign_inside_the_domain_is_refused(tmp_path):
+    # 1 + 2 L: zero at L = -0.5, inside the normalised cube (the file's own denominator is 1 + O(1e-3))
+    path = _replace_line("test_rpc.txt", "SAMP_DEN_COEFF_2", "2.0", tmp_path)
+    with pytest.raises(RPCFormatError, match="SAMP_DEN_COEFF .* vanishes .* L=-0.67"):
+        read_rpc(path)
+    # but a denominator with a zero outside the cube (1 + 0.5 L) is a valid model
+    ok = read_rpc(_replace_line("test_rpc.txt", "SAMP_DEN_COEFF_2", "0.5", tmp_path, "ok_RPC.TXT"))
+    assert ok.col_den[1] == 0.5
+
+
+def test_corrupt_dimap_validity_is_refused(tmp_path):
+    text = (RPC_DIR / "rpc_PLEIADES.xml").read_text()
+    start = text.index("<LAT_OFF>") + len("<LAT_OFF>")
+    bad = tmp_path / "RPC_bad.XML"
+    bad.write_text(text[:start] + "-134.9" + text[text.index("</LAT_OFF>"):])
+    with pytest.raises(RPCFormatError, match=r"RPC_bad.XML: LAT_OFF .* outside \[-90, 90\]"):
+        read_rpc(bad)
+
+
+def test_every_real_file_passes_the_validation():
+    for name in EXPECTED_FORMATS:
+        model = read_rpc(RPC_DIR / name)
+        assert max(np.abs(np.r_[model.row_num, model.row_den, model.col_num, model.col_den])) < 15  # O(1)
+
+
+# ------------------------------------------------------------ validity flags (issue 18)
+def test_projection_flags_points_outside_the_validity_domain():
+    from explorer.errors import InputError
+    from explorer.rpc.model import VALIDITY_MARGIN
+
+    model = read_rpc(RPC_DIR / "rpc_PLEIADES.xml")
+    lon, lat, h = normalisation_grid(model, 5, 5, 3)
+    row, col = model.projection(lon, lat, h)
+    row2, col2, valid = model.projection(lon, lat, h, return_valid=True)
+    np.testing.assert_array_equal(row2, row)  # same numbers, plus the flags
+    np.testing.assert_array_equal(col2, col)
+    # the normalisation cube maps inside the file's image box (+ 10 % of the scale): all valid
+    inside = model.image_validity(row, col)
+    np.testing.assert_array_equal(valid, inside)
+    # 100 degrees of longitude away (the issue's row 802,902 / col 286,943 case): a number, flagged
+    r_far, c_far, v_far = model.projection(model.lon_offset + 100.0, model.lat_offset, model.height_offset,
+                                           return_valid=True)
+    assert np.isfinite(r_far) and not v_far
+    # just beyond the margin on each normalised axis, and just inside it
+    for axis, (off, scale) in enumerate(((model.lon_offset, model.lon_scale), (model.lat_offset, model.lat_scale),
+                                         (model.height_offset, model.height_scale))):
+        for u, expected in ((1.0 + VALIDITY_MARGIN + 1e-9, False), (1.0 + VALIDITY_MARGIN - 1e-3, True)):
+            p = [model.lon_offset, model.lat_offset, model.height_offset]
+            p[axis] = off + u * abs(scale)
+            assert bool(model.ground_validity(*p)) is expected
+    # latitude 200 and infinite inputs are errors, naming the input (numba and numpy paths)
+    for backend in ("numba", "numpy"):
+        with pytest.raises(InputError, match="lat must be within"):
+            model.projection(model.lon_offset, 200.0, 0.0, backend=backend)
+        with pytest.raises(InputError, match="lon contains infinite"):
+            model.projection(np.inf, model.lat_offset, 0.0, backend=backend)
+        with pytest.raises(InputError, match="h contains NaN"):
+            model.projection(model.lon_offset, model.lat_offset, np.nan, backend=backend)
+
+
+def test_localization_far_outside_is_not_converged_and_flags_are_returned():
+    model = read_rpc(RPC_DIR / "rpc_PLEIADES.xml")
+    rows, cols = model.image_size
+    row = np.array([-1e6, 0.0, rows - 1.0, rows - 1.0 + 0.5 * model.row_scale, 1e9])
+    col = np.array([cols / 2, 0.0, cols - 1.0, cols / 2, cols / 2])
+    lon, lat, ok, valid = model.localization(row, col, model.height_offset, return_valid=True)
+    # row -1e6 and 1e9: Newton lands somewhere far away; never reported converged
+    np.testing.assert_array_equal(ok, [False, True, True, True, False])
+    assert np.isnan(lon[0]) and np.isnan(lat[4])
+    # the image corners are valid; half a scale beyond the last row is converged but outside the domain
+    np.testing.assert_array_equal(valid, [False, True, True, False, False])
+    # the corners round-trip through the projection (independent direction)
+    r2, c2 = model.projection(lon[1:3], lat[1:3], model.height_offset)
+    np.testing.assert_allclose(r2, row[1:3], atol=1e-6)
+    np.testing.assert_allclose(c2, col[1:3], atol=1e-6)
+    # the default return API is unchanged
+    assert len(model.localization(row, col, model.height_offset)) == 3
