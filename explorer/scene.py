@@ -315,7 +315,17 @@ class Scene:
             raise SceneFileError(f"{source}: {exc}") from exc
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1)
+        """The scene as JSON; :class:`SceneFileError` naming the field if a number is NaN or infinite.
+
+        NaN or infinite numbers in ``metadata`` (e.g. a report's RMSE without check points) are
+        written as ``null``."""
+        d = {**self.to_dict(), "metadata": _finite_or_none(self.metadata)}
+        try:
+            return json.dumps(d, indent=1, allow_nan=False)
+        except ValueError:  # a NaN or infinity would be written as the non-JSON NaN / Infinity
+            raise SceneFileError(f"scene {self.name!r}: {_non_finite_field(d)} is not finite; "
+                                 "a scene file holds finite numbers only") from None
+
 
     def save(self, path: str | Path) -> None:
         """Write the scene to a JSON file (atomically: a failed write leaves no file under ``path``)."""
@@ -328,14 +338,47 @@ class Scene:
         :func:`explorer.real.load_scene` reads either an MPC scene or a rigorous line-scan scene."""
         path = Path(path)
         try:
-            d = json.loads(path.read_text())
+            d = json.loads(path.read_text(), parse_constant=_NonFinite)
         except json.JSONDecodeError as exc:
             raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+        geometry = {k: v for k, v in d.items() if k != "metadata"} if isinstance(d, dict) else d
+        if (where := _non_finite_field(geometry)) is not None:
+            raise SceneFileError(f"{path}: {where} is not finite; a scene file holds finite numbers only")
         if cls is Scene and isinstance(d, dict) and d.get("format") == RIGOROUS_SCENE_FORMAT:
             raise SceneFileError(
                 f"{path}: a rigorous line-scan scene; load it with explorer.load_scene (explorer.real.load_scene)"
             )
         return cls.from_dict(d, source=str(path))
+
+
+class _NonFinite(float):
+    """``NaN`` / ``Infinity`` / ``-Infinity`` met while parsing a scene file (a float that marks the field)."""
+
+
+def _finite_or_none(obj: object) -> object:
+    """``obj`` with NaN/infinite floats replaced by None (lists, tuples and dicts walked)."""
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    return obj
+
+
+def _non_finite_field(obj: object, where: str = "") -> str | None:
+    """Dotted path of the first NaN/infinite number (or :class:`_NonFinite` marker) in ``obj``, else None."""
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return f"{where or 'value'} ({obj})"
+    if isinstance(obj, np.ndarray) and obj.dtype.kind == "f" and not np.all(np.isfinite(obj)):
+        return f"{where} (array with NaN/infinite values)"
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, (list, tuple)) else ()
+    for key, value in items:
+        found = _non_finite_field(value, f"{where}[{key}]" if isinstance(key, int) else
+                                  f"{where}.{key}" if where else str(key))
+        if found is not None:
+            return found
+    return None
 
 
 def validate_ground(ground: np.ndarray) -> np.ndarray:
