@@ -119,7 +119,10 @@ assert evals["bws-interp"].ce_evals_per_point == evals["bws"].ce_evals_per_point
 # converge quadratically from the image centre; BWS halves the window each step.
 
 # %%
-def convergence(index=len(scps) // 3, methods_shown=("bws", "nr", "cpp", "gdp", "hybrid", "csm-secant")):
+DEFAULT_INDEX = len(scps) // 3
+
+
+def convergence(index=DEFAULT_INDEX, methods_shown=("bws", "nr", "cpp", "gdp", "hybrid", "csm-secant")):
     point = scps.ground[index][None, :]
     exact_row = scps.row[index]
     fig = go.Figure()

@@ -40,7 +40,6 @@ PANEL_SCPS = 2000 if SMALL else 20000
 
 # %%
 import numpy as np
-import plotly.graph_objects as go
 
 from explorer.evaluate import evaluate_method
 from explorer.methods import available, create

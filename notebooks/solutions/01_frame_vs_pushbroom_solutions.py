@@ -44,7 +44,8 @@ assert len(changes) == 1 and rows[changes[0]] <= row0 <= rows[changes[0] + 1]
 fit = np.polyval(np.polyfit(rows, x, 1), rows)
 print(f"agile: departure from a straight line {np.abs(x - fit).max():.1f} px over the image")
 wsu = build_scene("WSU")
-gw = wsu.image_to_ground(np.array([row0 * wsu.n_rows / agile.n_rows]), np.array([col0 * wsu.n_columns / agile.n_columns]))
+gw = wsu.image_to_ground(np.array([row0 * wsu.n_rows / agile.n_rows]),
+                         np.array([col0 * wsu.n_columns / agile.n_columns]))
 rw = np.arange(wsu.n_rows, dtype=float)
 xw = wsu.along_track_residual(np.repeat(gw, rw.size, 0), wsu.scanline_time(rw)) / wsu.pixel_size_m
 dev_wsu = np.abs(xw - np.polyval(np.polyfit(rw, xw, 1), rw)).max()
