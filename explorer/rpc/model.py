@@ -266,10 +266,6 @@ class RationalFunctionModel:
             if not np.isfinite(coefficients).all():
                 k = int(np.flatnonzero(~np.isfinite(coefficients))[0])
                 raise InputError(f"{key}_{k + 1} ({name}[{k}]) is not finite: {coefficients[k]}")
-            if np.max(np.abs(coefficients)) > MAX_COEFFICIENT:
-                k = int(np.argmax(np.abs(coefficients)))
-                raise InputError(f"{key}_{k + 1} ({name}[{k}]) = {coefficients[k]:.6g} is implausibly large "
-                                 f"(normalised RPC coefficients are O(1); limit {MAX_COEFFICIENT:g})")
             object.__setattr__(self, name, coefficients)
         for name in ("row", "col", "lat", "lon", "height"):
             key = _FILE_KEYS[name]
@@ -281,7 +277,6 @@ class RationalFunctionModel:
                 raise InputError(f"{key}_SCALE ({name}_scale) must be finite and non-zero, got {scale}")
             object.__setattr__(self, f"{name}_offset", offset)
             object.__setattr__(self, f"{name}_scale", scale)
-        self._check_ranges()
         if self.inverse is not None:
             arrays = {
                 k: np.asarray(getattr(self.inverse, k), dtype=np.float64).reshape(20)
@@ -298,8 +293,50 @@ class RationalFunctionModel:
         if self.image_size is not None and not (int(self.image_size[0]) > 0 and int(self.image_size[1]) > 0):
             raise InputError(f"image size {self.image_size} must be positive")
 
+    @property
+    def geodetic(self) -> bool:
+        """True when the ground coordinates are longitude/latitude degrees (every file format);
+        False for models fitted in other coordinates (``source_format="fitted"``, e.g. local ENU
+        metres in the roles of lon/lat/h), which skip the degree range checks."""
+        return self.source_format != "fitted"
+
+    def validate(self) -> RationalFunctionModel:
+        """Check that the values describe a usable RPC; the readers call it on every file.
+
+        Coefficients at most :data:`MAX_COEFFICIENT` in magnitude (normalised RPC00B coefficients
+        are O(1)); denominators that neither vanish nor change sign on the normalised cube
+        ``[-1, 1]^3`` (7 x 7 x 7 nodes); for :attr:`geodetic` models, ``LAT_OFF`` in
+        [-90, 90], ``|LAT_SCALE| <= 90``, ``LONG_OFF`` in [-180, 360], ``|LONG_SCALE| <= 180``,
+        heights and pixel offsets/scales below 100 km and 1e8 pixels.
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        InputError
+            Naming the field (RPC00B key and attribute) and its value.
+        """
+        for name in ("row_num", "row_den", "col_num", "col_den"):
+            coefficients = getattr(self, name)
+            if np.max(np.abs(coefficients)) > MAX_COEFFICIENT:
+                k = int(np.argmax(np.abs(coefficients)))
+                raise InputError(f"{_FILE_KEYS[name]}_{k + 1} ({name}[{k}]) = {coefficients[k]:.6g} is implausibly "
+                                 f"large (normalised RPC coefficients are O(1); limit {MAX_COEFFICIENT:g})")
+        if self.geodetic:
+            self._check_ranges()
+        for name in ("row_den", "col_den"):
+            den = evaluate_rpc00b_polynomial(getattr(self, name), *_CUBE)
+            if not np.all(np.isfinite(den)) or np.any(den == 0.0) or np.any(np.sign(den) != np.sign(den[0])):
+                k = int(np.argmin(np.abs(den)))
+                where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
+                raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the normalised domain (near {where}): "
+                                 "the projection is singular there")
+        return self
+
     def _check_ranges(self) -> None:
-        """Offsets and scales in their physical ranges; denominators that never vanish on [-1, 1]^3."""
+        """Offsets and scales of a geodetic model in their physical ranges."""
         if not -90.0 <= self.lat_offset <= 90.0:
             raise InputError(f"LAT_OFF (lat_offset) = {self.lat_offset:g} is outside [-90, 90] degrees")
         if not abs(self.lat_scale) <= 90.0:
@@ -316,13 +353,6 @@ class RationalFunctionModel:
             if not (abs(off) <= 1e8 and abs(scale) <= 1e8):
                 raise InputError(f"{_FILE_KEYS[name]}_OFF / {_FILE_KEYS[name]}_SCALE ({off:g} / {scale:g} px) "
                                  "beyond 1e8 pixels")
-        for name in ("row_den", "col_den"):
-            den = evaluate_rpc00b_polynomial(getattr(self, name), *_CUBE)
-            if not np.all(np.isfinite(den)) or np.any(den == 0.0) or np.any(np.sign(den) != np.sign(den[0])):
-                k = int(np.argmin(np.abs(den)))
-                where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
-                raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the normalised domain (near {where}): "
-                                 "the projection is singular there")
 
     # ------------------------------------------------------------------ domain
     @property
@@ -479,8 +509,8 @@ class RationalFunctionModel:
         Raises
         ------
         InputError
-            A ValueError: an input contains NaN or an infinity, or a latitude beyond +-90 degrees
-            (the message names it).
+            A ValueError: an input contains NaN or an infinity, or (:attr:`geodetic` models) a
+            latitude beyond +-90 degrees (the message names it).
 
         Notes
         -----
@@ -501,7 +531,7 @@ class RationalFunctionModel:
         if not finite:  # an infinite input (NaN was refused above), or the polynomials overflowed
             for value, name in ((lon, "lon"), (lat, "lat"), (h, "h")):
                 _as_float_array(value, name)
-        lat_abs = np.abs(np.asarray(lat, dtype=np.float64))
+        lat_abs = np.abs(np.asarray(lat, dtype=np.float64)) if self.geodetic else np.zeros(0)
         if lat_abs.size and np.max(lat_abs) > 90.0:
             k = int(np.argmax(lat_abs.ravel()))
             raise InputError(f"lat must be within [-90, 90] degrees, got {np.asarray(lat, float).ravel()[k]:g}")

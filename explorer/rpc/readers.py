@@ -85,8 +85,8 @@ def _from_dict(
 
 def _model(path: str | Path, coeffs: dict, scalars: dict, shift: float, source_format: str,
            extra: dict) -> RationalFunctionModel:
-    """The model; its constructor validates every value (:class:`InputError` naming the field)."""
-    return RationalFunctionModel(
+    """The model, validated (:meth:`RationalFunctionModel.validate`: :class:`InputError` naming the field)."""
+    model = RationalFunctionModel(
         row_num=coeffs["LINE_NUM_COEFF"],
         row_den=coeffs["LINE_DEN_COEFF"],
         col_num=coeffs["SAMP_NUM_COEFF"],
@@ -105,6 +105,7 @@ def _model(path: str | Path, coeffs: dict, scalars: dict, shift: float, source_f
         source_path=str(path),
         **extra,
     )
+    return model.validate()
 
 
 def _collect_indexed(

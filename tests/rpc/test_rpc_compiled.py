@@ -149,11 +149,11 @@ def test_zero_denominator_and_infinite_inputs_give_the_same_non_finite_values(lo
     for backend in ("numba", "numpy"):
         with pytest.raises(InputError, match="lon contains infinite"):
             model.projection(np.array([11.0, np.inf]), 0.0, 0.0, backend=backend)
-    # a denominator that vanishes inside the domain (L = 0) is refused at construction
+    # a denominator that vanishes inside the domain (L = 0) is refused by validate() (the readers call it)
     den_zero = np.zeros(20)
     den_zero[1] = 1.0
     with pytest.raises(InputError, match="LINE_DEN_COEFF"):
-        RationalFunctionModel(row_num=num, row_den=den_zero, col_num=num, col_den=den, **kwargs)
+        RationalFunctionModel(row_num=num, row_den=den_zero, col_num=num, col_den=den, **kwargs).validate()
 
 
 def test_backend_argument_is_checked():
