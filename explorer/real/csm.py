@@ -288,9 +288,11 @@ class CsmCamera:
         cam[K.C_N_LINES], cam[K.C_N_SAMPLES] = self.n_lines, self.n_samples
         cam[K.C_SLOPE] = -1.0
         cam[K.C_LOOK] = 1.0
+        cam[K.C_CURV] = np.inf  # until measured: accept on the step only
         self._cam = cam
         self._set_look_sign()
         self._seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._ext: tuple | None = None
         self._setup_seed()
 
     # ------------------------------------------------------------------ packing
@@ -298,13 +300,19 @@ class CsmCamera:
         return (self.rate_lines, self.rate_times, self.rate_periods)
 
     def _exterior_args(self) -> tuple:
-        return (self.position_times, self.positions_m, int(self.position_order), self.pointing_times,
-                self.pointing_quaternions, self.pointing_constant, self.body_times, self.body_quaternions,
-                self.body_constant, 1 if self.attitude_interpolation == "lagrange" else 0, int(self.attitude_order),
-                bool(self.position_in_j2000))
+        """The ``ext`` tuple of the kernels (tables with their precomputed Lagrange windows)."""
+        if getattr(self, "_ext", None) is None:
+            pw, pd = K.window_tables(self.position_times, int(self.position_order))
+            qpw, qpd = K.window_tables(self.pointing_times, int(self.attitude_order))
+            qbw, qbd = K.window_tables(self.body_times, int(self.attitude_order))
+            self._ext = (self.position_times, self.positions_m, pw, pd, self.pointing_times,
+                         self.pointing_quaternions, qpw, qpd, self.pointing_constant, self.body_times,
+                         self.body_quaternions, qbw, qbd, self.body_constant,
+                         1 if self.attitude_interpolation == "lagrange" else 0, bool(self.position_in_j2000))
+        return self._ext
 
     def _all_args(self) -> tuple:
-        return (self._cam, *self._tables(), *self._exterior_args(), int(self.distortion_model),
+        return (self._cam, *self._tables(), self._exterior_args(), int(self.distortion_model),
                 self.distortion_coefficients)
 
     # ------------------------------------------------------------------ time
@@ -330,7 +338,7 @@ class CsmCamera:
         """
         t = np.ascontiguousarray(np.atleast_1d(np.asarray(t, dtype=np.float64)))
         centre, rot = np.empty((t.size, 3)), np.empty((t.size, 3, 3))
-        K.exterior_many(t, *self._exterior_args(), centre, rot)
+        K.exterior_many(t, self._exterior_args(), centre, rot)
         return centre, rot
 
     # ------------------------------------------------------------------ distortion
@@ -393,7 +401,7 @@ class CsmCamera:
 
     # ------------------------------------------------------------------ ground -> image
     def _setup_seed(self) -> None:
-        """Quadratic seed ``line(X, Y, Z)`` fitted on a grid of image points at three heights, and the
+        """Cubic seed ``line(X, Y, Z)`` fitted on a grid of image points at three heights, and the
         residual's slope (lines per line) at the image centre."""
         lo, hi = self.height_range_m
         lines = np.linspace(0.0, self.n_lines, 9)
@@ -412,9 +420,13 @@ class CsmCamera:
         mean = ground.mean(axis=0)
         scale = ground.std(axis=0)
         scale[scale == 0] = 1.0
-        coef, *_ = np.linalg.lstsq(_quadratic((ground - mean) / scale), line, rcond=None)
+        feats = _cubic((ground - mean) / scale)
+        if line.size < 2 * feats.shape[1]:
+            feats = _quadratic((ground - mean) / scale)
+        coef, *_ = np.linalg.lstsq(feats, line, rcond=None)
         self._seed = (mean, scale, coef)
-        # slope of the residual at the centre
+        # slope of the residual at the centre, and the curvature constant C = max |g''| / (2 |g'|) around
+        # the grid points' lines (times a safety factor of 4), for the secant's acceptance test
         c = ground[np.argmin(np.abs(line - 0.5 * self.n_lines))][None, :]
         mid = np.array([0.5 * self.n_lines])
         r0, _ = self.detector_residual(c, mid - 0.5)
@@ -423,6 +435,17 @@ class CsmCamera:
         if not (np.isfinite(slope) and slope != 0.0):
             raise SceneFileError(f"{self.source}: the detector-line residual does not change with the line")
         self._cam[K.C_SLOPE] = slope
+        offsets = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
+        pts = np.repeat(ground, offsets.size, axis=0)
+        at = (line[:, None] + offsets[None, :]).ravel()
+        g, _ = self.detector_residual(pts, at)
+        g = g.reshape(-1, offsets.size)
+        d1 = 0.5 * (g[:, 2:] - g[:, :-2])
+        d2 = g[:, 2:] - 2 * g[:, 1:-1] + g[:, :-2]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.abs(d2) / (2.0 * np.abs(d1))
+        ratio = ratio[np.isfinite(ratio)]
+        self._cam[K.C_CURV] = 4.0 * float(np.max(ratio)) if ratio.size else np.inf
 
     def _set_look_sign(self) -> None:
         """usgscsm intersects the whole line of sight (the root nearest the camera on either side); here
@@ -437,9 +460,10 @@ class CsmCamera:
         return float(self._cam[K.C_LOOK])
 
     def seed_line(self, ground: np.ndarray) -> np.ndarray:
-        """The quadratic seed's line (N,) for body-fixed points (N, 3)."""
+        """The seed polynomial's line (N,) for body-fixed points (N, 3)."""
         mean, scale, coef = self._seed  # type: ignore[misc]
-        return _quadratic((ground - mean) / scale) @ coef
+        u = (ground - mean) / scale
+        return (_cubic(u) if coef.size == 20 else _quadratic(u)) @ coef
 
     def detector_residual(self, ground: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """usgscsm's detector-line residual (image lines, zero at the best line) and the sample of
@@ -474,7 +498,8 @@ class CsmCamera:
             raise InputError(f"tol must be > 0 and max_iter >= 2, got {tol}, {max_iter}")
         margin = 0.25 * self.n_lines + 50.0 if margin_lines is None else float(margin_lines)
         n = ground.shape[0]
-        seed = np.ascontiguousarray(self.seed_line(ground))
+        mean, scale, coef = self._seed  # type: ignore[misc]
+        seed = (mean, 1.0 / scale, np.ascontiguousarray(coef))
         line, sample = np.empty(n), np.empty(n)
         status, evals = np.empty(n, np.int8), np.empty(n, np.int64)
         K.ground_to_image_nb(ground, seed, -margin, self.n_lines + margin, float(tol), int(max_iter),
@@ -497,6 +522,12 @@ class CsmCamera:
             f"{'J2000' if self.position_in_j2000 else 'body-fixed'}), {self.pointing_times.size} pointing and "
             f"{self.body_times.size} body-rotation quaternions ({self.attitude_interpolation})"
         )
+
+
+def _cubic(u: np.ndarray) -> np.ndarray:
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    return np.column_stack([_quadratic(u), x**3, y**3, z**3, x * x * y, x * x * z, y * y * x, y * y * z,
+                            z * z * x, z * z * y, x * y * z])
 
 
 def _quadratic(u: np.ndarray) -> np.ndarray:

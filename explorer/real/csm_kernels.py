@@ -102,25 +102,73 @@ def lagrange_eval(times, values, t, max_order, out):
 
 
 @njit(cache=True)
-def quaternion_at(times, quats, t, mode, max_order, q):
-    """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` into ``q`` (4,).
+def window_tables(times, max_order):
+    """Per table interval: usgscsm's Lagrange window ``(first, order)`` and the inverse denominators
+    ``1 / prod_{b != a} (t_a - t_b)`` of its weights (so that evaluations need no division)."""
+    n = times.shape[0]
+    m = max(n - 1, 1)
+    win = np.zeros((m, 2), np.int64)
+    den = np.zeros((m, 8))
+    if n < 2:
+        win[0, 1] = 1
+        den[0, 0] = 1.0
+        return win, den
+    for i in range(n - 1):
+        first, order = lagrange_window(n, i, max_order)
+        win[i, 0], win[i, 1] = first, order
+        for a in range(order):
+            d = 1.0
+            for b in range(order):
+                if b != a:
+                    d *= times[first + a] - times[first + b]
+            den[i, a] = 1.0 / d
+    return win, den
 
-    ``mode`` 0: slerp between the two samples around ``t`` (linear extrapolation of the angle
-    beyond the table); 1: Lagrange on the components (usgscsm), renormalised.
-    """
+
+@njit(cache=True)
+def _lagrange3(times, values, win, den, t):
+    """Lagrange interpolation of ``values`` (n, 3) at ``t`` with precomputed windows (allocation-free)."""
     n = times.shape[0]
     if n == 1:
-        for j in range(4):
-            q[j] = quats[0, j]
-        return
-    if mode == 1:
-        lagrange_eval(times, quats, t, max_order, q)
+        return values[0, 0], values[0, 1], values[0, 2]
+    i = interval_index(times, t)
+    first, order = win[i, 0], win[i, 1]
+    o0 = o1 = o2 = 0.0
+    for a in range(order):
+        w = den[i, a]
+        for b in range(order):
+            if b != a:
+                w *= t - times[first + b]
+        o0 += w * values[first + a, 0]
+        o1 += w * values[first + a, 1]
+        o2 += w * values[first + a, 2]
+    return o0, o1, o2
+
+
+@njit(cache=True)
+def _quat(times, quats, win, den, t, mode):
+    """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` (allocation-free, see :func:`quaternion_at`)."""
+    n = times.shape[0]
+    if n == 1:
+        q0, q1, q2, q3 = quats[0, 0], quats[0, 1], quats[0, 2], quats[0, 3]
+    elif mode == 1:
+        i = interval_index(times, t)
+        first, order = win[i, 0], win[i, 1]
+        q0 = q1 = q2 = q3 = 0.0
+        for a in range(order):
+            w = den[i, a]
+            for b in range(order):
+                if b != a:
+                    w *= t - times[first + b]
+            q0 += w * quats[first + a, 0]
+            q1 += w * quats[first + a, 1]
+            q2 += w * quats[first + a, 2]
+            q3 += w * quats[first + a, 3]
     else:
         i = interval_index(times, t)
         s = (t - times[i]) / (times[i + 1] - times[i])
-        dot = 0.0
-        for j in range(4):
-            dot += quats[i, j] * quats[i + 1, j]
+        dot = quats[i, 0] * quats[i + 1, 0] + quats[i, 1] * quats[i + 1, 1] + quats[i, 2] * quats[i + 1, 2] \
+            + quats[i, 3] * quats[i + 1, 3]
         if dot > 1.0:
             dot = 1.0
         theta = np.arccos(dot)
@@ -131,26 +179,38 @@ def quaternion_at(times, quats, t, mode, max_order, q):
         else:
             w0 = np.sin((1.0 - s) * theta) / st
             w1 = np.sin(s * theta) / st
-        for j in range(4):
-            q[j] = w0 * quats[i, j] + w1 * quats[i + 1, j]
-    nrm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    for j in range(4):
-        q[j] /= nrm
+        q0 = w0 * quats[i, 0] + w1 * quats[i + 1, 0]
+        q1 = w0 * quats[i, 1] + w1 * quats[i + 1, 1]
+        q2 = w0 * quats[i, 2] + w1 * quats[i + 1, 2]
+        q3 = w0 * quats[i, 3] + w1 * quats[i + 1, 3]
+    nrm = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    return q0 / nrm, q1 / nrm, q2 / nrm, q3 / nrm
+
+
+@njit(cache=True)
+def quaternion_at(times, quats, t, mode, max_order, q):
+    """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` into ``q`` (4,).
+
+    ``mode`` 0: slerp between the two samples around ``t`` (linear extrapolation of the angle
+    beyond the table); 1: Lagrange on the components (usgscsm), renormalised.
+    """
+    win, den = window_tables(times, max_order)
+    q[0], q[1], q[2], q[3] = _quat(times, quats, win, den, t, mode)
+
+
+@njit(cache=True)
+def _qmat(w, x, y, z):
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w),
+            2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w),
+            2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y))
 
 
 @njit(cache=True)
 def quaternion_matrix(q, r):
     """Active rotation matrix ``r`` (3, 3) of the unit quaternion ``q = (w, x, y, z)``."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    r[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    r[0, 1] = 2.0 * (x * y - z * w)
-    r[0, 2] = 2.0 * (x * z + y * w)
-    r[1, 0] = 2.0 * (x * y + z * w)
-    r[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    r[1, 2] = 2.0 * (y * z - x * w)
-    r[2, 0] = 2.0 * (x * z - y * w)
-    r[2, 1] = 2.0 * (y * z + x * w)
-    r[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    m = _qmat(q[0], q[1], q[2], q[3])
+    for k in range(9):
+        r[k // 3, k % 3] = m[k]
 
 
 @njit(cache=True)
@@ -164,36 +224,52 @@ def line_time(line, rate_lines, rate_times, rate_periods):
 
 # --------------------------------------------------------------------------- exterior
 @njit(cache=True)
-def exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rotate_position,
-                s_out, m_out):
+def _const_times(c, m):
+    """``c @ m`` for a 3 x 3 array ``c`` and a 9-tuple ``m`` (row-major), as a 9-tuple."""
+    return (c[0, 0] * m[0] + c[0, 1] * m[3] + c[0, 2] * m[6], c[0, 0] * m[1] + c[0, 1] * m[4] + c[0, 2] * m[7],
+            c[0, 0] * m[2] + c[0, 1] * m[5] + c[0, 2] * m[8], c[1, 0] * m[0] + c[1, 1] * m[3] + c[1, 2] * m[6],
+            c[1, 0] * m[1] + c[1, 1] * m[4] + c[1, 2] * m[7], c[1, 0] * m[2] + c[1, 1] * m[5] + c[1, 2] * m[8],
+            c[2, 0] * m[0] + c[2, 1] * m[3] + c[2, 2] * m[6], c[2, 0] * m[1] + c[2, 1] * m[4] + c[2, 2] * m[7],
+            c[2, 0] * m[2] + c[2, 1] * m[5] + c[2, 2] * m[8])
+
+
+@njit(cache=True)
+def _exterior(t, ext):
+    """Allocation-free exterior: centre ``(s0, s1, s2)`` and camera -> body rotation (row-major 9-tuple).
+
+    ``ext`` = ``(pos_t, pos, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb,
+    att_mode, rotate_position)`` (:meth:`explorer.real.csm.CsmCamera._exterior_args`).
+    """
+    pos_t, pos, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb, att_mode, \
+        rotate_position = ext
+    p0, p1, p2 = _lagrange3(pos_t, pos, pos_win, pos_den, t)
+    w, x, y, z = _quat(qb_t, qb, qb_win, qb_den, t, att_mode)
+    b = _const_times(cb, _qmat(w, x, y, z))
+    w, x, y, z = _quat(qp_t, qp, qp_win, qp_den, t, att_mode)
+    pm = _const_times(cp, _qmat(w, x, y, z))
+    m = (b[0] * pm[0] + b[1] * pm[1] + b[2] * pm[2], b[0] * pm[3] + b[1] * pm[4] + b[2] * pm[5],
+         b[0] * pm[6] + b[1] * pm[7] + b[2] * pm[8], b[3] * pm[0] + b[4] * pm[1] + b[5] * pm[2],
+         b[3] * pm[3] + b[4] * pm[4] + b[5] * pm[5], b[3] * pm[6] + b[4] * pm[7] + b[5] * pm[8],
+         b[6] * pm[0] + b[7] * pm[1] + b[8] * pm[2], b[6] * pm[3] + b[7] * pm[4] + b[8] * pm[5],
+         b[6] * pm[6] + b[7] * pm[7] + b[8] * pm[8])
+    if rotate_position:
+        return (b[0] * p0 + b[1] * p1 + b[2] * p2, b[3] * p0 + b[4] * p1 + b[5] * p2,
+                b[6] * p0 + b[7] * p1 + b[8] * p2, m)
+    return p0, p1, p2, m
+
+
+@njit(cache=True)
+def exterior_at(t, ext, s_out, m_out):
     """Perspective centre ``s_out`` (3,) body-fixed metres and camera -> body rotation ``m_out`` (3, 3).
 
     ``M = B(t) P(t)^T`` with ``P = C_p Q(qp(t))`` the J2000 -> sensor rotation and
     ``B = C_b Q(qb(t))`` the J2000 -> body rotation; positions given in J2000
     (``rotate_position``) are rotated by ``B(t)``.
     """
-    p = np.empty(3)
-    lagrange_eval(pos_t, pos, t, pos_order, p)
-    q = np.empty(4)
-    rq = np.empty((3, 3))
-    quaternion_at(qb_t, qb, t, att_mode, att_order, q)
-    quaternion_matrix(q, rq)
-    b = cb @ rq
-    quaternion_at(qp_t, qp, t, att_mode, att_order, q)
-    quaternion_matrix(q, rq)
-    pm = cp @ rq
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += b[i, k] * pm[j, k]
-            m_out[i, j] = acc
-    if rotate_position:
-        for i in range(3):
-            s_out[i] = b[i, 0] * p[0] + b[i, 1] * p[1] + b[i, 2] * p[2]
-    else:
-        for i in range(3):
-            s_out[i] = p[i]
+    s0, s1, s2, m = _exterior(t, ext)
+    s_out[0], s_out[1], s_out[2] = s0, s1, s2
+    for k in range(9):
+        m_out[k // 3, k % 3] = m[k]
 
 
 # --------------------------------------------------------------------------- distortion
@@ -272,10 +348,33 @@ def remove_distortion(model, c, x, y):
 
 
 @njit(cache=True)
+def _apply_radial(c, x, y):
+    """Inverse of usgscsm's radial removal ``u = d (1 - D(|d|^2))``: Newton on the distorted radius."""
+    ru = np.sqrt(x * x + y * y)
+    if ru == 0.0:
+        return x, y
+    r = ru
+    for _ in range(DIST_MAX_ITER):
+        rr = r * r
+        dd = c[0] + rr * (c[1] + rr * c[2])
+        f = r * (1.0 - dd) - ru
+        fp = 1.0 - dd - 2.0 * rr * (c[1] + 2.0 * rr * c[2])
+        step = f / fp
+        r -= step
+        if abs(step) <= NEWTON_TOL_MM * (1.0 + r):
+            rr = r * r
+            dd = c[0] + rr * (c[1] + rr * c[2])
+            return x / (1.0 - dd), y / (1.0 - dd)
+    return np.nan, np.nan
+
+
+@njit(cache=True)
 def apply_distortion(model, c, x, y):
     """Undistorted -> distorted focal-plane coordinates (mm)."""
     if model == DIST_NONE:
         return x, y
+    if model == DIST_RADIAL:
+        return _apply_radial(c, x, y)
     if closed_form_is_removal(model):
         return _solve_closed_form(model, c, x, y)
     return _closed_form(model, c, x, y)
@@ -295,27 +394,24 @@ def distortion_many(model, c, x, y, remove, ox, oy):
 # ``cam``: float64 array of the scalar camera constants, see explorer.real.csm.CsmCamera._cam
 C_FOCAL, C_LINE_ORIGIN, C_SAMPLE_ORIGIN, C_START_LINE, C_START_SAMPLE = 0, 1, 2, 3, 4
 C_LINE_SUM, C_SAMPLE_SUM, C_TL0, C_TL1, C_TL2, C_TS0, C_TS1, C_TS2 = 5, 6, 7, 8, 9, 10, 11, 12
-C_A, C_B, C_N_LINES, C_N_SAMPLES, C_SLOPE, C_LOOK = 13, 14, 15, 16, 17, 18
-N_CAM = 19
+C_A, C_B, C_N_LINES, C_N_SAMPLES, C_SLOPE, C_LOOK, C_CURV = 13, 14, 15, 16, 17, 18, 19
+N_CAM = 20
 
 
 @njit(cache=True)
-def detector_residual(X, Y, Z, line, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb,
-                      att_mode, att_order, rot_pos, dmodel, dc):
+def detector_residual(X, Y, Z, line, cam, rl, rt, rp, ext, dmodel, dc):
     """Detector-line residual (image lines) and sample of a ground point seen at ``line``.
 
     Returns ``(residual, sample, ok)``: the residual is usgscsm's ``calcDetectorLineErr`` (zero
     at the best line); ``ok`` is False behind the camera or for a non-finite evaluation.
     """
     t = line_time(line, rl, rt, rp)
-    s = np.empty(3)
-    m = np.empty((3, 3))
-    exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, s, m)
+    s0, s1, s2, m = _exterior(t, ext)
     sg = cam[C_LOOK]
-    dx, dy, dz = sg * (X - s[0]), sg * (Y - s[1]), sg * (Z - s[2])
-    vx = m[0, 0] * dx + m[1, 0] * dy + m[2, 0] * dz
-    vy = m[0, 1] * dx + m[1, 1] * dy + m[2, 1] * dz
-    vz = m[0, 2] * dx + m[1, 2] * dy + m[2, 2] * dz
+    dx, dy, dz = sg * (X - s0), sg * (Y - s1), sg * (Z - s2)
+    vx = m[0] * dx + m[3] * dy + m[6] * dz
+    vy = m[1] * dx + m[4] * dy + m[7] * dz
+    vz = m[2] * dx + m[5] * dy + m[8] * dz
     if not vz < 0.0:  # the camera looks along C_LOOK * (-x, -y, -f)
         return np.nan, np.nan, False
     f = cam[C_FOCAL]
@@ -330,11 +426,27 @@ def detector_residual(X, Y, Z, line, cam, rl, rt, rp, pos_t, pos, pos_order, qp_
     return res, sample, ok
 
 
+@njit(cache=True)
+def seed_polynomial(X, Y, Z, mean, inv_scale, coef):
+    """The camera's seed polynomial ``line(X, Y, Z)`` (quadratic: 10 terms, cubic: 20) in normalised coordinates."""
+    x = (X - mean[0]) * inv_scale[0]
+    y = (Y - mean[1]) * inv_scale[1]
+    z = (Z - mean[2]) * inv_scale[2]
+    v = coef[0] + coef[1] * x + coef[2] * y + coef[3] * z + coef[4] * x * x + coef[5] * y * y + coef[6] * z * z \
+        + coef[7] * x * y + coef[8] * x * z + coef[9] * y * z
+    if coef.shape[0] == 20:
+        v += coef[10] * x * x * x + coef[11] * y * y * y + coef[12] * z * z * z + coef[13] * x * x * y \
+            + coef[14] * x * x * z + coef[15] * y * y * x + coef[16] * y * y * z + coef[17] * z * z * x \
+            + coef[18] * z * z * y + coef[19] * x * y * z
+    return v
+
+
 @njit(parallel=True, cache=True)
-def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, cam, rl, rt, rp, pos_t, pos,
-                       pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, dmodel, dc,
+def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, rl, rt, rp, ext, dmodel, dc,
                        line_out, sample_out, status_out, evals_out):
     """Best line per ground point: safeguarded secant on the detector-line residual.
+
+    ``seed`` = ``(mean (3,), 1 / scale (3,), coefficients (10 or 20,))`` of :func:`seed_polynomial`.
 
     From the seed (clipped to the window), a Newton step with the camera's typical slope
     ``d residual / d line`` (``cam[C_SLOPE]``), then secant steps; once two residuals differ in
@@ -343,11 +455,12 @@ def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, c
     iterate plus that step (the sample is the last evaluation's: it moves by less than ``tol``
     times ``d sample / d line``).  A step pushed against a window end twice means no root.
     """
+    curv = cam[C_CURV]
+    mean, inv_scale, coef = seed
     for i in prange(ground.shape[0]):
         X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
-        x0 = min(max(seed_line[i], window_lo), window_hi)
-        f0, s0, ok = detector_residual(X, Y, Z, x0, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t,
-                                       qb, cb, att_mode, att_order, rot_pos, dmodel, dc)
+        x0 = min(max(seed_polynomial(X, Y, Z, mean, inv_scale, coef), window_lo), window_hi)
+        f0, s0, ok = detector_residual(X, Y, Z, x0, cam, rl, rt, rp, ext, dmodel, dc)
         n_eval = 1
         status = STATUS_MAX_ITER
         line = np.nan
@@ -362,8 +475,7 @@ def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, c
             if x1 == x0:
                 x1 = min(max(x0 + (1.0 if -f0 / slope > 0 else -1.0) * 1e-3, window_lo), window_hi)
             for _ in range(max_iter):
-                f1, s1, ok = detector_residual(X, Y, Z, x1, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp,
-                                               qb_t, qb, cb, att_mode, att_order, rot_pos, dmodel, dc)
+                f1, s1, ok = detector_residual(X, Y, Z, x1, cam, rl, rt, rp, ext, dmodel, dc)
                 n_eval += 1
                 if not ok:
                     status = STATUS_BEHIND
@@ -385,17 +497,22 @@ def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, c
                 denom = f1 - f0
                 step = -f1 * (x1 - x0) / denom if denom != 0.0 else -f1 / slope
                 x2 = x1 + step
+                bisected = False
                 if bracket and not (a < x2 < b):
                     x2 = 0.5 * (a + b)
                     step = x2 - x1
-                if abs(step) <= tol:
-                    line, sample, status = x2, s1, STATUS_OK
+                    bisected = True
+                # the secant point's error is about C |x1 - r| |x0 - r| ~ C |step| |x1 - x0| (C: the residual's
+                # curvature constant measured at setup); accept once that (or the step itself) is below tol
+                if abs(step) <= tol or (not bisected and curv * abs(step) * abs(x1 - x0) <= tol):
+                    ds = (s1 - s0) / (x1 - x0) if x1 != x0 else 0.0
+                    line, sample, status = x2, s1 + ds * step, STATUS_OK
                     break
                 x2c = min(max(x2, window_lo), window_hi)
                 if x2c == x1:  # pushed against a window end: the residual keeps its sign over the window
                     status = STATUS_NO_ROOT
                     break
-                x0, f0 = x1, f1
+                x0, f0, s0 = x1, f1, s1
                 x1 = x2c
         if status != STATUS_OK:
             line = np.nan
@@ -407,8 +524,8 @@ def ground_to_image_nb(ground, seed_line, window_lo, window_hi, tol, max_iter, c
 
 
 @njit(parallel=True, cache=True)
-def image_to_ground_nb(line, sample, height, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb,
-                       att_mode, att_order, rot_pos, dmodel, dc, ground_out, status_out, centre_out, look_out):
+def image_to_ground_nb(line, sample, height, cam, rl, rt, rp, ext, dmodel, dc, ground_out, status_out, centre_out,
+                       look_out):
     """Lines of sight of image points intersected with the ellipsoid inflated by ``height``.
 
     The ellipsoid has semi-axes ``(a + h, a + h, b + h)`` as in usgscsm's ``losEllipsoidIntersect``;
@@ -419,7 +536,7 @@ def image_to_ground_nb(line, sample, height, cam, rl, rt, rp, pos_t, pos, pos_or
         t = line_time(line[i], rl, rt, rp)
         s = np.empty(3)
         m = np.empty((3, 3))
-        exterior_at(t, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos, s, m)
+        exterior_at(t, ext, s, m)
         det_sample = sample[i] * cam[C_SAMPLE_SUM] + cam[C_START_SAMPLE]
         det_line = cam[C_START_LINE]  # the detector line: usgscsm passes line 0 to the focal-plane mapping
         t1 = det_line - cam[C_LINE_ORIGIN] - cam[C_TL0]
@@ -472,13 +589,13 @@ def image_to_ground_nb(line, sample, height, cam, rl, rt, rp, pos_t, pos, pos_or
 
 
 @njit(parallel=True, cache=True)
-def exterior_many(times, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+def exterior_many(times, ext,
                   centre_out, rot_out):
     """Perspective centres (N, 3) and camera -> body rotations (N, 3, 3) at times (N,)."""
     for i in prange(times.shape[0]):
         s = np.empty(3)
         m = np.empty((3, 3))
-        exterior_at(times[i], pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+        exterior_at(times[i], ext,
                     s, m)
         for a in range(3):
             centre_out[i, a] = s[a]
@@ -487,12 +604,10 @@ def exterior_many(times, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_
 
 
 @njit(parallel=True, cache=True)
-def residual_many(ground, lines, cam, rl, rt, rp, pos_t, pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode,
-                  att_order, rot_pos, dmodel, dc, res_out, sample_out):
+def residual_many(ground, lines, cam, rl, rt, rp, ext, dmodel, dc, res_out, sample_out):
     """:func:`detector_residual` for many (point, line) pairs (NaN where invalid)."""
     for i in prange(ground.shape[0]):
-        r, s, ok = detector_residual(ground[i, 0], ground[i, 1], ground[i, 2], lines[i], cam, rl, rt, rp, pos_t,
-                                     pos, pos_order, qp_t, qp, cp, qb_t, qb, cb, att_mode, att_order, rot_pos,
+        r, s, ok = detector_residual(ground[i, 0], ground[i, 1], ground[i, 2], lines[i], cam, rl, rt, rp, ext,
                                      dmodel, dc)
         res_out[i] = r if ok else np.nan
         sample_out[i] = s if ok else np.nan
