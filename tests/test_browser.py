@@ -135,3 +135,110 @@ def test_scene_and_panel_render_in_two_clients(explorer, browser, tmp_path):
         page.wait_for_function("() => document.body.innerText.includes('ISB: updated')")
     for page in (page1, page2):
         page.context.close()
+
+
+# ------------------------------------------------------------------ a real scene
+MAP_REGIONS = """() => {
+  const gd = document.querySelector('.js-plotly-plot');
+  const box = gd.getBoundingClientRect();
+  const out = [];
+  for (const key of Object.keys(gd._fullLayout).filter(k => /^xaxis\\d*$/.test(k)).sort()) {
+    const xa = gd._fullLayout[key], ya = gd._fullLayout['y' + key.slice(1)];
+    out.push({x: box.x + xa._offset, y: box.y + ya._offset, width: xa._length, height: ya._length});
+  }
+  return out;
+}"""
+POINT_PIXEL = """([trace, k]) => {
+  const gd = document.querySelector('.js-plotly-plot');
+  const box = gd.getBoundingClientRect();
+  const t = gd._fullData[trace];
+  const xa = gd._fullLayout[t.xaxis.replace('x', 'xaxis')], ya = gd._fullLayout[t.yaxis.replace('y', 'yaxis')];
+  return {x: box.x + xa._offset + xa.l2p(t.x[k]), y: box.y + ya._offset + ya.l2p(t.y[k])};
+}"""
+RECORD_CLICKS = """() => {
+  const gd = document.querySelector('.js-plotly-plot');
+  window.__clicked = [];
+  gd.on('plotly_click', ev => window.__clicked.push(ev.points[0].customdata[1]));
+}"""
+
+
+@pytest.fixture(scope="module")
+def real_explorer():
+    from explorer.app.sources import load_source
+    from tests.real.conftest import DEM_DIR, PHR_2017
+
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"))
+    box: dict = {}
+    stop = threading.Event()
+    th = threading.Thread(target=lambda: box.setdefault("rc", serve(
+        src.label, port=0, methods=["lrm", "prm", "nr"], sources=[src], stop_event=stop,
+        ready=lambda a: box.setdefault("app", a), scp_count=10_000, sweep=False)), daemon=True)
+    th.start()
+    t0 = time.monotonic()
+    while "app" not in box and th.is_alive() and time.monotonic() - t0 < 120:
+        time.sleep(0.05)
+    app = box["app"]
+    assert app.wait_idle(240)
+    yield app
+    stop.set()
+    th.join(60)
+    assert not th.is_alive() and box["rc"] == 0
+
+
+def _map_colours(page, region) -> int:
+    png = page.screenshot(clip=region)
+    px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).reshape(-1, 3)
+    colours = {tuple(c) for c in px[::3]}
+    colours.discard((64, 64, 64))  # the plot background
+    return len(colours)
+
+
+def test_real_scene_maps_have_structure_and_a_click_selects_in_3d(real_explorer, browser, tmp_path):
+    app = real_explorer
+    assert app.scene.n_rows == 49826 and "Pleiades" in app.handles["preset"].value
+    page = _open(browser, app.url)
+    page.wait_for_function("() => document.body.innerText.includes('nr row: RMSE')")
+    page.wait_for_timeout(1500)  # scattergl draws after the layout
+    page.screenshot(path=str(tmp_path / "real.png"))
+    regions = page.evaluate(MAP_REGIONS)
+    assert len(regions) == 3  # lrm, prm, nr (row residual)
+    for region in regions:  # every map shows structure under the default (automatic) scale
+        assert _map_colours(page, region) > 10
+    text = page.locator(".js-plotly-plot").first.inner_text()
+    assert "nr row: RMSE" in text and "p99" in text  # the limit and how it was chosen, on the colour bars
+    assert "Send data to Chart Studio" not in page.content()
+
+    # click a point of the nr map: the 3D selection moves to that SCP
+    page.evaluate(RECORD_CLICKS)
+    before = np.array(app.nodes["/selected/point"].position)
+    trace = [t.name for t in app.handles["maps"].figure.data].index("nr row")
+    xy = page.evaluate(POINT_PIXEL, [trace, 1234])
+    page.mouse.click(xy["x"], xy["y"])
+    page.wait_for_function("() => window.__clicked.length > 0")
+    clicked = int(page.evaluate("() => window.__clicked[0]"))
+    t0 = time.monotonic()
+    while (app.selection is None or app.selection.source != f"SCP {clicked} (picked in a map)") \
+            and time.monotonic() - t0 < 60:
+        time.sleep(0.2)
+    assert app.selection.source == f"SCP {clicked} (picked in a map)"
+    assert app.wait_idle(60)
+    scps = app.model.scps(app.settings())
+    after = np.array(app.nodes["/selected/point"].position)
+    np.testing.assert_allclose(after, app.frame.ground(scps.ground[clicked][None])[0], atol=1e-5)
+    assert np.linalg.norm(after - before) > 0
+    assert "visited" in app.handles["sel_text"].content  # nr's search trace is drawn
+
+    # a scene change reframes every open browser's camera on the new footprint
+    page2 = _open(browser, app.url)
+    app.handles["preset"].value = "WSU"
+    assert app.wait_idle(120)
+    pos, look, _ = app.camera_pose
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 30:
+        cams = [np.array(c.camera.position) for c in app.server.get_clients().values()]
+        if len(cams) == 2 and all(np.allclose(c, pos, atol=1e-3) for c in cams):
+            break
+        time.sleep(0.5)
+    assert len(cams) == 2 and all(np.allclose(c, pos, atol=1e-3) for c in cams)
+    for p in (page, page2):
+        p.context.close()

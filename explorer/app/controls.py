@@ -49,12 +49,16 @@ CLICK_SCRIPT = r"""
       gd.__pushbroomPick = true;
       gd.on('plotly_click', function (ev) {
         const p = ev && ev.points && ev.points[0];
-        if (!p || !Array.isArray(p.customdata) || p.customdata.length < 2) return;
+        if (!p || !p.customdata || !(p.customdata.length >= 2)) return;  /* may be a typed array */
         type('scp ' + Math.round(p.customdata[1]));
       });
     }
   }
+  state.attach = attach;
   setInterval(attach, 500);
+  /* a click on a plot attaches first (timers of a page in the background may be throttled) */
+  document.addEventListener('pointerdown', attach, true);
+  document.addEventListener('mousedown', attach, true);
 })();
 """
 
