@@ -119,13 +119,13 @@ def test_scene_and_panel_render_in_two_clients(explorer, browser, tmp_path):
     for end in (POSITIVE_END, NEGATIVE_END):  # SCPs drawn in the residual colours
         assert np.abs(px - np.array(end)).sum(axis=2).min() < 40
     plot_text = page1.locator(".js-plotly-plot").first.inner_text()
-    assert "toy_poly: RMSE" in plot_text and "toy_bisect: RMSE" in plot_text
+    assert "toy_poly row: RMSE" in plot_text and "toy_bisect row: RMSE" in plot_text
     assert page1.get_by_text("Residual maps").count() >= 1
 
     page2 = _open(browser, explorer.url)
     px2 = _wait_drawn(page2)
     assert px2.reshape(-1, 3).std(axis=0).max() > 10.0
-    assert "toy_poly: RMSE" in page2.locator(".js-plotly-plot").first.inner_text()
+    assert "toy_poly row: RMSE" in page2.locator(".js-plotly-plot").first.inner_text()
     assert len(explorer.server.get_clients()) == 2
 
     # a change made by one client reaches the other
