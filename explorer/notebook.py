@@ -52,7 +52,9 @@ from explorer.scene import Scene
 SCOP_MARKS = (10, 20, 30, 50, 100, 300, 500, 1000)
 """SCOP counts of the papers' experiments (the density control's stops)."""
 COLOUR_LIMITS_PX = (0.01, 0.1, 0.5, 1.0, 2.0, 5.0, 20.0)
-"""Colour-scale limits offered, pixels (the map spans ``[-limit, +limit]``)."""
+"""Colour-scale limits offered, pixels (the ``"fixed"`` scale spans ``[-limit, +limit]``)."""
+COLOUR_MODES = ("fixed", "per method", "shared", "log magnitude")
+"""Colour scales of the explorer's residual maps (:func:`explorer.panels.figures.residual_maps`)."""
 
 
 # ============================================================================ 3D view
@@ -259,6 +261,7 @@ class PanelState:
     relief_m: float = 0.0
     attitude_rate_scale: float = 1.0
     limit_px: float = 1.0
+    colour_mode: str = "fixed"
 
 
 @dataclass
@@ -272,9 +275,11 @@ class ResidualPanel:
     Attributes
     ----------
     controls : dict of str to ipywidgets.Widget
-        ``preset``, ``methods``, ``scop_density``, ``relief_m``, ``attitude_rate_scale``, ``limit_px``.
+        ``preset``, ``methods``, ``scop_density``, ``relief_m``, ``attitude_rate_scale``, ``limit_px``,
+        ``colour_mode``.
     figure : plotly.graph_objects.FigureWidget
-        One scattergl trace per method (``customdata``: signed row residual, pixels).
+        The explorer's residual maps: one scattergl trace per method (``meta`` starts with the
+        method name; ``customdata`` holds the signed row residual, pixels, in its first column).
     evaluations : dict of str to Evaluation
         The current residuals per method (``residual_row`` aligned with ``evaluated_index``).
     scene : Scene
@@ -304,7 +309,7 @@ class ResidualPanel:
         c = self.controls
         return PanelState(str(c["preset"].value), tuple(c["methods"].value), int(c["scop_density"].value),
                           float(c["relief_m"].value), float(c["attitude_rate_scale"].value),
-                          float(c["limit_px"].value))
+                          float(c["limit_px"].value), str(c["colour_mode"].value))
 
     def _cached(self, key: tuple, make):
         if key not in self._cache:
@@ -345,8 +350,9 @@ class ResidualPanel:
 
         if not self.evaluations:
             return empty_figure("no method evaluated" + (": " + "; ".join(self.errors.values()) if self.errors else ""))
+        fixed = s.colour_mode == "fixed"
         fig = residual_maps(self.evaluations, self.check, control=self.control, shape=self.scene.shape,
-                            limit_px=s.limit_px, max_points=self.max_points)
+                            limit_px=s.limit_px if fixed else None, mode=s.colour_mode, max_points=self.max_points)
         fig.update_layout(title={"text": f"{self.scene.name}: relief {s.relief_m:g} m, attitude rate x"
                                          f"{s.attitude_rate_scale:g}, {len(self.control)} SCOPs",
                                  "font": {"size": 12}, "y": 0.995},
@@ -378,7 +384,7 @@ class ResidualPanel:
         import ipywidgets as W  # noqa: N812
 
         c = self.controls
-        row1 = W.HBox([c["preset"], c["methods"], W.VBox([c["scop_density"], c["limit_px"]])])
+        row1 = W.HBox([c["preset"], c["methods"], W.VBox([c["scop_density"], c["colour_mode"], c["limit_px"]])])
         row2 = W.HBox([c["relief_m"], c["attitude_rate_scale"]])
         return W.VBox([row1, row2, self.status, self.figure])
 
@@ -398,6 +404,7 @@ def residual_panel(
     relief_m: float = 0.0,
     attitude_rate_scale: float = 1.0,
     limit_px: float = 1.0,
+    colour_mode: str = "fixed",
     n_scps: int = 5000,
     seed: int = 0,
     max_points: int = 20000,
@@ -418,7 +425,10 @@ def residual_panel(
     attitude_rate_scale : float
         Initial multiplier of the preset's attitude rates (control 0 to 5).
     limit_px : float
-        Initial colour-scale limit, pixels (control: :data:`COLOUR_LIMITS_PX`).
+        Initial colour-scale limit of the ``"fixed"`` scale, pixels (control: :data:`COLOUR_LIMITS_PX`).
+    colour_mode : str
+        Initial colour scale, one of :data:`COLOUR_MODES`: ``"fixed"`` (``[-limit_px, +limit_px]``),
+        ``"per method"`` / ``"shared"`` (robust automatic limits), ``"log magnitude"``.
     n_scps : int
         Number of SCPs (check points) the residuals are computed on.
     seed : int
@@ -449,6 +459,8 @@ def residual_panel(
     limits = sorted(set(COLOUR_LIMITS_PX) | {float(limit_px)})
     if not limit_px > 0:
         raise InputError(f"limit_px must be positive, got {limit_px}")
+    if colour_mode not in COLOUR_MODES:
+        raise InputError(f"colour_mode must be one of {COLOUR_MODES}, got {colour_mode!r}")
     if n_scps < 1:
         raise InputError(f"n_scps must be at least 1, got {n_scps}")
     ids = preset_ids()
@@ -465,6 +477,8 @@ def residual_panel(
                                           description="SCOPs", continuous_update=False, style=style),
         "limit_px": W.SelectionSlider(options=limits, value=float(limit_px), description="colour limit (px)",
                                       continuous_update=False, style=style),
+        "colour_mode": W.Dropdown(options=list(COLOUR_MODES), value=colour_mode, description="colour scale",
+                                  style=style),
         "relief_m": W.FloatSlider(value=float(relief_m), min=0.0, max=2000.0, step=250.0,
                                   description="relief (m)", continuous_update=False, style=style),
         "attitude_rate_scale": W.FloatSlider(value=float(attitude_rate_scale), min=0.0, max=5.0, step=0.5,
@@ -611,5 +625,5 @@ def interactive_figure(make_figure: Any, **controls: Any) -> InteractiveFigure:
     return out
 
 
-__all__ = ["COLOUR_LIMITS_PX", "SCOP_MARKS", "InteractiveFigure", "PanelState", "ResidualPanel", "SceneView",
-           "interactive_figure", "residual_panel", "scene_view", "static_figure_html"]
+__all__ = ["COLOUR_LIMITS_PX", "COLOUR_MODES", "SCOP_MARKS", "InteractiveFigure", "PanelState", "ResidualPanel",
+           "SceneView", "interactive_figure", "residual_panel", "scene_view", "static_figure_html"]
