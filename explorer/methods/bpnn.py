@@ -38,8 +38,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from explorer import _log
 from explorer.errors import InputError, NotFittedError, check_finite
-from explorer.methods._lm import torch, torch_threads
+from explorer.methods._lm import lm_minimise, torch, torch_threads
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -54,6 +55,11 @@ def _normaliser(values: np.ndarray, min_scale: float) -> tuple[float, float, boo
     scale = 0.5 * (hi - lo)
     degenerate = scale < min_scale
     return 0.5 * (lo + hi), (min_scale if degenerate else scale), degenerate
+
+
+#: A network needs at least this many training equations (points x outputs) per weight to be trusted
+#: between its control points; below, it is flagged ``too_few_points`` and its answers not converged.
+MIN_EQUATIONS_PER_PARAMETER = 2.0
 
 
 class MLPRegressor:
@@ -87,13 +93,17 @@ class MLPRegressor:
         Training that reaches ``max_iter`` is flagged ``converged = False`` (and warns) only if
         the error still fell by more than this fraction over the last ``window`` steps (10 %).
     seed : int
+    name : str
+        Names the model in warnings (e.g. the method: ``"bpnn"``).
 
     Attributes
     ----------
     fit_info : dict
         ``converged``, ``stop`` (plateau, validation, mu_max, goal or max_iter), ``iterations``,
         ``restart`` (index of the winner), ``train_rms`` per output (target units),
-        ``validation_rms`` when a validation split is used, ``n_parameters``.
+        ``validation_rms`` when a validation split is used, ``n_parameters``, ``too_few_points``
+        (fewer than :data:`MIN_EQUATIONS_PER_PARAMETER` training equations per weight: also
+        ``converged = False``).  Warnings are logged on the ``explorer`` logger (one line).
     """
 
     def __init__(
@@ -110,7 +120,9 @@ class MLPRegressor:
         window: int = 100,
         fail_tol: float = 0.1,
         seed: int = 0,
+        name: str = "network",
     ) -> None:
+        self.name = str(name)
         self.hidden = (int(hidden),) if np.isscalar(hidden) else tuple(int(h) for h in hidden)
         if not self.hidden or min(self.hidden) < 1:
             raise ValueError(f"hidden layer sizes must be >= 1, got {hidden}")
@@ -243,74 +255,27 @@ class MLPRegressor:
         self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor,
         u_val: torch.Tensor | None, t_val: torch.Tensor | None,
     ) -> tuple[torch.Tensor, dict]:
-        lam = self.weight_decay
+        """One restart of the package's Levenberg-Marquardt trainer (:func:`explorer.methods._lm.lm_minimise`):
+        sum of squared errors plus ``weight_decay |theta|^2``, plateau rule, validation failures
+        counted when the error does not improve (ties included)."""
 
-        def residual(th: torch.Tensor) -> torch.Tensor:
-            return (self._forward(th, u) - t).reshape(-1)
+        def validation_error(th: torch.Tensor) -> float:
+            rv = self._forward(th, u_val) - t_val
+            return float((rv * rv).sum())
 
-        def objective(r: torch.Tensor, th: torch.Tensor) -> float:
-            return float(r @ r + lam * (th @ th))
-
-        def jac(th: torch.Tensor) -> torch.Tensor:
-            return self._jacobian(th, u)
-
-        eye = torch.eye(theta.numel(), dtype=torch.float64)
-        mu = 1e-3
-        r = residual(theta)
-        loss = objective(r, theta)
-        best_val = np.inf
-        best_theta = theta
-        fails = 0
-        history: list[float] = [loss]
-        reason = "max_iter"
-        it = 0
-        while it < self.max_iter:
-            it += 1
-            j = jac(theta)
-            g = j.T @ r + lam * theta
-            h = j.T @ j + lam * eye
-            accepted = False
-            while mu <= 1e10:
-                try:
-                    delta = torch.linalg.solve(h + mu * eye, -g)
-                except RuntimeError:
-                    mu *= 10.0
-                    continue
-                th_new = theta + delta
-                r_new = residual(th_new)
-                new_loss = objective(r_new, th_new)
-                if np.isfinite(new_loss) and new_loss < loss:
-                    accepted = True
-                    break
-                mu *= 10.0
-            if not accepted:
-                reason = "mu_max"  # no step lowers the error: a (numerical) minimum
-                break
-            theta, r, loss = th_new, r_new, new_loss
-            history.append(loss)
-            mu = max(mu * 0.1, 1e-20)
-            if u_val is not None:
-                rv = self._forward(theta, u_val) - t_val
-                val = float((rv * rv).sum())
-                if val < best_val:
-                    best_val, best_theta, fails = val, theta, 0
-                else:
-                    fails += 1
-                    if fails >= self.max_fail:
-                        reason = "validation"
-                        break
-            if len(history) > self.window and history[-1 - self.window] - loss <= self.tol * history[-1 - self.window]:
-                reason = "plateau"
-                break
-            if loss < 1e-28:
-                reason = "goal"
-                break
-        if u_val is not None:
-            theta = best_theta
+        res = lm_minimise(
+            lambda th: (t - self._forward(th, u)).reshape(-1), lambda th: self._jacobian(th, u), theta,
+            validation_error=validation_error if u_val is not None else None, mean=False,
+            weight_decay=self.weight_decay, max_epochs=self.max_iter, goal=1e-28, max_fail=self.max_fail,
+            fail_on_tie=True, count_initial_validation=False, plateau=(self.window, self.tol),
+        )
+        history = res.history["objective"]
         ref = history[max(0, len(history) - 1 - self.window)]
         window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
-        return theta, {"iterations": it, "stop": reason, "loss": loss, "window_decrease": window_decrease,
-                       "val_loss": best_val if u_val is not None else None}
+        stop = "max_iter" if res.stop_reason == "max_epochs" else res.stop_reason
+        return res.theta, {"iterations": res.iterations, "stop": stop, "loss": res.final_objective,
+                           "window_decrease": window_decrease,
+                           "val_loss": res.val_mse if u_val is not None else None}
 
     def fit_arrays(
         self,
@@ -379,18 +344,29 @@ class MLPRegressor:
         # means more iterations would change the model materially: flag it.
         converged = (info["stop"] != "max_iter" or info["window_decrease"] < self.fail_tol) and bool(
             np.all(np.isfinite(err)))
+        # fewer equations than MIN_EQUATIONS_PER_PARAMETER per weight: the network interpolates the
+        # control points and nothing tells its values between them (690-770 px on check points with
+        # 4 control points and 38 weights)
+        n_equations = int(u.shape[0]) * int(t.shape[1])
+        too_few = n_equations < MIN_EQUATIONS_PER_PARAMETER * self.n_parameters
         self.fit_info = {
-            "converged": converged, "stop": info["stop"], "iterations": info["iterations"], "restart": k,
-            "window_decrease": info["window_decrease"], "train_rms": np.sqrt(np.mean(err**2, axis=0)).tolist(),
-            "n_train": int(u.shape[0]), "n_parameters": self.n_parameters, "hidden": list(self.hidden),
+            "converged": converged and not too_few, "stop": info["stop"], "iterations": info["iterations"],
+            "restart": k, "window_decrease": info["window_decrease"],
+            "train_rms": np.sqrt(np.mean(err**2, axis=0)).tolist(), "n_train": int(u.shape[0]),
+            "n_parameters": self.n_parameters, "hidden": list(self.hidden), "too_few_points": too_few,
         }
         if ev is not None:
             self.fit_info["validation_rms"] = np.sqrt(np.mean(ev**2, axis=0)).tolist()
             self.fit_info["n_validation"] = int(ev.shape[0])
-        if not converged:
-            warnings.warn(f"network training stopped at max_iter={self.max_iter} while the error still fell by "
-                          f"{100 * info['window_decrease']:.0f} % over the last {self.window} steps "
-                          f"(train RMS {self.fit_info['train_rms']})", RuntimeWarning, stacklevel=3)
+        if too_few:
+            need = int(np.ceil(MIN_EQUATIONS_PER_PARAMETER * self.n_parameters / t.shape[1]))
+            _log.warn(f"{self.name} (hidden {list(self.hidden)}): {u.shape[0]} training points give {n_equations} "
+                      f"equations for {self.n_parameters} weights; it cannot generalise from so few points and its "
+                      f"answers are marked not converged (need at least {need} training points, or fewer hidden nodes)")
+        elif not converged:
+            _log.warn(f"{self.name}: network training stopped at max_iter={self.max_iter} while the error still fell "
+                      f"by {100 * info['window_decrease']:.0f} % over the last {self.window} steps "
+                      f"(train RMS {self.fit_info['train_rms']})")
         return self
 
     @property
@@ -584,6 +560,7 @@ class BPNNMethod(BestScanlineMethod):
     family = "generalized"
     needs_fit = True
     exactness = "approximate"
+    column_source = "model"  # the network predicts the column too
 
     def __init__(
         self,
@@ -604,7 +581,7 @@ class BPNNMethod(BestScanlineMethod):
                          max_newton=max_newton, domain_margin=domain_margin, seed=seed)
         self.network = BPNetworkGeometryModel(hidden, activation=activation, max_iter=max_iter,
                                               n_restarts=n_restarts, validation_fraction=validation_fraction,
-                                              weight_decay=weight_decay, seed=seed)
+                                              weight_decay=weight_decay, seed=seed, name=self.name)
         self.tol_px = float(tol_px)
         self.max_newton = int(max_newton)
         self.domain_margin = float(domain_margin)
@@ -621,6 +598,8 @@ class BPNNMethod(BestScanlineMethod):
         in_domain = np.zeros(row.shape, dtype=bool)
         in_domain[finite] = self.network.in_domain_image(row[finite], col[finite], ground[finite, 2],
                                                                 self.domain_margin)
+        if self.fit_info.get("too_few_points"):  # the network cannot generalise: no answer is trusted
+            conv = np.zeros_like(conv)
         return self._result(ground, row, conv & in_domain, np.zeros(row.size, dtype=np.int64), col=col,
                             trace=rows_seen, info={"iterations": its, "in_domain": in_domain})
 
@@ -725,7 +704,7 @@ def compare_bpnn_rfm(
     rows = []
     for n_hidden in nodes:
         net = BPNetworkGeometryModel(n_hidden, n_restarts=n_restarts, max_iter=max_iter, seed=seed)
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, _log.collect_warnings() as logged:
             warnings.simplefilter("always")
             net.fit(tr_n, tc_n, tg[:, 2], tg[:, 0], tg[:, 1])
         xs, ys = net.image_to_ground(tr, tc, tg[:, 2])
@@ -734,7 +713,7 @@ def compare_bpnn_rfm(
         chk = (xc - cg[:, 0], yc - cg[:, 1])
         rows.append({
             "hidden_nodes": n_hidden, "n_parameters": net.n_parameters,
-            "converged": net.fit_info["converged"], "warnings": len(caught),
+            "converged": net.fit_info["converged"], "warnings": len(caught) + len(logged),
             "control": _error_stats(*ctl, gsd), "check": _error_stats(*chk, gsd),
             "control_m": _error_stats(*ctl, 1.0), "check_m": _error_stats(*chk, 1.0),
         })

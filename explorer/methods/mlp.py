@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from explorer import _log
 from explorer.geometry.kernels import NUMBA_AVAILABLE
 from explorer.methods._compiled import mlp_predict
 from explorer.methods._lm import GroundFeatures, fit_network, take_params
@@ -43,13 +44,11 @@ def network_verdict(name: str, info: dict, max_val_rmse_px: float) -> bool:
     ok = info["stop_reason"] != "non_finite" and np.isfinite(info["val_rmse_px"])
     ok = bool(ok and info["val_rmse_px"] <= max_val_rmse_px)
     info["converged"] = ok
-    if not ok:
-        warnings.warn(
+    if not ok:  # one line on the package logger (explorer/_log.py), not a warning record with a file path
+        _log.warn(
             f"{name}: training did not converge (stop: {info['stop_reason']}, validation RMSE "
             f"{info['val_rmse_px']:.3g} px, limit {max_val_rmse_px} px, after {info['epochs']} epochs); "
-            "its points are marked not converged",
-            RuntimeWarning,
-            stacklevel=3,
+            "its points are marked not converged"
         )
     return ok
 
@@ -195,7 +194,7 @@ def grid_search(
         for n_neurons in neurons:
             m = MLPMethod(scene, hidden_layers=int(n_layers), neurons=int(n_neurons), seed=seed, **params)
             t0 = time.perf_counter()
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), _log.quiet():  # failing candidates are expected and tabulated
                 warnings.simplefilter("ignore", RuntimeWarning)
                 m.fit(scops)
             fi = m.fit_info

@@ -44,6 +44,7 @@ import warnings
 
 import numpy as np
 
+from explorer import _log
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.methods.bpnn import BPNetworkGeometryModel, MLPRegressor
 from explorer.methods.rfm import rfm_domain_mask, rfm_ground_errors
@@ -154,7 +155,7 @@ def fit_nn_rfm(
         raise ValueError(f"synthetic='surface' puts the grid on the learned terrain: n_layers must be 1, got {nz}")
     g = gcps.ground
     options = dict(activation=activation, max_iter=max_iter, n_restarts=n_restarts,
-                   validation_fraction=validation_fraction, seed=seed)
+                   validation_fraction=validation_fraction, seed=seed, name="nn-rfm")
     rows = np.linspace(0.0, image_shape[0] - 1.0, nr)
     cols = np.linspace(0.0, image_shape[1] - 1.0, nc)
     if synthetic == "surface":
@@ -269,7 +270,7 @@ def compare_nn_rfm(
     g = gcps.ground
     direct = fit_rfm_from_gcps(g[:, 0], g[:, 1], g[:, 2], gcps.row, gcps.col, order=3, rational=True,
                                regularization=rfm_regularization).model
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _log.collect_warnings() as logged:
         warnings.simplefilter("always")
         hybrid, net, info = fit_nn_rfm(gcps, scene.shape, synthetic=synthetic, hidden=hidden,
                                        activation=activation, grid=grid,
@@ -298,7 +299,7 @@ def compare_nn_rfm(
         "rfm": rfm_block(direct), "nn_rfm": rfm_block(hybrid), "nn": _xy_stats(xn - cg[:, 0], yn - cg[:, 1]),
         "network": info["network"], "n_synthetic": info["n_synthetic"], "synthetic": synthetic,
         "synthetic_heights_m": info["synthetic_heights_m"], "rfm_synthetic_grid_rms_px": info["rfm_grid_rms_px"],
-        "warnings": [str(w.message) for w in caught],
+        "warnings": [str(w.message) for w in caught] + list(logged),
         "paper": {"rfm": {"rms_x": 1.223, "rms_y": 0.949}, "nn_rfm": {"rms_x": 0.851, "rms_y": 0.685},
                   "note": "Habib et al. 2018 Table 2, QuickBird 0.62 m, 572 AGE points, 9 GPS check points"},
     }
@@ -338,6 +339,7 @@ class NNRFMMethod(BestScanlineMethod):
     family = "generalized"
     needs_fit = True
     exactness = "approximate"
+    column_source = "model"  # the network predicts the column too
 
     def __init__(
         self,
@@ -373,5 +375,7 @@ class NNRFMMethod(BestScanlineMethod):
         row, col = self.model.projection(ground[:, 0], ground[:, 1], ground[:, 2])
         in_domain = rfm_domain_mask(self.model, ground, self.domain_margin)
         converged = in_domain & np.isfinite(row) & np.isfinite(col)
+        if self.fit_info["network"].get("too_few_points"):  # the network cannot generalise: trust nothing
+            converged[:] = False
         return self._result(ground, row, converged, np.zeros(row.size, dtype=np.int64), col=col,
                             trace=[row.copy()] if trace else None, info={"in_domain": in_domain})
