@@ -43,8 +43,7 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.evaluate import Evaluation, evaluate_method
-from explorer.methods import available, create, registry
-from explorer.methods.base import BestScanlineMethod
+from explorer.methods import BestScanlineMethod, available, create, registry
 from explorer.points import PointSet, simulate_points
 from explorer.presets import build_scene, preset_ids
 from explorer.scene import Scene
