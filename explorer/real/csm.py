@@ -292,6 +292,7 @@ class CsmCamera:
         self._cam = cam
         self._set_look_sign()
         self._seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._seed_table: tuple = ()
         self._ext: tuple | None = None
         self._setup_seed()
 
@@ -305,7 +306,9 @@ class CsmCamera:
             pw, pd = K.window_tables(self.position_times, int(self.position_order))
             qpw, qpd = K.window_tables(self.pointing_times, int(self.attitude_order))
             qbw, qbd = K.window_tables(self.body_times, int(self.attitude_order))
-            self._ext = (self.position_times, self.positions_m, pw, pd, self.pointing_times,
+            ref = np.ascontiguousarray(self.positions_m[self.positions_m.shape[0] // 2])
+            self._ext = (self.position_times, np.ascontiguousarray(self.positions_m - ref), ref, pw, pd,
+                         self.pointing_times,
                          self.pointing_quaternions, qpw, qpd, self.pointing_constant, self.body_times,
                          self.body_quaternions, qbw, qbd, self.body_constant,
                          1 if self.attitude_interpolation == "lagrange" else 0, bool(self.position_in_j2000))
@@ -424,7 +427,10 @@ class CsmCamera:
         if line.size < 2 * feats.shape[1]:
             feats = _quadratic((ground - mean) / scale)
         coef, *_ = np.linalg.lstsq(feats, line, rcond=None)
+        samp = np.concatenate([ss[self.image_to_ground(ll, ss, h).hit] for h in (lo, 0.5 * (lo + hi), hi)])
+        scoef, *_ = np.linalg.lstsq(feats, samp, rcond=None)
         self._seed = (mean, scale, coef)
+        self._seed_table = self._correction_table(mean, scale, coef, scoef, 0.5 * (lo + hi))
         # slope of the residual at the centre, and the curvature constant C = max |g''| / (2 |g'|) around
         # the grid points' lines (times a safety factor of 4), for the secant's acceptance test
         c = ground[np.argmin(np.abs(line - 0.5 * self.n_lines))][None, :]
@@ -447,6 +453,33 @@ class CsmCamera:
         ratio = ratio[np.isfinite(ratio)]
         self._cam[K.C_CURV] = 4.0 * float(np.max(ratio)) if ratio.size else np.inf
 
+    def _correction_table(self, mean, scale, coef, scoef, height: float) -> tuple:
+        """The seed polynomial's error along the image (attitude jitter is no polynomial of the ground):
+        ``line - seed(ground)`` at the first, middle and last samples at ``height``, tabulated on an even
+        grid of the seed's own line (where it is looked up; linear in the line, quadratic in the sample
+        from a second polynomial ``sample(X, Y, Z)``).  Empty when the seed is not monotonic along a
+        column."""
+        margin = 0.25 * self.n_lines + 60.0
+        span = self.n_lines + 2 * margin
+        step = max(1.0, span / 65536.0)
+        lines = np.arange(-margin, self.n_lines + margin + step, step)
+        seeds, errors = [], []
+        for c in (0.0, 0.5 * self.n_samples, float(self.n_samples)):
+            g = self.image_to_ground(lines, np.full(lines.size, c), height)
+            if not g.hit.all():
+                return _no_table(coef.size, scoef)
+            ls = _features((g.ground - mean) / scale, coef.size) @ coef
+            if not np.all(np.diff(ls) > 0):
+                return _no_table(coef.size, scoef)
+            seeds.append(ls)
+            errors.append(lines - ls)
+        lo = max(a[0] for a in seeds)
+        hi = min(a[-1] for a in seeds)
+        nodes = np.arange(lo, hi, step)
+        table = np.column_stack([np.interp(nodes, a, e) for a, e in zip(seeds, errors, strict=True)])
+        return (np.ascontiguousarray(scoef), np.ascontiguousarray(table), float(nodes[0]), 1.0 / step,
+                0.5 * self.n_samples, 2.0 / self.n_samples)
+
     def _set_look_sign(self) -> None:
         """usgscsm intersects the whole line of sight (the root nearest the camera on either side); here
         the look direction is the one of ``+-(-x, -y, -f)`` that points at the body at the centre line
@@ -462,8 +495,7 @@ class CsmCamera:
     def seed_line(self, ground: np.ndarray) -> np.ndarray:
         """The seed polynomial's line (N,) for body-fixed points (N, 3)."""
         mean, scale, coef = self._seed  # type: ignore[misc]
-        u = (ground - mean) / scale
-        return (_cubic(u) if coef.size == 20 else _quadratic(u)) @ coef
+        return _features((ground - mean) / scale, coef.size) @ coef
 
     def detector_residual(self, ground: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """usgscsm's detector-line residual (image lines, zero at the best line) and the sample of
@@ -474,7 +506,7 @@ class CsmCamera:
         K.residual_many(ground, line, *self._all_args(), res, samp)
         return res, samp
 
-    def ground_to_image(self, ground: np.ndarray, *, tol: float = 1e-10, max_iter: int = 60,
+    def ground_to_image(self, ground: np.ndarray, *, tol: float = 1e-11, max_iter: int = 60,
                         margin_lines: float | None = None) -> GroundToImage:
         """Image coordinates of body-fixed ground points (usgscsm ``groundToImage``, solved exactly).
 
@@ -483,7 +515,8 @@ class CsmCamera:
         ground : ndarray, shape (N, 3)
             Body-fixed metres.
         tol : float
-            Stop when the line step is at most this many lines (default 1e-10).
+            Target line error (default 1e-11): stop when the step, or the secant error estimate
+            ``C |step| |x1 - x0|``, is at most this.
         max_iter : int
             Residual evaluations per point before ``status = 3``.
         margin_lines : float, optional
@@ -499,7 +532,7 @@ class CsmCamera:
         margin = 0.25 * self.n_lines + 50.0 if margin_lines is None else float(margin_lines)
         n = ground.shape[0]
         mean, scale, coef = self._seed  # type: ignore[misc]
-        seed = (mean, 1.0 / scale, np.ascontiguousarray(coef))
+        seed = (mean, 1.0 / scale, np.ascontiguousarray(coef), *self._seed_table)
         line, sample = np.empty(n), np.empty(n)
         status, evals = np.empty(n, np.int8), np.empty(n, np.int64)
         K.ground_to_image_nb(ground, seed, -margin, self.n_lines + margin, float(tol), int(max_iter),
@@ -522,6 +555,14 @@ class CsmCamera:
             f"{'J2000' if self.position_in_j2000 else 'body-fixed'}), {self.pointing_times.size} pointing and "
             f"{self.body_times.size} body-rotation quaternions ({self.attitude_interpolation})"
         )
+
+
+def _features(u: np.ndarray, n_terms: int) -> np.ndarray:
+    return _cubic(u) if n_terms == 20 else _quadratic(u)
+
+
+def _no_table(n_terms: int, scoef: np.ndarray) -> tuple:
+    return (np.ascontiguousarray(scoef), np.zeros((0, 3)), 0.0, 1.0, 0.0, 1.0)
 
 
 def _cubic(u: np.ndarray) -> np.ndarray:

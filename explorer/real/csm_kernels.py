@@ -237,12 +237,15 @@ def _const_times(c, m):
 def _exterior(t, ext):
     """Allocation-free exterior: centre ``(s0, s1, s2)`` and camera -> body rotation (row-major 9-tuple).
 
-    ``ext`` = ``(pos_t, pos, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb,
-    att_mode, rotate_position)`` (:meth:`explorer.real.csm.CsmCamera._exterior_args`).
+    ``ext`` = ``(pos_t, pos - pos_ref, pos_ref, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb,
+    qb_win, qb_den, cb, att_mode, rotate_position)`` (:meth:`explorer.real.csm.CsmCamera._exterior_args`):
+    the positions are interpolated as offsets from a reference point (the weights sum to one), which keeps
+    the round-off of the weighted sum at the offsets' scale instead of the body radius.
     """
-    pos_t, pos, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb, att_mode, \
+    pos_t, pos, pos_ref, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb, att_mode, \
         rotate_position = ext
     p0, p1, p2 = _lagrange3(pos_t, pos, pos_win, pos_den, t)
+    p0, p1, p2 = p0 + pos_ref[0], p1 + pos_ref[1], p2 + pos_ref[2]
     w, x, y, z = _quat(qb_t, qb, qb_win, qb_den, t, att_mode)
     b = _const_times(cb, _qmat(w, x, y, z))
     w, x, y, z = _quat(qp_t, qp, qp_win, qp_den, t, att_mode)
@@ -446,7 +449,9 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
                        line_out, sample_out, status_out, evals_out):
     """Best line per ground point: safeguarded secant on the detector-line residual.
 
-    ``seed`` = ``(mean (3,), 1 / scale (3,), coefficients (10 or 20,))`` of :func:`seed_polynomial`.
+    ``seed`` = ``(mean (3,), 1 / scale (3,), line coefficients, sample coefficients (10 or 20,),
+    correction table (K, 3), first node, 1 / node step, middle sample, 2 / samples)``: the polynomial
+    :func:`seed_polynomial` plus its tabulated error (:meth:`explorer.real.csm.CsmCamera._correction_table`).
 
     From the seed (clipped to the window), a Newton step with the camera's typical slope
     ``d residual / d line`` (``cam[C_SLOPE]``), then secant steps; once two residuals differ in
@@ -456,10 +461,25 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
     times ``d sample / d line``).  A step pushed against a window end twice means no root.
     """
     curv = cam[C_CURV]
-    mean, inv_scale, coef = seed
+    mean, inv_scale, coef, scoef, table, node0, inv_step, s_mid, s_inv_half = seed
+    n_nodes = table.shape[0]
     for i in prange(ground.shape[0]):
         X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
-        x0 = min(max(seed_polynomial(X, Y, Z, mean, inv_scale, coef), window_lo), window_hi)
+        x0 = seed_polynomial(X, Y, Z, mean, inv_scale, coef)
+        if n_nodes > 1:
+            # tabulated error of the polynomial: linear in its line, quadratic in the sample
+            j = (x0 - node0) * inv_step
+            if j >= 0.0 and j < n_nodes - 1:
+                k = int(j)
+                fr = j - k
+                u = (seed_polynomial(X, Y, Z, mean, inv_scale, scoef) - s_mid) * s_inv_half
+                u = min(max(u, -1.0), 1.0)
+                l0, l1, l2 = 0.5 * u * (u - 1.0), 1.0 - u * u, 0.5 * u * (u + 1.0)
+                e0 = (1.0 - fr) * table[k, 0] + fr * table[k + 1, 0]
+                e1 = (1.0 - fr) * table[k, 1] + fr * table[k + 1, 1]
+                e2 = (1.0 - fr) * table[k, 2] + fr * table[k + 1, 2]
+                x0 += l0 * e0 + l1 * e1 + l2 * e2
+        x0 = min(max(x0, window_lo), window_hi)
         f0, s0, ok = detector_residual(X, Y, Z, x0, cam, rl, rt, rp, ext, dmodel, dc)
         n_eval = 1
         status = STATUS_MAX_ITER
@@ -504,7 +524,8 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
                     bisected = True
                 # the secant point's error is about C |x1 - r| |x0 - r| ~ C |step| |x1 - x0| (C: the residual's
                 # curvature constant measured at setup); accept once that (or the step itself) is below tol
-                if abs(step) <= tol or (not bisected and curv * abs(step) * abs(x1 - x0) <= tol):
+                if abs(step) <= tol or abs(f1 / slope) <= tol or (not bisected and curv * abs(step) * abs(x1 - x0)
+                                                                   <= tol):
                     ds = (s1 - s0) / (x1 - x0) if x1 != x0 else 0.0
                     line, sample, status = x2, s1 + ds * step, STATUS_OK
                     break
