@@ -451,7 +451,7 @@ class CsmCamera:
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.abs(d2) / (2.0 * np.abs(d1))
         ratio = ratio[np.isfinite(ratio)]
-        self._cam[K.C_CURV] = 4.0 * float(np.max(ratio)) if ratio.size else np.inf
+        self._cam[K.C_CURV] = 4.0 * float(np.max(ratio)) if ratio.size else 1.0
 
     def _correction_table(self, mean, scale, coef, scoef, height: float) -> tuple:
         """The seed polynomial's error along the image (attitude jitter is no polynomial of the ground):

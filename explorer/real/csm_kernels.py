@@ -500,7 +500,7 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
                 if not ok:
                     status = STATUS_BEHIND
                     break
-                if f1 == 0.0:
+                if abs(f1 / slope) <= 0.01 * tol:  # at the residual's floor: x1 is the root
                     line, sample, status = x1, s1, STATUS_OK
                     break
                 if not bracket and ((f0 < 0.0) != (f1 < 0.0)):
@@ -524,8 +524,7 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
                     bisected = True
                 # the secant point's error is about C |x1 - r| |x0 - r| ~ C |step| |x1 - x0| (C: the residual's
                 # curvature constant measured at setup); accept once that (or the step itself) is below tol
-                if abs(step) <= tol or abs(f1 / slope) <= tol or (not bisected and curv * abs(step) * abs(x1 - x0)
-                                                                   <= tol):
+                if abs(step) <= tol or (not bisected and curv * abs(step) * abs(x1 - x0) <= tol):
                     ds = (s1 - s0) / (x1 - x0) if x1 != x0 else 0.0
                     line, sample, status = x2, s1 + ds * step, STATUS_OK
                     break
