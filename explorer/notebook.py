@@ -1,6 +1,6 @@
 """The explorer inside a Jupyter notebook: an inline 3D view and interactive residual panels.
 
-Two calls, both built from the explorer's own parts:
+Three calls, built from the explorer's own parts:
 
 * :func:`scene_view` -- the explorer's 3D scene of one image, drawn by the SAME viser builders
   (:mod:`explorer.scene3d.builders`: ground footprint, satellite track and sensor frames,
@@ -16,6 +16,9 @@ Two calls, both built from the explorer's own parts:
   :func:`explorer.methods.create`, :func:`explorer.evaluate.evaluate_method`) and updates the
   figure in place.  Displayed, the panel carries a static HTML copy of the current figure as
   well, which is what a notebook exported to HTML shows.
+* :func:`interactive_figure` -- any ``make_figure(**values) -> go.Figure`` as a ``FigureWidget``
+  redrawn by sliders and dropdowns (``ipywidgets.interact`` abbreviations), with the same static
+  copy.
 
 Usage (``pip install -e ".[notebooks]"`` for ipywidgets and anywidget)::
 
