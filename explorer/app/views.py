@@ -112,8 +112,12 @@ class Views:
         if self._changed("frame", frame_key):
             self.frame = B.DisplayFrame.for_scene(scene, sensor_distance=s.sensor_distance,
                                                   height_exaggeration=s.height_exaggeration)
+            n, dem_cells = B.ground_mesh_nodes(scene)
+            self.ground_text = (f"Ground: the DEM sampled on a {n} x {n} image grid"
+                                + (f" (decimated from ~{dem_cells} DEM cells across)" if dem_cells and dem_cells > n - 1
+                                   else "") if dem_cells is not None else f"Ground: {n} x {n} image grid")
             with self.server.atomic():
-                self._put("/ground", B.add_ground(self.server.scene, scene, self.frame))
+                self._put("/ground", B.add_ground(self.server.scene, scene, self.frame, n=n))
                 self._put("/orbit", B.add_orbit(self.server.scene, scene, self.frame))
             self._frame_camera(scene, (s.preset, s.sensor_distance))
             fixed = s.preset in m.fixed_scenes
@@ -178,7 +182,8 @@ class Views:
         n_eval = len(idx_all)
         sub = f" ({cm} evaluated on a subsample of {n_eval:,})" if n_eval < len(scps) else ""
         dec = f"; the 3D view shows an evenly strided {len(idx):,} of {n_eval:,}" if len(idx) < n_eval else ""
-        self.handles["cloud_text"].content = f"SCPs: {len(scps):,}{sub}, {what}{dec}. SCOPs (gold): {len(scops)}."
+        self.handles["cloud_text"].content = (f"SCPs: {len(scps):,}{sub}, {what}{dec}. SCOPs (gold): {len(scops)}. "
+                                              f"{getattr(self, 'ground_text', '')}.")
 
     def _update_panels(self, s: Settings, gen: int | None) -> None:
         """Residual maps, timing bars and the summary table."""

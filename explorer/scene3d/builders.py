@@ -170,6 +170,31 @@ def footprint_mesh(scene: Scene, n: int = 41) -> tuple[np.ndarray, np.ndarray]:
     return verts, faces
 
 
+GROUND_NODES = (41, 129)
+"""Nodes per side of the ground mesh: at least 41, at most 129 (33,000 triangles: what a browser's
+software WebGL still draws smoothly)."""
+
+
+def ground_mesh_nodes(scene: Scene, limits: tuple[int, int] = GROUND_NODES) -> tuple[int, int | None]:
+    """Nodes per side of the footprint mesh: one per DEM cell across the footprint, within ``limits``.
+
+    Returns
+    -------
+    n : int
+        Nodes per image side for :func:`footprint_mesh`.
+    dem_cells : int or None
+        DEM cells across the footprint's larger side (None for a terrain without a grid); when it
+        exceeds ``n - 1`` the mesh is a decimation of the DEM.
+    """
+    cell = getattr(scene.terrain, "dx", None)
+    if cell is None or not np.isfinite(cell) or cell <= 0:
+        return limits[0], None
+    fp = scene.footprint()
+    span = float(max(np.ptp(fp[:, 0]), np.ptp(fp[:, 1])))
+    cells = int(np.ceil(span / float(min(cell, getattr(scene.terrain, "dy", cell)))))
+    return int(np.clip(cells + 1, *limits)), cells
+
+
 def footprint_outline(scene: Scene, per_edge: int = 64) -> np.ndarray:
     """Image border on the terrain as segments (4 per_edge, 2, 3), local ENU metres."""
     r1, c1 = scene.n_rows - 0.5, scene.n_columns - 0.5
@@ -540,7 +565,8 @@ def add_selection(
 
 
 __all__ = [
-    "COMPRESSED_DISTANCE_FACTOR", "DisplayFrame", "add_ground", "add_orbit", "add_points",
+    "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "DisplayFrame", "add_ground", "add_orbit", "add_points",
+    "ground_mesh_nodes",
     "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
     "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
     "scanline_planes", "scene_centre", "track_positions", "vertex_normals",

@@ -183,3 +183,22 @@ def test_scops_are_gold(api, scene):
     out = B.add_scops(api, f, g)
     node = out["/points/scops"]
     assert node.points.shape == (2, 3) and tuple(node.colors) == SCOP_RGB
+
+
+def test_real_dem_ground_mesh_follows_the_dem_and_is_decimated_for_the_browser():
+    """The Pleiades 2017 DIMAP scene on its DEM (shareloc): the ground mesh vertices lie on the DEM
+    terrain (bilinear heights of the resampled grid), at one node per DEM cell up to 129 per side."""
+    from explorer.app.sources import load_source
+    from tests.real.conftest import DEM_DIR, PHR_2017
+
+    scene = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif")).scene
+    n, cells = B.ground_mesh_nodes(scene)
+    fp = scene.footprint()
+    span = max(np.ptp(fp[:, 0]), np.ptp(fp[:, 1]))
+    assert cells == int(np.ceil(span / scene.terrain.dx)) and n == min(max(cells + 1, 41), 129)
+    verts, faces = B.footprint_mesh(scene, n)
+    assert verts.shape == (n * n, 3) and faces.shape == (2 * (n - 1) ** 2, 3)
+    np.testing.assert_allclose(verts[:, 2], scene.terrain.height(verts[:, 0], verts[:, 1]), atol=1e-3)
+    assert np.ptp(verts[:, 2]) > 30.0  # the coastal relief is there
+    flat = build_scene("WSU")
+    assert B.ground_mesh_nodes(flat) == (41, None)
