@@ -32,25 +32,8 @@ from explorer.geometry.kernels import (
 
 @njit(parallel=True, fastmath=False, cache=True)
 def _newton_raphson_nb(
-    ground,
-    start,
-    gx,
-    fx,
-    use_fixed,
-    focal,
-    offset,
-    pitch,
-    pc,
-    line_period,
-    ref_row,
-    lo0,
-    hi0,
-    tol,
-    max_iter,
-    row_out,
-    col_out,
-    converged_out,
-    ce_out,
+    ground, start, gx, fx, use_fixed, focal, offset, pitch, pc, line_period, ref_row, lo0, hi0, tol, max_iter, row_out,
+    col_out, converged_out, ce_out,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx

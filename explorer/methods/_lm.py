@@ -21,7 +21,7 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -255,24 +255,29 @@ def torch_threads(n: int = 1) -> Iterator[None]:
 
 @dataclass
 class LMResult:
-    """Outcome of :func:`levenberg_marquardt` (errors in the normalised target units).
+    """Outcome of :func:`lm_minimise` (errors in the caller's normalised units).
 
     Attributes
     ----------
     theta : Tensor (P,)
-        Parameters with the lowest validation error met during training.
+        Parameters with the lowest validation error met during training (the last ones without a
+        validation set).
     epochs : int
         Levenberg-Marquardt steps taken (accepted epochs).
     best_epoch : int
         Epoch of ``theta``.
     stop_reason : str
-        "goal", "min_grad", "mu_max", "validation", "max_epochs" or "non_finite".
+        "goal", "min_grad", "mu_max", "validation", "plateau", "max_epochs" or "non_finite".
     converged : bool
         Stopped for a reason other than ``max_epochs`` / ``non_finite``.
     train_mse, val_mse : float
-        Mean squared errors of ``theta`` on the two sets.
+        Training objective and validation error of ``theta`` (mean squared errors for the MLP).
     history : dict
-        "train_mse", "val_mse", "mu" at the start and after each epoch (``epochs + 1`` values).
+        "objective", "validation", "mu" at the start and after each epoch (``epochs + 1`` values).
+    iterations : int
+        Epochs started (``epochs`` plus one where the damping could not find a step).
+    final_objective : float
+        Training objective of the last accepted step (not necessarily ``theta``'s).
     """
 
     theta: torch.Tensor
@@ -283,12 +288,23 @@ class LMResult:
     train_mse: float
     val_mse: float
     history: dict = field(default_factory=dict)
+    iterations: int = 0
+    final_objective: float = float("nan")
 
 
-def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float) -> torch.Tensor:
-    """Solve ``(J^T J + mu I) d = J^T e``; uses ``d = J^T (J J^T + mu I)^-1 e`` when P > N."""
+def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor | None = None,
+             weight_decay: float = 0.0) -> torch.Tensor:
+    """Solve ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` (Cholesky, least squares if singular).
+
+    Without weight decay and with more parameters P than errors N it uses the equivalent
+    ``d = J^T (J J^T + mu I)^-1 e`` (an N x N system).
+    """
     n, p = jac.shape
-    if p <= n:
+    if weight_decay:
+        a = jac.T @ jac
+        a.diagonal().add_(mu + weight_decay)
+        rhs = jac.T @ err - weight_decay * theta
+    elif p <= n:
         a = jac.T @ jac
         a.diagonal().add_(mu)
         rhs = jac.T @ err
@@ -301,7 +317,134 @@ def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float) -> torch.Tensor:
         sol = torch.linalg.lstsq(a, rhs[:, None]).solution[:, 0]
     else:
         sol = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
-    return sol if p <= n else jac.T @ sol
+    return sol if (p <= n or weight_decay) else jac.T @ sol
+
+
+def lm_minimise(
+    errors: Callable[[torch.Tensor], torch.Tensor],
+    jacobian: Callable[[torch.Tensor], torch.Tensor],
+    theta0: torch.Tensor,
+    *,
+    validation_error: Callable[[torch.Tensor], float] | None = None,
+    mean: bool = True,
+    weight_decay: float = 0.0,
+    max_epochs: int = 1000,
+    mu: float = 1e-3,
+    mu_dec: float = 0.1,
+    mu_inc: float = 10.0,
+    mu_max: float = 1e10,
+    min_grad: float = 0.0,
+    goal: float = 0.0,
+    max_fail: int = 6,
+    fail_on_tie: bool = False,
+    count_initial_validation: bool = True,
+    plateau: tuple[int, float] | None = None,
+) -> LMResult:
+    """The one Levenberg-Marquardt trainer of the package (networks of ``mlp``, ``ann``, ``bpnn``, ``nn-rfm``).
+
+    Damped Gauss-Newton steps ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` on the errors
+    ``e = target - model`` (flattened, N) with ``J = d model / d theta`` (N, P); ``mu`` is multiplied by
+    ``mu_dec`` after a step that lowers the objective ``mean(e^2)`` (or ``e.e`` with ``mean=False``) plus
+    ``lambda |theta|^2``, and by ``mu_inc`` until one does (MATLAB's ``trainlm``).
+
+    Stops on a non-finite objective, on the objective ``<= goal``, on a gradient norm ``|2 J^T e| / N``
+    below ``min_grad``, when ``mu`` exceeds ``mu_max``, after ``max_fail`` epochs in a row whose
+    validation error did not improve on the best (``> best``; ``>= best`` with ``fail_on_tie``), on a
+    plateau (``plateau=(window, tol)``: the objective fell by less than the fraction ``tol`` over the
+    last ``window`` epochs) or after ``max_epochs``.  The parameters with the best validation error are
+    returned; ``count_initial_validation=False`` starts the best validation error at infinity instead
+    of the initial parameters' error.
+
+    Parameters
+    ----------
+    errors : callable
+        ``theta (P,) -> e (N,)``, target minus model.
+    jacobian : callable
+        ``theta (P,) -> J (N, P)``, derivative of the model (not of ``e``).
+    theta0 : Tensor (P,)
+        Initial parameters (float64).
+    validation_error : callable, optional
+        ``theta -> float``; without it there is no early stopping.
+
+    Returns
+    -------
+    LMResult
+    """
+    lam = float(weight_decay)
+
+    def objective(e: torch.Tensor, th: torch.Tensor) -> float:
+        base = torch.mean(e**2) if mean else e @ e
+        return float(base + lam * (th @ th)) if lam else float(base)
+
+    def val_error(th: torch.Tensor) -> float:
+        if validation_error is None:
+            return float("nan")
+        with torch.no_grad():
+            return float(validation_error(th))
+
+    theta = theta0.detach().clone()
+    with torch.no_grad():
+        err = errors(theta)
+    n = err.shape[0]
+    perf = objective(err, theta)
+    best_theta, best_epoch = theta.clone(), 0
+    best_val = val_error(theta) if count_initial_validation else float("inf")
+    fails = 0
+    hist: dict[str, list[float]] = {"objective": [perf], "validation": [val_error(theta)], "mu": [mu]}
+    stop, done, started = "max_epochs", 0, 0
+    for epoch in range(1, max_epochs + 1):
+        if not np.isfinite(perf):
+            stop = "non_finite"
+            break
+        if perf <= goal:
+            stop = "goal"
+            break
+        started = epoch
+        jf = jacobian(theta).detach()
+        if min_grad > 0.0 and float(torch.linalg.vector_norm(2.0 * (jf.T @ err)) / n) < min_grad:
+            stop, started = "min_grad", epoch - 1
+            break
+        improved = False
+        while mu <= mu_max:
+            cand = theta + _lm_step(jf, err, mu, theta, lam)
+            with torch.no_grad():
+                cerr = errors(cand)
+            cperf = objective(cerr, cand)
+            if np.isfinite(cperf) and cperf < perf:
+                theta, err, perf = cand, cerr, cperf
+                mu = max(mu * mu_dec, 1e-20)
+                improved = True
+                break
+            mu *= mu_inc
+        if not improved:
+            stop = "mu_max"
+            break
+        done = epoch
+        v = val_error(theta)
+        hist["mu"].append(mu)
+        hist["objective"].append(perf)
+        hist["validation"].append(v)
+        if validation_error is None:
+            best_theta, best_epoch = theta.clone(), epoch
+        elif v < best_val:
+            best_theta, best_val, best_epoch = theta.clone(), v, epoch
+            fails = 0
+        elif v > best_val or fail_on_tie:
+            fails += 1
+            if fails >= max_fail:
+                stop = "validation"
+                break
+        if plateau is not None:
+            window, tol = plateau
+            past = hist["objective"]
+            if len(past) > window and past[-1 - window] - perf <= tol * past[-1 - window]:
+                stop = "plateau"
+                break
+    with torch.no_grad():
+        train_best = objective(errors(best_theta), best_theta)
+    ok = stop not in ("max_epochs", "non_finite") and np.isfinite(train_best)
+    return LMResult(best_theta, done, best_epoch, stop, bool(ok), train_best, val_error(best_theta), hist,
+                    max(started, done), perf)
 
 
 @torch_threads(1)
@@ -323,9 +466,12 @@ def levenberg_marquardt(
     max_fail: int = 6,
     device: str | torch.device = "cpu",
 ) -> LMResult:
-    """Train ``net`` by Levenberg-Marquardt with early stopping on the validation set.
+    """Train a :class:`SigmoidMLP` by :func:`lm_minimise` (mean squared error) with early stopping on
+    the validation set.
 
-    Runs on one CPU thread (:func:`torch_threads`), restoring torch's setting after.
+    Runs on one CPU thread (:func:`torch_threads`), restoring torch's setting after.  The Jacobian of
+    the outputs (N, P) is built row by row: ``jacrev`` of one sample's output, vmapped over the samples
+    (cost O(N P); ``jacrev`` of the whole batch costs O(N^2 P)).
 
     Parameters
     ----------
@@ -336,21 +482,15 @@ def levenberg_marquardt(
         Normalised training inputs and targets.
     x_val, y_val : ndarray (M, D), (M,)
         Normalised validation inputs and targets (M may be 0: no early stopping).
-    max_epochs : int
-    mu, mu_dec, mu_inc, mu_max : float
-        Initial damping, its decrease/increase factors and the stopping bound.
-    min_grad : float
-        Stop when the gradient norm of the training MSE falls below this.
-    goal : float
-        Stop when the training MSE reaches this.
-    max_fail : int
-        Stop after the validation MSE stayed above its best this many epochs in a row.
+    max_epochs, mu, mu_dec, mu_inc, mu_max, min_grad, goal, max_fail
+        As :func:`lm_minimise`.
     device : str or torch.device
         Where the tensors live ("cpu" is enough for these small problems).
 
     Returns
     -------
     LMResult
+        ``train_mse`` / ``val_mse`` are mean squared errors in normalised target units.
     """
     dev = torch.device(device)
 
@@ -358,85 +498,17 @@ def levenberg_marquardt(
         return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)).to(dev)
 
     xt, yt, xv, yv = tensor(x_train), tensor(y_train), tensor(x_val), tensor(y_val)
-    n = xt.shape[0]
-    has_val = xv.shape[0] > 0
-
-    def residual(theta: torch.Tensor) -> torch.Tensor:
-        return yt - net.forward(theta, xt)
-
-    # Jacobian of the network outputs (N, P), row by row: jacrev of one sample's output,
-    # vmapped over the samples (cost O(N P); jacrev of the whole batch costs O(N^2 P)).
-    # With r = y - f the Gauss-Newton step is d = (J^T J + mu I)^-1 J^T r.
     per_sample = torch.func.vmap(
         torch.func.jacrev(lambda theta, xi: net.forward(theta, xi[None, :])[0]), in_dims=(None, 0)
     )
-
-    def jac_fn(theta: torch.Tensor) -> torch.Tensor:
-        return per_sample(theta, xt)
-
-    def val_mse(theta: torch.Tensor) -> float:
-        if not has_val:
-            return float("nan")
-        with torch.no_grad():
-            return float(torch.mean((yv - net.forward(theta, xv)) ** 2))
-
-    theta = theta0.detach().clone().to(device=dev, dtype=torch.float64)
-    with torch.no_grad():
-        err = residual(theta)
-    perf = float(torch.mean(err**2))
-    best_theta, best_val, best_epoch = theta.clone(), val_mse(theta), 0
-    fails = 0
-    hist: dict[str, list[float]] = {"train_mse": [perf], "val_mse": [best_val], "mu": [mu]}
-    stop, done = "max_epochs", 0
-    for epoch in range(1, max_epochs + 1):
-        if not np.isfinite(perf):
-            stop = "non_finite"
-            break
-        if perf <= goal:
-            stop = "goal"
-            break
-        jf = jac_fn(theta).detach()
-        grad = float(torch.linalg.vector_norm(2.0 * (jf.T @ err)) / n)
-        if grad < min_grad:
-            stop = "min_grad"
-            break
-        improved = False
-        while mu <= mu_max:
-            step = _lm_step(jf, err, mu)
-            cand = theta + step
-            with torch.no_grad():
-                cerr = residual(cand)
-            cperf = float(torch.mean(cerr**2))
-            if np.isfinite(cperf) and cperf < perf:
-                theta, err, perf = cand, cerr, cperf
-                mu = max(mu * mu_dec, 1e-20)
-                improved = True
-                break
-            mu *= mu_inc
-        if not improved:
-            stop = "mu_max"
-            break
-        done = epoch
-        v = val_mse(theta)
-        hist["mu"].append(mu)
-        hist["train_mse"].append(perf)
-        hist["val_mse"].append(v)
-        if not has_val:
-            best_theta, best_epoch = theta.clone(), epoch
-            continue
-        if v < best_val:
-            best_theta, best_val, best_epoch = theta.clone(), v, epoch
-            fails = 0
-        elif v > best_val:
-            fails += 1
-            if fails >= max_fail:
-                stop = "validation"
-                break
-    with torch.no_grad():
-        train_best = float(torch.mean((yt - net.forward(best_theta, xt)) ** 2))
-    vbest = val_mse(best_theta)
-    ok = stop not in ("max_epochs", "non_finite") and np.isfinite(train_best)
-    return LMResult(best_theta, done, best_epoch, stop, bool(ok), train_best, vbest, hist)
+    return lm_minimise(
+        lambda theta: yt - net.forward(theta, xt),
+        lambda theta: per_sample(theta, xt),
+        theta0.detach().clone().to(device=dev, dtype=torch.float64),
+        validation_error=(lambda theta: torch.mean((yv - net.forward(theta, xv)) ** 2)) if xv.shape[0] else None,
+        max_epochs=max_epochs, mu=mu, mu_dec=mu_dec, mu_inc=mu_inc, mu_max=mu_max, min_grad=min_grad, goal=goal,
+        max_fail=max_fail,
+    )
 
 
 # ------------------------------------------------------------- network training

@@ -90,6 +90,9 @@ class BestScanlineMethod(ABC):
     family: ClassVar[str] = "search"
     needs_fit: ClassVar[bool] = False
     exactness: ClassVar[str] = "exact"  # "exact", "pixel" or "approximate"
+    # where the column comes from: "collinearity" (the rigorous model at the returned row) or "model"
+    # (the method's own image model, e.g. a fitted RFM or network that predicts both coordinates)
+    column_source: ClassVar[str] = "collinearity"
     # points per _locate call when the method's working arrays grow with N (numpy active-set loops keep
     # several (N,) and (N, 3) arrays per iteration); None: all at once.  Results do not depend on it.
     chunk_points: int | None = None

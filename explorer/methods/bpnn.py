@@ -40,7 +40,7 @@ import numpy as np
 
 from explorer import _log
 from explorer.errors import InputError, NotFittedError, check_finite
-from explorer.methods._lm import torch, torch_threads
+from explorer.methods._lm import lm_minimise, torch, torch_threads
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -255,74 +255,27 @@ class MLPRegressor:
         self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor,
         u_val: torch.Tensor | None, t_val: torch.Tensor | None,
     ) -> tuple[torch.Tensor, dict]:
-        lam = self.weight_decay
+        """One restart of the package's Levenberg-Marquardt trainer (:func:`explorer.methods._lm.lm_minimise`):
+        sum of squared errors plus ``weight_decay |theta|^2``, plateau rule, validation failures
+        counted when the error does not improve (ties included)."""
 
-        def residual(th: torch.Tensor) -> torch.Tensor:
-            return (self._forward(th, u) - t).reshape(-1)
+        def validation_error(th: torch.Tensor) -> float:
+            rv = self._forward(th, u_val) - t_val
+            return float((rv * rv).sum())
 
-        def objective(r: torch.Tensor, th: torch.Tensor) -> float:
-            return float(r @ r + lam * (th @ th))
-
-        def jac(th: torch.Tensor) -> torch.Tensor:
-            return self._jacobian(th, u)
-
-        eye = torch.eye(theta.numel(), dtype=torch.float64)
-        mu = 1e-3
-        r = residual(theta)
-        loss = objective(r, theta)
-        best_val = np.inf
-        best_theta = theta
-        fails = 0
-        history: list[float] = [loss]
-        reason = "max_iter"
-        it = 0
-        while it < self.max_iter:
-            it += 1
-            j = jac(theta)
-            g = j.T @ r + lam * theta
-            h = j.T @ j + lam * eye
-            accepted = False
-            while mu <= 1e10:
-                try:
-                    delta = torch.linalg.solve(h + mu * eye, -g)
-                except RuntimeError:
-                    mu *= 10.0
-                    continue
-                th_new = theta + delta
-                r_new = residual(th_new)
-                new_loss = objective(r_new, th_new)
-                if np.isfinite(new_loss) and new_loss < loss:
-                    accepted = True
-                    break
-                mu *= 10.0
-            if not accepted:
-                reason = "mu_max"  # no step lowers the error: a (numerical) minimum
-                break
-            theta, r, loss = th_new, r_new, new_loss
-            history.append(loss)
-            mu = max(mu * 0.1, 1e-20)
-            if u_val is not None:
-                rv = self._forward(theta, u_val) - t_val
-                val = float((rv * rv).sum())
-                if val < best_val:
-                    best_val, best_theta, fails = val, theta, 0
-                else:
-                    fails += 1
-                    if fails >= self.max_fail:
-                        reason = "validation"
-                        break
-            if len(history) > self.window and history[-1 - self.window] - loss <= self.tol * history[-1 - self.window]:
-                reason = "plateau"
-                break
-            if loss < 1e-28:
-                reason = "goal"
-                break
-        if u_val is not None:
-            theta = best_theta
+        res = lm_minimise(
+            lambda th: (t - self._forward(th, u)).reshape(-1), lambda th: self._jacobian(th, u), theta,
+            validation_error=validation_error if u_val is not None else None, mean=False,
+            weight_decay=self.weight_decay, max_epochs=self.max_iter, goal=1e-28, max_fail=self.max_fail,
+            fail_on_tie=True, count_initial_validation=False, plateau=(self.window, self.tol),
+        )
+        history = res.history["objective"]
         ref = history[max(0, len(history) - 1 - self.window)]
         window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
-        return theta, {"iterations": it, "stop": reason, "loss": loss, "window_decrease": window_decrease,
-                       "val_loss": best_val if u_val is not None else None}
+        stop = "max_iter" if res.stop_reason == "max_epochs" else res.stop_reason
+        return res.theta, {"iterations": res.iterations, "stop": stop, "loss": res.final_objective,
+                           "window_decrease": window_decrease,
+                           "val_loss": res.val_mse if u_val is not None else None}
 
     def fit_arrays(
         self,
@@ -607,6 +560,7 @@ class BPNNMethod(BestScanlineMethod):
     family = "generalized"
     needs_fit = True
     exactness = "approximate"
+    column_source = "model"  # the network predicts the column too
 
     def __init__(
         self,

@@ -35,8 +35,6 @@ flags them ``inside=False``.  Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.errors import InputError
@@ -75,15 +73,12 @@ class CentralPerspectivePlane(BestScanlineMethod):
         One-off cost at construction (one ray intersection and two plane distances).
     """
 
-    name: ClassVar[str] = "cpp"
-    label: ClassVar[str] = "Central perspective plane (CPP)"
-    reference: ClassVar[str] = (
+    name = "cpp"
+    label = "Central perspective plane (CPP)"
+    reference = (
         "Wang M., Hu F., Li J., Pan J. (2009), A fast approach to best scanline search of airborne linear "
         "pushbroom images, Photogramm. Eng. Remote Sens. 75(9):1059-1067, doi:10.14358/PERS.75.9.1059"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,

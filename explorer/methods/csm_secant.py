@@ -39,8 +39,6 @@ calcDetectorLineErr, computeProjectiveApproximation, createProjectiveApproximati
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.geometry.kernels import CollinearityParams, solve_secant
@@ -100,15 +98,12 @@ class CsmSecant(BestScanlineMethod):
         Only "cpu".
     """
 
-    name: ClassVar[str] = "csm-secant"
-    label: ClassVar[str] = "usgscsm projective seed + secant"
-    reference: ClassVar[str] = (
+    name = "csm-secant"
+    label = "usgscsm projective seed + secant"
+    reference = (
         "USGS Astrogeology usgscsm, UsgsAstroLsSensorModel::groundToImage "
         "(https://github.com/DOI-USGS/usgscsm)"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,

@@ -67,8 +67,6 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.geometry.kernels import (
@@ -140,15 +138,12 @@ class Exact(BestScanlineMethod):
         "cpu" (default) or "cuda[:index]"; a CUDA device implies ``backend="torch"``.
     """
 
-    name: ClassVar[str] = "exact"
-    label: ClassVar[str] = "Seeded safeguarded Newton (exact)"
-    reference: ClassVar[str] = (
+    name = "exact"
+    label = "Seeded safeguarded Newton (exact)"
+    reference = (
         "this project; Newton on the first collinearity component after Chen & Rau (1993), "
         "IEEE TGRS 31(6):1243-1252"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,

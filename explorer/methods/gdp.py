@@ -28,14 +28,12 @@ the image (``converged=False``, ``row=NaN``).  Conventions: ``docs/conventions.m
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.errors import InputError
-from explorer.methods._common import residual_px, weighted_mean_row
+from explorer.methods._common import residual_px
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
-from explorer.methods.hybrid import widen_to_sign_change
+from explorer.methods.hybrid import interpolate_in_widened_windows
 from explorer.scene import Scene
 
 
@@ -60,16 +58,13 @@ class GeneralDistancePrediction(BestScanlineMethod):
 
     chunk_points = 1_000_000  # per-point work arrays (network layers / window search) grow with N
 
-    name: ClassVar[str] = "gdp"
-    label: ClassVar[str] = "General distance prediction (GDP)"
-    reference: ClassVar[str] = (
+    name = "gdp"
+    label = "General distance prediction (GDP)"
+    reference = (
         "Geng X., Xu Q., Xing S., Lan C. (2019), A robust ground-to-image transformation algorithm and its "
         "applications in the geometric processing of linear pushbroom images, Earth and Space Science "
         "6:1805-1830, doi:10.1029/2019EA000646"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,
@@ -157,13 +152,10 @@ class GeneralDistancePrediction(BestScanlineMethod):
                 hi = np.where(up, partner, l0)
                 f_lo = np.where(up, f0, f1)
                 f_hi = np.where(up, f1, f0)
-                found = widen_to_sign_change(
-                    sc, g, lo, hi, f_lo, f_hi, ce_sub, max_steps=self.max_widen, line_min=line_min,
-                    line_max=line_max, current=current, trace=path, index=idx,
+                interpolate_in_widened_windows(
+                    sc, g, lo, hi, f_lo, f_hi, ce_sub, idx, (row, converged, ce), max_steps=self.max_widen,
+                    line_min=line_min, line_max=line_max, current=current, trace=path,
                 )
-                row[idx[found]] = weighted_mean_row(lo[found], hi[found], f_lo[found], f_hi[found])
-                converged[idx[found]] = True
-                ce[idx] = ce_sub
         if path is not None:
             path.append(row.copy())
         return self._result(ground, row, converged, ce, trace=path, info={"iterations": iterations})

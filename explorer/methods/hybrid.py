@@ -32,8 +32,6 @@ Conventions (pixel centre, row <-> time, the residual): ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.errors import InputError
@@ -116,6 +114,29 @@ def widen_to_sign_change(
     return found
 
 
+def interpolate_in_widened_windows(
+    scene: Scene,
+    ground: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    f_lo: np.ndarray,
+    f_hi: np.ndarray,
+    ce_sub: np.ndarray,
+    idx: np.ndarray,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray],
+    **widen,
+) -> None:
+    """Finish of ``gdp`` and ``hybrid``: :func:`widen_to_sign_change` on the windows of the points
+    ``idx``, then eq. 4 (:func:`~explorer.methods._common.weighted_mean_row`) where a sign change was
+    found.  Writes ``row``, ``converged`` and ``ce`` of ``out = (row, converged, ce)`` at ``idx``;
+    ``widen`` are the keyword arguments of :func:`widen_to_sign_change` (``index=idx`` is added)."""
+    row, converged, ce = out
+    found = widen_to_sign_change(scene, ground, lo, hi, f_lo, f_hi, ce_sub, index=idx, **widen)
+    row[idx[found]] = weighted_mean_row(lo[found], hi[found], f_lo[found], f_hi[found])
+    converged[idx[found]] = True
+    ce[idx] = ce_sub
+
+
 @register
 class HybridObjectSpace(BestScanlineMethod):
     """Jannati's three-stage hybrid object-space method (approximation, neighbours, eq. 4).
@@ -145,15 +166,12 @@ class HybridObjectSpace(BestScanlineMethod):
         The stage-1 transformation coefficients (normalised coordinates).
     """
 
-    name: ClassVar[str] = "hybrid"
-    label: ClassVar[str] = "Hybrid object-space (Jannati)"
-    reference: ClassVar[str] = (
+    name = "hybrid"
+    label = "Hybrid object-space (Jannati)"
+    reference = (
         "Jannati M. (2012), MSc thesis, K. N. Toosi University of Technology; summarised in Ahooei Nezhad, "
         "Valadan Zoej, Jannati (2020), J. Geospatial Information Technology 8(1):23-38, sec. 2-4, eq. 4"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,
@@ -248,13 +266,10 @@ class HybridObjectSpace(BestScanlineMethod):
                 path.append(current.copy())
                 current[idx] = hi
                 path.append(current.copy())
-            found = widen_to_sign_change(
-                sc, g, lo, hi, f_lo, f_hi, ce_sub, max_steps=self.max_widen, line_min=line_min,
-                line_max=line_max, current=current, trace=path, index=idx,
+            interpolate_in_widened_windows(
+                sc, g, lo, hi, f_lo, f_hi, ce_sub, idx, (row, converged, ce), max_steps=self.max_widen,
+                line_min=line_min, line_max=line_max, current=current, trace=path,
             )
-            row[idx[found]] = weighted_mean_row(lo[found], hi[found], f_lo[found], f_hi[found])
-            converged[idx[found]] = True
-            ce[idx] = ce_sub
         if path is not None:
             path.append(row.copy())
         return self._result(ground, row, converged, ce, trace=path,

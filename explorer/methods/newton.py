@@ -41,8 +41,6 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from explorer.geometry.collinearity import sensor_vectors
@@ -179,15 +177,12 @@ class NewtonRaphson(BestScanlineMethod):
         Traces (``trace=True``) and ``derivative="central"`` always use the numpy loop.
     """
 
-    name: ClassVar[str] = "nr"
-    label: ClassVar[str] = "Newton-Raphson (NR)"
-    reference: ClassVar[str] = (
+    name = "nr"
+    label = "Newton-Raphson (NR)"
+    reference = (
         "Chen & Rau (1993), A unified solution for digital terrain model and orthoimage generation "
         "from SPOT stereopairs, IEEE TGRS 31(6):1243-1252"
     )
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
-    exactness: ClassVar[str] = "exact"
 
     def __init__(
         self,

@@ -167,8 +167,6 @@ class _IntegerRowSearch(BestScanlineMethod):
 
     chunk_points = 1_000_000  # the active-set loop keeps several (N,) arrays per iteration
 
-    family: ClassVar[str] = "search"
-    needs_fit: ClassVar[bool] = False
     interpolate: ClassVar[bool] = False
 
     def __init__(self, scene: Scene, *, select: str = "nearest") -> None:
@@ -232,12 +230,12 @@ class SequentialSearch(_IntegerRowSearch):
         See :class:`_IntegerRowSearch`.
     """
 
-    name: ClassVar[str] = "ss"
-    label: ClassVar[str] = "Sequential search (SS)"
-    reference: ClassVar[str] = (
+    name = "ss"
+    label = "Sequential search (SS)"
+    reference = (
         "Ahooei Nezhad, Valadan Zoej & Jannati (2020), J. Geospatial Information Technology 8(1), sec. 2-2"
     )
-    exactness: ClassVar[str] = "pixel"
+    exactness = "pixel"
 
     def _bracket(self, ground: np.ndarray, trace: list[np.ndarray] | None, info: dict) -> _Bracket:
         n = ground.shape[0]
@@ -280,13 +278,13 @@ class BisectingWindowSearch(_IntegerRowSearch):
     halving as (N, 2) arrays (NaN for finished points).
     """
 
-    name: ClassVar[str] = "bws"
-    label: ClassVar[str] = "Bisecting window search (BWS)"
-    reference: ClassVar[str] = (
+    name = "bws"
+    label = "Bisecting window search (BWS)"
+    reference = (
         "Liu & Wang (2007), Efficient orthoimage generation from ADS40 level 0 products, "
         "J. Remote Sensing 11(2):247"
     )
-    exactness: ClassVar[str] = "pixel"
+    exactness = "pixel"
 
     def __init__(self, scene: Scene, *, final_window: int = 8, select: str = "nearest") -> None:
         if int(final_window) != final_window or final_window < 2:
@@ -348,12 +346,12 @@ class SequentialSearchInterpolated(SequentialSearch):
     ``|x''| / (8 |x'|)`` pixels at most (curvature of the residual over one line).
     """
 
-    name: ClassVar[str] = "ss-interp"
-    label: ClassVar[str] = "Sequential search + sub-pixel interpolation (SS, eq. 4)"
-    reference: ClassVar[str] = (
+    name = "ss-interp"
+    label = "Sequential search + sub-pixel interpolation (SS, eq. 4)"
+    reference = (
         "Ahooei Nezhad, Valadan Zoej & Jannati (2020), J. Geospatial Information Technology 8(1), eq. 4"
     )
-    exactness: ClassVar[str] = "approximate"
+    exactness = "approximate"
     interpolate: ClassVar[bool] = True
 
 
@@ -364,11 +362,11 @@ class BisectingWindowSearchInterpolated(BisectingWindowSearch):
     Same CE as ``bws`` plus one for the column at the interpolated row; parameters as ``bws``.
     """
 
-    name: ClassVar[str] = "bws-interp"
-    label: ClassVar[str] = "Bisecting window search + sub-pixel interpolation (BWS, eq. 4)"
-    reference: ClassVar[str] = (
+    name = "bws-interp"
+    label = "Bisecting window search + sub-pixel interpolation (BWS, eq. 4)"
+    reference = (
         "Liu & Wang (2007); Ahooei Nezhad, Valadan Zoej & Jannati (2020), J. Geospatial "
         "Information Technology 8(1), eq. 4"
     )
-    exactness: ClassVar[str] = "approximate"
+    exactness = "approximate"
     interpolate: ClassVar[bool] = True

@@ -479,18 +479,10 @@ class RigorousLineScanScene(Scene):
         terrain height), so it is exact there; :meth:`image_to_ground` passes the
         intersection height, so its results are exact.
         """
-        row = check_finite(np.atleast_1d(row), "row")
-        col = check_finite(np.atleast_1d(col), "col")
-        row, col = np.broadcast_arrays(row, col)
-        t = self.scanline_time(row)
-        xd, yd = self.interior.detector_focal_plane(col)
-        x, y = self.interior.undistort(xd, yd)
-        v = np.stack([x, y, np.full(t.shape, -self.interior.focal_length_m)], axis=-1)
-        d = np.einsum("nij,nj->ni", self.exterior.rotation(t), v)
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        centre = self.exterior.position(t)
+        centre, d = super().rays(row, col)  # the apparent lines of sight, as for any scene
         if not (self.aberration or self.refraction):
             return centre, d
+        t = self.scanline_time(np.broadcast_arrays(np.atleast_1d(row), np.atleast_1d(col))[0])
         h_ref = np.broadcast_to(
             np.asarray(self.terrain.mean_height if height is None else height, dtype=np.float64), t.shape
         )

@@ -51,29 +51,10 @@ PRIOR_SIGMA = {"position_m": 1000.0, "attitude_rad": 1e-3, "focal_relative": 1e-
 
 
 # --------------------------------------------------------------------------- projection
-def project_to_image(
-    scene: Scene,
-    ground: np.ndarray,
-    *,
-    row_guess: np.ndarray | None = None,
-    margin_fraction: float = 0.25,
-    n_bracket: int = 33,
-    tol_rows: float = 1e-10,
-    max_iter: int = 100,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ground -> image for any scene by bracketing the best-scanline condition (Illinois regula falsi).
-
-    :func:`explorer.geometry.bracket.bracket_best_scanline` (the code behind
-    :meth:`explorer.scene.Scene.ground_to_image`), independent of the best-scanline methods under study.
-
-    Returns
-    -------
-    row, col : ndarray, shape (N,)
-        Fractional image coordinates (0-based, pixel centre); NaN where no root was bracketed.
-    converged : ndarray of bool, shape (N,)
-    """
-    return bracket_best_scanline(scene, ground, row_guess=row_guess, margin_fraction=margin_fraction,
-                                 n_bracket=n_bracket, tol_rows=tol_rows, max_iter=max_iter)
+#: Ground -> image for any scene by bracketing the best-scanline condition (Illinois regula falsi):
+#: :func:`explorer.geometry.bracket.bracket_best_scanline`, the code behind
+#: :meth:`explorer.scene.Scene.ground_to_image`, independent of the best-scanline methods under study.
+project_to_image = bracket_best_scanline
 
 
 def image_residuals(

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from explorer.geometry.exterior import Jitter
-from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.kernels import NUMBA_AVAILABLE, CollinearityParams, residual_and_rate
 from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
 from explorer.scene import Scene
+from tests import scenes
 
 ALL_PRESETS = preset_ids()
 ROOT = Path(__file__).resolve().parents[2]
@@ -21,20 +21,8 @@ BACKENDS = ["numba", "numpy"] if NUMBA_AVAILABLE else ["numpy"]
 
 
 def curved_scene(jitter: bool = False) -> Scene:
-    """WSU with a displaced, curved detector line and radial distortion (as tests/test_scene.py)."""
-    base = build_scene("WSU")
-    pitch = base.interior.detector_pitch_m
-    interior = InteriorOrientation(
-        base.interior.focal_length_m, pitch, base.n_columns,
-        principal_column=1990.3,
-        along_track_offset_m=37.2 * pitch,
-        line_curvature=(2e-4, 3e-3),
-        radial_distortion=(2e-3,),
-    )
-    exterior = base.exterior
-    if jitter:
-        exterior.jitter = [Jitter("kappa", 4e-6, 23.0, 0.4), Jitter("phi", 2e-6, 57.0, 1.3)]
-    return Scene("curved", interior, exterior, base.timing, base.n_rows, base.terrain, base.frame)
+    """WSU with a displaced, curved detector line and radial distortion (principal column 1990.3)."""
+    return scenes.curved_scene("WSU", jitter=jitter, principal_column=1990.3)
 
 
 def scene_cases():
@@ -61,15 +49,20 @@ def _tolerance(scene, ref):
     return 1e-12 * np.abs(ref) + 1e-9 * scene.pixel_size_m
 
 
+def _assert_matches_scene(scene, ground, t, g, col):
+    """Residual within :func:`_tolerance` of the scene's, column within 1e-9 px of the scene's."""
+    ref = scene.along_track_residual(ground, t)
+    assert np.all(np.abs(g - ref) <= _tolerance(scene, ref))
+    np.testing.assert_allclose(col, scene.column_at_time(ground, t), rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize("name, make", CASES, ids=[c[0] for c in CASES])
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_reference_evaluator_matches_scene_residual_and_column(name, make, backend):
     scene = make()
     ground, t = _points_and_times(scene)
-    ref = scene.along_track_residual(ground, t)
     g, _, col = residual_and_rate(scene, ground, t, backend=backend)
-    assert np.all(np.abs(g - ref) <= _tolerance(scene, ref))
-    np.testing.assert_allclose(col, scene.column_at_time(ground, t), rtol=0, atol=1e-9)
+    _assert_matches_scene(scene, ground, t, g, col)
 
 
 @pytest.mark.parametrize("name, make", CASES, ids=[c[0] for c in CASES])
@@ -77,12 +70,9 @@ def test_reference_evaluator_matches_scene_residual_and_column(name, make, backe
 def test_fast_evaluators_match_scene_residual(name, make, evaluator):
     scene = make()
     ground, t = _points_and_times(scene, seed=1)
-    ref = scene.along_track_residual(ground, t)
     g, g_t, col = residual_and_rate(scene, ground, t, evaluator=evaluator)
-    _, g_t_ref, _ = residual_and_rate(scene, ground, t)
-    assert np.all(np.abs(g - ref) <= _tolerance(scene, ref))
-    np.testing.assert_allclose(g_t, g_t_ref, rtol=1e-12)
-    np.testing.assert_allclose(col, scene.column_at_time(ground, t), rtol=0, atol=1e-9)
+    _assert_matches_scene(scene, ground, t, g, col)
+    np.testing.assert_allclose(g_t, residual_and_rate(scene, ground, t)[1], rtol=1e-12)
 
 
 @pytest.mark.parametrize("name, make", CASES, ids=[c[0] for c in CASES])

@@ -10,42 +10,9 @@ from explorer.errors import InputError
 from explorer.methods import create
 from explorer.methods.cpp import CentralPerspectivePlane
 from explorer.points import simulate_points
-from explorer.presets import preset_ids
 from tests.methods.cases import curved_scene, scene_for, scps_for
-from tests.truth import brute_force_rows
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
-
-
-@pytest.mark.parametrize("preset", preset_ids())
-def test_exact_rows_on_every_preset(preset):
-    """Straight detector line: the plane root is the best scanline, on every preset including
-    ``agile`` (the planes are exact per line whatever the attitude rates; the secant absorbs them)."""
-    scene, scps = scene_for(preset), scps_for(preset)
-    res = create("cpp", scene).ground_to_image(scps.ground)
-    assert res.valid.all()
-    assert np.max(np.abs(res.row - scps.row)) < BAR_PX
-    assert np.max(np.abs(res.col - scps.col)) < BAR_PX
-
-
-@pytest.mark.parametrize("preset", ["WSU", "ISB"])
-def test_exact_rows_with_relief(preset):
-    scene, scps = scene_for(preset, 800.0), scps_for(preset, 800.0)
-    assert np.ptp(scps.ground[:, 2]) > 300  # the points really are spread in height
-    res = create("cpp", scene).ground_to_image(scps.ground)
-    assert res.valid.all()
-    assert np.max(np.abs(res.row - scps.row)) < BAR_PX
-
-
-def test_matches_brute_force_truth_on_random_points():
-    scene = scene_for("WSU", 800.0)
-    rng = np.random.default_rng(11)
-    row = rng.uniform(0, scene.n_rows - 1, 30)
-    col = rng.uniform(0, scene.n_columns - 1, 30)
-    ground = scene.image_to_ground(row, col)
-    truth = brute_force_rows(scene, ground)
-    res = create("cpp", scene).ground_to_image(ground)
-    assert np.max(np.abs(res.row - truth)) < BAR_PX
 
 
 def test_curved_detector_and_distortion_need_the_refinement():

@@ -9,8 +9,6 @@ from explorer.methods import available, create
 from explorer.methods.csm_secant import fit_projective_line
 from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
-from tests.geometry.test_kernels import curved_scene
-from tests.truth import brute_force_rows
 
 ALL_PRESETS = preset_ids()
 
@@ -36,17 +34,6 @@ def test_rows_with_relief(preset):
     check = simulate_points(scene, 2000, kind="scp")
     ev = evaluate_method(create("csm-secant", scene), check)
     assert ev.valid_frac == 1.0 and ev.dr_max_px <= 1e-6
-
-
-def test_curved_distorted_camera_matches_brute_force():
-    scene = curved_scene(jitter=True)
-    rng = np.random.default_rng(1)
-    row = rng.uniform(0, scene.n_rows - 1, 300)
-    col = rng.uniform(0, scene.n_columns - 1, 300)
-    ground = scene.image_to_ground(row, col)
-    res = create("csm-secant", scene).ground_to_image(ground)
-    assert res.valid.all()
-    assert np.max(np.abs(res.row - brute_force_rows(scene, ground))) <= 1e-6
 
 
 def test_projective_seed_reproduces_its_fitting_grid_on_a_straight_orbit():

@@ -9,7 +9,6 @@ from explorer.geometry.kernels import NUMBA_AVAILABLE, STATUS_INVALID, STATUS_NO
 from explorer.methods import available, create
 from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
-from tests.geometry.test_kernels import curved_scene
 from tests.truth import brute_force_rows
 
 ALL_PRESETS = preset_ids()
@@ -85,19 +84,6 @@ def test_exact_under_strong_rates_and_jitter_matches_brute_force(kwargs):
     assert res.converged.all()
     assert np.max(np.abs(res.row - truth)) <= 1e-7
     assert np.max(np.abs(res.row - row)) <= 1e-7
-
-
-def test_exact_with_displaced_curved_detector_and_distortion():
-    scene = curved_scene(jitter=True)
-    rng = np.random.default_rng(5)
-    row = rng.uniform(0, scene.n_rows - 1, 400)
-    col = rng.uniform(0, scene.n_columns - 1, 400)
-    ground = scene.image_to_ground(row, col)
-    truth = brute_force_rows(scene, ground)
-    res = create("exact", scene).ground_to_image(ground)
-    assert res.valid.all()
-    assert np.max(np.abs(res.row - truth)) <= 1e-7
-    assert np.max(np.abs(res.col - col)) <= 1e-7
 
 
 @pytest.mark.parametrize("preset", ["WSU", "agile"])

@@ -6,32 +6,28 @@ Training runs on CPU in float64; the all-preset test uses a 300-epoch budget to 
 few seconds (the default is MATLAB's 1000).
 """
 
+
 import logging
-from functools import lru_cache
 
 import numpy as np
 import pytest
 import torch
 
-from explorer.errors import InputError, NotFittedError
+from explorer.errors import NotFittedError
 from explorer.evaluate import evaluate_method
 from explorer.methods import available, create
 from explorer.methods._lm import SigmoidMLP, levenberg_marquardt, split_train_validation
 from explorer.methods.mlp import MLPMethod, grid_search
 from explorer.points import simulate_points
-from explorer.presets import build_scene, preset_ids
+from explorer.presets import preset_ids
+from tests.methods.cases import scene_for as _scene
+from tests.methods.cases import scps_for
 
 PAPER_PRESETS = preset_ids()[:10]
 
 
-@lru_cache(maxsize=12)
-def _scene(preset):
-    return build_scene(preset)
-
-
-@lru_cache(maxsize=12)
 def _scps(preset, n=20000):
-    return simulate_points(_scene(preset), n, kind="scp")
+    return scps_for(preset, n=n)
 
 
 def test_paper_presets_are_the_ten_images():
@@ -110,16 +106,6 @@ def test_out_of_image_points_flagged():
     res = m.ground_to_image(s.image_to_ground(rows, cols))
     assert not res.inside.any() and not res.valid.any()
     assert not res.converged[4:6].any()  # far outside the SCOPs: not located
-
-
-@pytest.mark.filterwarnings("ignore:mlp. training did not converge")
-def test_nan_ground_raises():
-    s = _scene("WSU")
-    m = MLPMethod(s, max_epochs=5).fit(simulate_points(s, 30, kind="scop"))
-    g = _scps("WSU", 100).ground.copy()
-    g[7, 0] = np.inf
-    with pytest.raises(InputError):
-        m.ground_to_image(g)
 
 
 def test_too_few_scops_raise():

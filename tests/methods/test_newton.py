@@ -12,6 +12,7 @@ from explorer.methods.newton import residual_and_derivative
 from explorer.points import simulate_points
 from explorer.presets import build_scene, preset_ids
 from explorer.scene import Scene
+from tests.methods.cases import random_image_points as _points
 from tests.truth import brute_force_rows
 
 ALL_PRESETS = preset_ids()
@@ -22,13 +23,6 @@ def _scene(preset, relief=0.0):
     return build_scene(preset, relief_m=relief, relief_seed=3)
 
 
-def _points(scene, n, seed):
-    rng = np.random.default_rng(seed)
-    row = rng.uniform(-0.5, scene.n_rows - 0.5, n)
-    col = rng.uniform(-0.5, scene.n_columns - 0.5, n)
-    ground = scene.image_to_ground(row, col)
-    ok = np.isfinite(ground[:, 0])
-    return row[ok], col[ok], ground[ok]
 
 
 def _curved_scene():
@@ -103,17 +97,6 @@ def test_residual_and_analytic_derivative_match_the_scene():
             - scene.along_track_residual(ground, scene.scanline_time(rows - h))
         ) / (2 * h * pitch)
         np.testing.assert_allclose(d, fd, rtol=1e-6)
-
-
-def test_nr_on_curved_detector_with_distortion():
-    scene = _curved_scene()
-    rng = np.random.default_rng(5)
-    row, col = rng.uniform(0, scene.n_rows - 1, 300), rng.uniform(0, scene.n_columns - 1, 300)
-    ground = scene.image_to_ground(row, col)
-    res = create("nr", scene).ground_to_image(ground)
-    assert np.all(res.valid)
-    np.testing.assert_allclose(res.row, row, atol=1e-9)
-    np.testing.assert_allclose(res.col, col, atol=1e-8)
 
 
 def test_central_difference_variant_costs_three_ce_per_iteration():

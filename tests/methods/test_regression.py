@@ -5,12 +5,11 @@ round trip checked to 1e-9 px in ``tests/test_scene.py``); the SCP grid is cell-
 check point is a control point.  Measured numbers quoted in comments come from these exact setups.
 """
 
-from functools import lru_cache
 
 import numpy as np
 import pytest
 
-from explorer.errors import InputError, NotFittedError
+from explorer.errors import NotFittedError
 from explorer.evaluate import evaluate_method
 from explorer.methods import available, create
 from explorer.methods.regression import (
@@ -20,17 +19,12 @@ from explorer.methods.regression import (
     monomial_exponents,
 )
 from explorer.points import image_grid, simulate_points
-from explorer.presets import build_scene
+from tests.methods.cases import scene_for as _scene
+from tests.methods.cases import scps_for
 
 
-@lru_cache(maxsize=8)
-def _scene(preset):
-    return build_scene(preset)
-
-
-@lru_cache(maxsize=8)
 def _scps(preset, n=20000, layers=1):
-    return simulate_points(_scene(preset), n, kind="scp", layers=layers)
+    return scps_for(preset, n=n, layers=layers)
 
 
 def _outside_points(scene):
@@ -166,16 +160,6 @@ def test_trace_holds_the_prediction():
     res = m.ground_to_image(g, trace=True)
     assert len(res.trace) == 1
     np.testing.assert_array_equal(res.trace[0], res.row)
-
-
-@pytest.mark.parametrize("cls", [LinearRegressionMethod, PolynomialRegressionMethod])
-def test_nan_ground_raises(cls):
-    s = _scene("WSU")
-    m = cls(s).fit(simulate_points(s, 30, kind="scop"))
-    g = _scps("WSU", 100).ground.copy()
-    g[3, 1] = np.nan
-    with pytest.raises(InputError):
-        m.ground_to_image(g)
 
 
 def test_too_few_scops_raise():

@@ -12,6 +12,7 @@ import pytest
 
 from explorer.methods import available, create
 from explorer.presets import build_scene, preset_ids
+from tests.methods.cases import random_image_points as _points
 from tests.truth import brute_force_rows
 
 ALL_PRESETS = preset_ids()
@@ -36,14 +37,6 @@ def _scene(preset, relief=0.0):
     return build_scene(preset, relief_m=relief, relief_seed=3)
 
 
-def _points(scene, n, seed):
-    """Random image points on the image and their ground points; exact rows (N,), cols, ground (N, 3)."""
-    rng = np.random.default_rng(seed)
-    row = rng.uniform(-0.5, scene.n_rows - 0.5, n)
-    col = rng.uniform(-0.5, scene.n_columns - 0.5, n)
-    ground = scene.image_to_ground(row, col)
-    ok = np.isfinite(ground[:, 0])
-    return row[ok], col[ok], ground[ok]
 
 
 def _fpx(scene, ground, row):
@@ -80,12 +73,19 @@ def _check_pixel_rows(scene, res, row, col, ground):
     np.testing.assert_allclose(res.col, scene.column_at_row(ground, r), atol=1e-9)
 
 
+def _pixel_search(name, preset, n, seed):
+    """Exact rows (N,) of seeded random image points and the result of the pixel search ``name`` on them
+    (checked by :func:`_check_pixel_rows`)."""
+    scene = _scene(preset)
+    row, col, ground = _points(scene, n, seed=seed)
+    res = create(name, scene).ground_to_image(ground)
+    _check_pixel_rows(scene, res, row, col, ground)
+    return row, res
+
+
 @pytest.mark.parametrize("preset", ALL_PRESETS)
 def test_bws_returns_nearest_integer_row(preset):
-    scene = _scene(preset)
-    row, col, ground = _points(scene, 2000, seed=1)
-    res = create("bws", scene).ground_to_image(ground)
-    _check_pixel_rows(scene, res, row, col, ground)
+    row, res = _pixel_search("bws", preset, 2000, seed=1)
     # the RMSE is the rounding RMSE of the exact rows (about 1 / sqrt(12) = 0.289 px)
     rmse = np.sqrt(np.mean((res.row - row) ** 2))
     assert rmse == pytest.approx(np.sqrt(np.mean((np.round(row) - row) ** 2)), abs=1e-9)
@@ -94,11 +94,8 @@ def test_bws_returns_nearest_integer_row(preset):
 
 @pytest.mark.parametrize("preset", ALL_PRESETS)
 def test_ss_returns_nearest_integer_row_and_agrees_with_bws(preset):
-    scene = _scene(preset)
-    row, col, ground = _points(scene, 60, seed=2)
-    res = create("ss", scene).ground_to_image(ground)
-    _check_pixel_rows(scene, res, row, col, ground)
-    np.testing.assert_array_equal(res.row, create("bws", scene).ground_to_image(ground).row)
+    row, res = _pixel_search("ss", preset, 60, seed=2)
+    np.testing.assert_array_equal(res.row, _pixel_search("bws", preset, 60, seed=2)[1].row)
 
 
 def test_select_lower_truncates():

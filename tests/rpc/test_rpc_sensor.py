@@ -25,10 +25,8 @@ def test_is_a_sensor(sensor):
 
 
 def test_image_to_ground_lies_on_the_local_plane_and_projects_back(sensor):
-    rng = np.random.default_rng(0)
-    row = rng.uniform(0, sensor.n_rows - 1, 100)
-    col = rng.uniform(0, sensor.n_columns - 1, 100)
-    z = rng.uniform(-100.0, 400.0, 100)
+    row, col, z = np.random.default_rng(0).uniform([0, 0, -100.0], [sensor.n_rows - 1, sensor.n_columns - 1, 400.0],
+                                                   (100, 3)).T
     ground = sensor.image_to_ground(row, col, height=z)
     assert np.max(np.abs(ground[:, 2] - z)) < 1e-6  # on the local plane, not the ellipsoidal height
     lon, lat, h = sensor.frame.enu_to_geodetic(ground)

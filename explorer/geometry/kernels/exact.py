@@ -53,26 +53,8 @@ def _newton_update_np(rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi
 
 @njit(parallel=True, fastmath=False, cache=True)
 def _newton_first_nb(
-    ground,
-    sx,
-    fx,
-    focal,
-    offset,
-    pitch,
-    pc,
-    line_period,
-    ref_row,
-    w_lo,
-    w_hi,
-    orient,
-    accept_step,
-    steps,
-    r,
-    row_out,
-    col_out,
-    state,
-    ce,
-    trace,
+    ground, sx, fx, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, accept_step, steps, r, row_out,
+    col_out, state, ce, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half = sx
@@ -93,23 +75,7 @@ def _newton_first_nb(
                 X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
             )
             _newton_update(
-                i,
-                rr,
-                g,
-                gt,
-                yd,
-                ydt,
-                vz,
-                line_period,
-                pitch,
-                pc,
-                w_lo,
-                w_hi,
-                orient,
-                accept_step,
-                r,
-                row_out,
-                col_out,
+                i, rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi, orient, accept_step, r, row_out, col_out,
                 state,
             )
         ce[i] = len(steps)
@@ -117,26 +83,8 @@ def _newton_first_nb(
 
 @njit(parallel=True, fastmath=False, cache=True)
 def _newton_next_nb(
-    ground,
-    idx,
-    fx,
-    focal,
-    offset,
-    pitch,
-    pc,
-    line_period,
-    ref_row,
-    w_lo,
-    w_hi,
-    orient,
-    accept_step,
-    k,
-    r,
-    row_out,
-    col_out,
-    state,
-    ce,
-    trace,
+    ground, idx, fx, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, accept_step, k, r, row_out,
+    col_out, state, ce, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     n_trace = trace.shape[0]
@@ -153,23 +101,7 @@ def _newton_next_nb(
             X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
         )
         _newton_update(
-            i,
-            rr,
-            g,
-            gt,
-            yd,
-            ydt,
-            vz,
-            line_period,
-            pitch,
-            pc,
-            w_lo,
-            w_hi,
-            orient,
-            accept_step,
-            r,
-            row_out,
-            col_out,
+            i, rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi, orient, accept_step, r, row_out, col_out,
             state,
         )
         ce[i] = k + 1
@@ -178,28 +110,8 @@ def _newton_next_nb(
 # --------------------------------------------------------------------------- exact: safeguarded iteration
 @njit(parallel=True, fastmath=False, cache=True)
 def _solve_exact_nb(
-    ground,
-    start,
-    gx,
-    fx,
-    use_fixed,
-    focal,
-    offset,
-    pitch,
-    pc,
-    line_period,
-    ref_row,
-    w_lo,
-    w_hi,
-    orient,
-    tol,
-    accept_step,
-    max_iter,
-    row_out,
-    col_out,
-    status_out,
-    ce_out,
-    trace,
+    ground, start, gx, fx, use_fixed, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, tol,
+    accept_step, max_iter, row_out, col_out, status_out, ce_out, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx
@@ -311,13 +223,7 @@ def _solve_exact_np(
     p: CollinearityParams,
     fm: FixedModel | None,
     fast: bool,
-    w_lo,
-    w_hi,
-    orient,
-    tol,
-    accept_step,
-    max_iter,
-    trace_rows,
+    w_lo, w_hi, orient, tol, accept_step, max_iter, trace_rows,
 ):
     """Vectorised numpy twin of :func:`_solve_exact_nb` (same algorithm, same decisions)."""
     n = ground.shape[0]
@@ -521,21 +427,9 @@ def solve_exact(
                 fm.args(),
                 p.focal,
                 p.offset,
-                pitch,
-                pc,
-                dt,
-                ref,
-                w_lo,
-                w_hi,
-                orient,
-                accept_step,
+                pitch, pc, dt, ref, w_lo, w_hi, orient, accept_step,
                 (0,) * first,
-                r,
-                row,
-                col,
-                state,
-                ce,
-                trace_rows,
+                r, row, col, state, ce, trace_rows,
             )
         else:
             ce = np.full(n, first, np.int64)
@@ -563,21 +457,7 @@ def solve_exact(
                     fm.args(),
                     p.focal,
                     p.offset,
-                    pitch,
-                    pc,
-                    dt,
-                    ref,
-                    w_lo,
-                    w_hi,
-                    orient,
-                    accept_step,
-                    k,
-                    r,
-                    row,
-                    col,
-                    state,
-                    ce,
-                    trace_rows,
+                    pitch, pc, dt, ref, w_lo, w_hi, orient, accept_step, k, r, row, col, state, ce, trace_rows,
                 )
             else:
                 rr = np.minimum(np.maximum(r[idx], w_lo), w_hi)
@@ -621,21 +501,9 @@ def solve_exact(
                 fm is not None,
                 p.focal,
                 p.offset,
-                pitch,
-                pc,
-                dt,
-                ref,
-                w_lo,
-                w_hi,
-                orient,
-                tol,
-                accept_step,
+                pitch, pc, dt, ref, w_lo, w_hi, orient, tol, accept_step,
                 int(max_iter),
-                r2,
-                c2,
-                s2,
-                ce2,
-                sub_trace,
+                r2, c2, s2, ce2, sub_trace,
             )
         else:
             r2, c2, s2, ce2 = _solve_exact_np(

@@ -232,16 +232,10 @@ class CollinearityParams:
             return np.ascontiguousarray(c if c.size else np.zeros(1))
 
         return FixedModel(
-            P,
-            V,
-            A,
-            AR,
+            P, V, A, AR,
             self.sc0,
             (0,) * (n_jit + 1),
-            jp,
-            jt,
-            js,
-            jc,
+            jp, jt, js, jc,
             float(jt[0]),
             1.0 / self.line_period,
             (0,) * (self.distortion.size + 1),

@@ -26,17 +26,7 @@ def _residual_nb(
             ground[i, 1],
             ground[i, 2],
             t[i],
-            pos,
-            dpos,
-            att,
-            datt,
-            jit,
-            focal,
-            offset,
-            curv,
-            dist,
-            sc0,
-            fast,
+            pos, dpos, att, datt, jit, focal, offset, curv, dist, sc0, fast,
         )
         g_out[i] = g
         gt_out[i] = gt

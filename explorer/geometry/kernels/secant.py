@@ -15,29 +15,8 @@ from explorer.geometry.kernels.residual import _use_numba
 # --------------------------------------------------------------------------- usgscsm secant solver
 @njit(parallel=True, fastmath=False, cache=True)
 def _solve_secant_nb(
-    ground,
-    proj,
-    gx,
-    fx,
-    use_fixed,
-    f_lo,
-    f_hi,
-    focal,
-    offset,
-    pitch,
-    pc,
-    line_period,
-    ref_row,
-    r_min,
-    r_max,
-    precision,
-    first_step,
-    max_count,
-    row_out,
-    col_out,
-    ok_out,
-    ce_out,
-    trace,
+    ground, proj, gx, fx, use_fixed, f_lo, f_hi, focal, offset, pitch, pc, line_period, ref_row, r_min, r_max,
+    precision, first_step, max_count, row_out, col_out, ok_out, ce_out, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx
@@ -77,27 +56,7 @@ def _solve_secant_nb(
             t = (rowq - ref_row) * line_period
             if use_fixed and f_lo <= rowq <= f_hi:
                 e, _, yd, _, vz = _ce_fixed(
-                    X,
-                    Y,
-                    Z,
-                    t,
-                    P,
-                    V,
-                    A,
-                    AR,
-                    sc0f,
-                    jn,
-                    jp,
-                    jt,
-                    js,
-                    jc,
-                    jt0,
-                    jinv_dt,
-                    dn,
-                    fdist,
-                    cn,
-                    fcurv,
-                    focal,
+                    X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal,
                     offset,
                 )
             else:
@@ -166,16 +125,7 @@ def _solve_secant_np(
     ground,
     proj,
     p: CollinearityParams,
-    fm,
-    f_lo,
-    f_hi,
-    fast,
-    r_min,
-    r_max,
-    precision,
-    first_step,
-    max_count,
-    trace_rows,
+    fm, f_lo, f_hi, fast, r_min, r_max, precision, first_step, max_count, trace_rows,
 ):
     """Vectorised numpy twin of :func:`_solve_secant_nb` (same iteration, same decisions)."""
     n = ground.shape[0]
@@ -308,23 +258,11 @@ def solve_secant(
             float(precision),
             float(first_step),
             int(max_count),
-            row,
-            col,
-            ok,
-            ce,
-            trace_rows,
+            row, col, ok, ce, trace_rows,
         )
     else:
         row, col, ok, ce = _solve_secant_np(
-            ground,
-            proj,
-            p,
-            fm,
-            f_lo,
-            f_hi,
-            fast,
-            r_min,
-            r_max,
+            ground, proj, p, fm, f_lo, f_hi, fast, r_min, r_max,
             float(precision),
             float(first_step),
             int(max_count),
