@@ -311,8 +311,16 @@ class CsmCamera:
                          self.pointing_times,
                          self.pointing_quaternions, qpw, qpd, self.pointing_constant, self.body_times,
                          self.body_quaternions, qbw, qbd, self.body_constant,
-                         1 if self.attitude_interpolation == "lagrange" else 0, bool(self.position_in_j2000))
+                         1 if self.attitude_interpolation == "lagrange" else 0, bool(self.position_in_j2000),
+                         self._is_simple())
         return self._ext
+
+    def _is_simple(self) -> bool:
+        """Identity body rotation and constant rotations with body-fixed positions (the usgscsm state)."""
+        ident = np.eye(3)
+        return bool(not self.position_in_j2000 and self.body_times.size == 1
+                    and np.array_equal(self.body_quaternions[0], [1.0, 0.0, 0.0, 0.0])
+                    and np.array_equal(self.body_constant, ident) and np.array_equal(self.pointing_constant, ident))
 
     def _all_args(self) -> tuple:
         return (self._cam, *self._tables(), self._exterior_args(), int(self.distortion_model),

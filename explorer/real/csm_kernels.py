@@ -238,18 +238,23 @@ def _exterior(t, ext):
     """Allocation-free exterior: centre ``(s0, s1, s2)`` and camera -> body rotation (row-major 9-tuple).
 
     ``ext`` = ``(pos_t, pos - pos_ref, pos_ref, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb,
-    qb_win, qb_den, cb, att_mode, rotate_position)`` (:meth:`explorer.real.csm.CsmCamera._exterior_args`):
+    qb_win, qb_den, cb, att_mode, rotate_position, simple)`` (:meth:`explorer.real.csm.CsmCamera._exterior_args`;
+    ``simple``: identity body and constant rotations, positions body-fixed):
     the positions are interpolated as offsets from a reference point (the weights sum to one), which keeps
     the round-off of the weighted sum at the offsets' scale instead of the body radius.
     """
     pos_t, pos, pos_ref, pos_win, pos_den, qp_t, qp, qp_win, qp_den, cp, qb_t, qb, qb_win, qb_den, cb, att_mode, \
-        rotate_position = ext
+        rotate_position, simple = ext
     p0, p1, p2 = _lagrange3(pos_t, pos, pos_win, pos_den, t)
     p0, p1, p2 = p0 + pos_ref[0], p1 + pos_ref[1], p2 + pos_ref[2]
+    w, x, y, z = _quat(qp_t, qp, qp_win, qp_den, t, att_mode)
+    if simple:  # identity body rotation and constant rotations (usgscsm state): M = P^T
+        pm = _qmat(w, x, y, z)
+        m = (pm[0], pm[3], pm[6], pm[1], pm[4], pm[7], pm[2], pm[5], pm[8])
+        return p0, p1, p2, m
+    pm = _const_times(cp, _qmat(w, x, y, z))
     w, x, y, z = _quat(qb_t, qb, qb_win, qb_den, t, att_mode)
     b = _const_times(cb, _qmat(w, x, y, z))
-    w, x, y, z = _quat(qp_t, qp, qp_win, qp_den, t, att_mode)
-    pm = _const_times(cp, _qmat(w, x, y, z))
     m = (b[0] * pm[0] + b[1] * pm[1] + b[2] * pm[2], b[0] * pm[3] + b[1] * pm[4] + b[2] * pm[5],
          b[0] * pm[6] + b[1] * pm[7] + b[2] * pm[8], b[3] * pm[0] + b[4] * pm[1] + b[5] * pm[2],
          b[3] * pm[3] + b[4] * pm[4] + b[5] * pm[5], b[3] * pm[6] + b[4] * pm[7] + b[5] * pm[8],
