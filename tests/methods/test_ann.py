@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from explorer.methods import available, create
-from explorer.methods.ann import ANNMethod
 from explorer.points import simulate_points
 from tests.methods.cases import check_affine_plus_correction, fitted, scps_for
 from tests.methods.cases import scene_for as _scene
@@ -43,11 +42,13 @@ def test_stages_in_trace():
     assert np.abs(r - check.row).max() < err_a.max()
 
 
-def test_too_few_scops_raise():
+@pytest.mark.parametrize("name", ["ann", "ogp"])
+def test_too_few_scops_raise(name):
+    """Both three-stage methods (affine stage + error model) refuse fewer SCOPs than the affine stage needs."""
     s = _scene("WSU")
     few = simulate_points(s, 4, kind="scop")
     with pytest.raises(ValueError, match="too few for the affine stage"):
-        ANNMethod(s).fit(few.subset(np.arange(3)))
+        create(name, s).fit(few.subset(np.arange(3)))
 
 
 def test_registered_as_learned():

@@ -59,13 +59,6 @@ def test_same_seed_same_terms():
     np.testing.assert_array_equal(a.ground_to_image(g).row, b.ground_to_image(g).row)
 
 
-def test_too_few_scops_raise():
-    s = _scene("WSU")
-    few = simulate_points(s, 4, kind="scop")
-    with pytest.raises(ValueError, match="too few for the affine stage"):
-        OGPMethod(s).fit(few.subset(np.arange(3)))
-
-
 def test_bad_degree_raises():
     s = _scene("WSU")
     with pytest.raises(ValueError, match="max_degree"):
