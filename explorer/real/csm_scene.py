@@ -38,7 +38,7 @@ from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain
-from explorer.real.csm import CsmCamera, read_isd
+from explorer.real.csm_camera import CsmCamera, read_isd
 from explorer.scene import Scene
 
 __all__ = ["body_fixed_to_enu", "enu_to_body_fixed", "scene_from_camera", "scene_from_isd"]

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from explorer.methods import create
-from explorer.real.csm import read_isd
-from explorer.real.csm_scene import body_fixed_to_enu, enu_to_body_fixed, scene_from_isd
+from explorer.real.csm import body_fixed_to_enu, enu_to_body_fixed, read_isd, scene_from_isd
 from explorer.scene import Scene
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "usgscsm"
