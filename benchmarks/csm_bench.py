@@ -1,6 +1,6 @@
 """Every registered best-scanline method on a USGS CSM line-scan camera (default: the MRO CTX ISD).
 
-Builds the project's scene from the ISD (``explorer.real.csm_scene.scene_from_isd``, the same as
+Builds the project's scene from the ISD (``explorer.real.csm.scene_from_isd``, the same as
 ``pushbroom scene from-isd``), writes it (``--scene-out``), and runs the bench protocol of
 ``pushbroom bench`` on it (``explorer.bench.bench_scene``: SCPs simulated from the scene, learned
 methods fitted on SCOPs) -- the bench CLI takes presets and RPC files, this script takes an ISD.
@@ -34,7 +34,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from explorer.bench import bench_scene, format_table, parse_counts, resolve_methods
-    from explorer.real.csm_scene import scene_from_isd
+    from explorer.real.csm import scene_from_isd
 
     scene = scene_from_isd(args.isd)
     print(f"scene {scene.name}: {scene.shape}, MPC fit to the CSM camera: {scene.metadata['csm_fit']}")

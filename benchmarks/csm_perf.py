@@ -7,7 +7,7 @@ Measures, on this machine and in the same run:
   per second, residual evaluations per point and the round-trip error (pixels);
 * ``CsmCamera.image_to_ground`` on the same points;
 * the project's ``exact`` and ``csm-secant`` methods on the MPC scene converted from the same ISD
-  (``explorer.real.csm_scene.scene_from_isd``), the peer measured alongside (same points mapped
+  (``explorer.real.csm.scene_from_isd``), the peer measured alongside (same points mapped
   into the scene's frame; their accuracy is against the MPC scene, not the CSM camera).
 
 Best of ``--repeat`` runs after a warm-up (numba compilation is cached on disk): wall time and process
@@ -90,7 +90,7 @@ def main() -> None:
     }
     if not args.no_methods:
         from explorer.methods import create
-        from explorer.real.csm_scene import body_fixed_to_enu, scene_from_camera
+        from explorer.real.csm import body_fixed_to_enu, scene_from_camera
 
         scene = scene_from_camera(cam, n_check=0)
         enu = body_fixed_to_enu(scene, ground)
