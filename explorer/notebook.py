@@ -379,6 +379,33 @@ class ResidualPanel:
             parts += [f"<span style='color:#b00'>{n}: {e}</span>" for n, e in self.errors.items()]
             self.status.value = "<br>".join(parts) or "no method selected"
 
+    def scene_view(self, method: str | None = None, **kwargs: Any) -> SceneView:
+        """The current scene in 3D: SCPs coloured by ``method``'s residual, SCOPs, and the ray and
+        search trace of that method's worst SCP (as the explorer's *worst SCP* selection).
+
+        Parameters
+        ----------
+        method : str, optional
+            One of the evaluated methods; default the first.
+        **kwargs
+            Passed to :func:`scene_view` (``sensor_distance``, ``height``, ...).
+        """
+        if not self.evaluations:
+            raise InputError("no method evaluated: nothing to colour the points by")
+        name = method or next(iter(self.evaluations))
+        if name not in self.evaluations:
+            raise InputError(f"method {name!r} is not evaluated here; evaluated: {', '.join(self.evaluations)}")
+        ev = self.evaluations[name]
+        residual = np.full(len(self.check), np.nan)
+        residual[np.asarray(ev.evaluated_index)] = ev.residual_row
+        worst = int(np.nanargmax(np.abs(residual))) if np.isfinite(residual).any() else len(self.check) // 2
+        fitted = create(name, self.scene)
+        if fitted.needs_fit:
+            fitted.fit(self.control)
+        kwargs.setdefault("limit_px", self.state().limit_px)
+        return scene_view(self.scene, point=(float(self.check.row[worst]), float(self.check.col[worst])),
+                          method=fitted, check=self.check, residual_px=residual, control=self.control, **kwargs)
+
     # --------------------------------------------------------------- display
     @property
     def widget(self):

@@ -144,6 +144,13 @@ for name, ev in panel.evaluations.items():
 assert panel.evaluations["prm"].rmse_px < panel.evaluations["lrm"].rmse_px
 
 # %% [markdown]
+# The panel's current state in 3D: SCPs coloured by the `lrm` residual on the same scale, the SCOPs
+# (gold), and the ray of the SCP where `lrm` errs most.
+
+# %%
+panel.scene_view("lrm")
+
+# %% [markdown]
 # ## Exercises
 # 1. Add relief (`build_scene("WSU", relief_m=1500)`) and SCOPs on the DEM. What happens to a
 #    model that uses (X, Y) only? Show with the affine formula above why $Z$ must enter the model.

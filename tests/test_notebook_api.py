@@ -100,6 +100,16 @@ def test_colour_limit_and_method_controls(panel):
     assert set(map_traces(panel.figure)) == {"prm"}
 
 
+def test_panel_scene_view_traces_the_worst_point(panel):
+    view = panel.scene_view("prm")
+    ev = panel.evaluations["prm"]
+    worst = int(np.asarray(ev.evaluated_index)[np.nanargmax(np.abs(ev.residual_row))])
+    assert view.best_row == panel.check.row[worst]
+    assert {"/points/scps", "/points/scops", "/selected/ray"} <= set(view.nodes)
+    with pytest.raises(InputError, match="not evaluated"):
+        panel.scene_view("nr")
+
+
 def test_panel_displays_a_widget_with_a_static_copy(panel):
     bundle = panel._repr_mimebundle_()
     assert "application/vnd.jupyter.widget-view+json" in bundle
