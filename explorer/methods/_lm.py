@@ -175,6 +175,17 @@ def check_split_sizes(name: str, n: int, n_train: int, n_val: int, n_features: i
 # ----------------------------------------------------------------------- network
 
 
+def dense_layers(theta: torch.Tensor, shapes: Sequence[tuple[int, int]]) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """Weights ``W (out, in)`` and biases ``b (out,)`` of consecutive dense layers, viewed from one flat
+    parameter vector laid out layer by layer as ``W`` row-major then ``b`` (the layout of every network
+    trained by :func:`lm_minimise`)."""
+    layers, pos = [], 0
+    for o, i in shapes:
+        layers.append((theta[pos:pos + o * i].reshape(o, i), theta[pos + o * i:pos + o * i + o]))
+        pos += o * i + o
+    return layers
+
+
 class SigmoidMLP:
     """Fully connected network: logistic-sigmoid hidden layers, one linear output.
 
@@ -221,13 +232,8 @@ class SigmoidMLP:
     def forward(self, theta: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """Network output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)."""
         h = x
-        pos = 0
         last = len(self.shapes) - 1
-        for k, (o, i) in enumerate(self.shapes):
-            w = theta[pos:pos + o * i].reshape(o, i)
-            pos += o * i
-            b = theta[pos:pos + o]
-            pos += o
+        for k, (w, b) in enumerate(dense_layers(theta, self.shapes)):
             h = h @ w.T + b
             if k < last:
                 h = torch.sigmoid(h)

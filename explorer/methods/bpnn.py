@@ -40,7 +40,7 @@ import numpy as np
 
 from explorer import _log
 from explorer.errors import InputError, NotFittedError, check_finite
-from explorer.methods._lm import lm_minimise, torch, torch_threads
+from explorer.methods._lm import dense_layers, lm_minimise, torch, torch_threads
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -157,14 +157,9 @@ class MLPRegressor:
 
     def _forward(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Normalised inputs (N, d_in) -> normalised outputs (N, d_out) for a flat parameter vector."""
-        k = 0
         h = u
         last = len(self._shapes) - 1
-        for layer, (o, i) in enumerate(self._shapes):
-            w = theta[k:k + o * i].reshape(o, i)
-            k += o * i
-            b = theta[k:k + o]
-            k += o
+        for layer, (w, b) in enumerate(dense_layers(theta, self._shapes)):
             h = h @ w.T + b
             if layer < last:
                 h = self._act(h)
@@ -177,14 +172,9 @@ class MLPRegressor:
         these tiny networks).
         """
         weights, acts, derivs = [], [u], []
-        k = 0
         h = u
         last = len(self._shapes) - 1
-        for layer, (o, i) in enumerate(self._shapes):
-            w = theta[k:k + o * i].reshape(o, i)
-            k += o * i
-            b = theta[k:k + o]
-            k += o
+        for layer, (w, b) in enumerate(dense_layers(theta, self._shapes)):
             weights.append(w)
             z = h @ w.T + b
             if layer < last:
@@ -218,13 +208,10 @@ class MLPRegressor:
         linear least-squares solution; starting there instead of at random saves most of the
         early Levenberg-Marquardt iterations.
         """
-        k = 0
         h = u
-        for o, i in self._shapes[:-1]:
-            w = theta[k:k + o * i].reshape(o, i)
-            k += o * i
-            h = self._act(h @ w.T + theta[k:k + o])
-            k += o
+        for w, b in dense_layers(theta, self._shapes[:-1]):
+            h = self._act(h @ w.T + b)
+        k = sum(o * i + o for o, i in self._shapes[:-1])  # where the output layer starts
         design = torch.cat([h, torch.ones((h.shape[0], 1), dtype=torch.float64)], dim=1)
         sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1, 2)
         o, i = self._shapes[-1]
