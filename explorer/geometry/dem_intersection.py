@@ -438,6 +438,7 @@ else:  # pragma: no cover - numba missing: the same code, interpreted (slow, sam
     _rays_loop = _rays_loop_py
 
 first_hit = _first_hit
+cell_hit = _cell_hit
 
 
 def intersect_segments(

@@ -39,7 +39,7 @@ import numpy as np
 from explorer._numba import NUMBA_AVAILABLE, njit, prange
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
-from explorer.geometry.dem_intersection import NOT_CONVERGED, OK, HeightGrid
+from explorer.geometry.dem_intersection import NO_INTERSECTION, NODATA, NOT_CONVERGED, OK, HeightGrid
 from explorer.rpc._kernels import horner_rpc00b
 
 if TYPE_CHECKING:
@@ -147,25 +147,78 @@ def _inverse_guess_py(iv0, iv1, cn, rn, zn):
     return x, y, x_r, x_c, y_r, y_c, x_z, y_z
 
 
+def _correction_py(corr, cg, cn, rn, zn):
+    """Residual of the fitted polynomial, interpolated in its grid: bilinear in (col_n, row_n), linear in z.
+
+    ``corr`` has shape (n_r - 1, n_c - 1, 16): per cell, for the longitude then the latitude, for the lower then
+    the upper height, the corners (0, 0), (0, 1), (1, 0), (1, 1) -- contiguous, so one cell is two cache
+    lines.  ``cg`` = (c0, r0, z0, dc, dr, dz).  Outside the grid the nearest cell is used (clamped).
+    """
+    n_r = corr.shape[0]
+    n_c = corr.shape[1]
+    fu = (cn - cg[0]) / cg[3]
+    fv = (rn - cg[1]) / cg[4]
+    w = (zn - cg[2]) / cg[5]
+    fu = fu if fu >= 0.0 else 0.0
+    fu = fu if fu <= n_c else float(n_c)
+    fv = fv if fv >= 0.0 else 0.0
+    fv = fv if fv <= n_r else float(n_r)
+    j = min(int(fu), n_c - 1)
+    i = min(int(fv), n_r - 1)
+    a = fu - j
+    b = fv - i
+    w00 = (1.0 - a) * (1.0 - b)
+    w01 = a * (1.0 - b)
+    w10 = (1.0 - a) * b
+    w11 = a * b
+    c = corr[i, j]
+    lon_lo = w00 * c[0] + w01 * c[1] + w10 * c[2] + w11 * c[3]
+    lon_hi = w00 * c[4] + w01 * c[5] + w10 * c[6] + w11 * c[7]
+    lat_lo = w00 * c[8] + w01 * c[9] + w10 * c[10] + w11 * c[11]
+    lat_hi = w00 * c[12] + w01 * c[13] + w10 * c[14] + w11 * c[15]
+    return lon_lo + w * (lon_hi - lon_lo), lat_lo + w * (lat_hi - lat_lo)
+
+
+def _correction_cells(residual: np.ndarray) -> np.ndarray:
+    """(2, 2, n_r, n_c) node residuals (component, height layer) -> (n_r - 1, n_c - 1, 16) per-cell blocks."""
+    n_r, n_c = residual.shape[2:]
+    cells = np.empty((n_r - 1, n_c - 1, 16))
+    for comp in range(2):
+        for layer in range(2):
+            grid = residual[comp, layer]
+            base = 8 * comp + 4 * layer
+            cells[:, :, base] = grid[:-1, :-1]
+            cells[:, :, base + 1] = grid[:-1, 1:]
+            cells[:, :, base + 2] = grid[1:, :-1]
+            cells[:, :, base + 3] = grid[1:, 1:]
+    return np.ascontiguousarray(cells)
+
+
 #: Points per block of the compiled loops: each block runs branch-free passes over its points (which LLVM
 #: vectorises), then the scalar walk and the scalar fallback for the few points the passes did not settle.
 BLOCK = 512
 
+#: Nodes per side of the correction grid of the fitted polynomial.
+CORRECTION_NODES = 65
+
 #: Branch-free refinement passes before the verification pass.
-PASSES = 2
+PASSES = 1
 
 
-def _solve_point_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, rn, cn, zn, tol_px, max_iter):
+def _solve_point_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, rn, cn, zn, tol_px, max_iter):
     """Scalar fallback for one point at a fixed normalised height: ``(x, y, converged)``."""
     row_sc = norm[7]
     col_sc = norm[9]
     x, y, m_xr, m_xc, m_yr, m_yc, _xz, _yz = _inverse_guess(iv0, iv1, cn, rn, zn)
+    cx, cy = _correction(corr, cg, cn, rn, zn)
+    x += cx
+    y += cy
     prev = math.inf
     for _it in range(max_iter):
         rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
         er = rn - rr
         ec = cn - cc
-        err = math.hypot(er * row_sc, ec * col_sc)
+        err = math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
         if not (err < 1e300):
             return x, y, False
         if err <= tol_px:
@@ -178,7 +231,7 @@ def _solve_point_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, rn, cn, zn, tol_px, max_
     return x, y, False
 
 
-def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
+def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
                         flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     n = row.shape[0]
@@ -195,8 +248,9 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, row, col, h, tol_px,
             cn = (col[i0 + k] - col_off) / col_sc
             zn = (h[i0 + k] - h_off) / h_sc
             xg, yg, a, bb, c, d, _e, _f = _inverse_guess(iv0, iv1, cn, rn, zn)
-            x[k] = xg
-            y[k] = yg
+            cx, cy = _correction(corr, cg, cn, rn, zn)
+            x[k] = xg + cx
+            y[k] = yg + cy
             scratch[0, k] = a
             scratch[1, k] = bb
             scratch[2, k] = c
@@ -216,14 +270,14 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, row, col, h, tol_px,
             cn = (col[i0 + k] - col_off) / col_sc
             zn = (h[i0 + k] - h_off) / h_sc
             rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], zn)
-            err = math.hypot((rn - rr) * row_sc, (cn - cc) * col_sc)
+            err = math.sqrt(((rn - rr) * row_sc) ** 2 + ((cn - cc) * col_sc) ** 2)
             flag_out[i0 + k] = OK if err <= tol_px else NOT_CONVERGED
         for k in range(m):  # scalar fallback, then degrees
             if flag_out[i0 + k] != OK:
                 rn = (row[i0 + k] - row_off) / row_sc
                 cn = (col[i0 + k] - col_off) / col_sc
                 zn = (h[i0 + k] - h_off) / h_sc
-                xs, ys, conv = _solve_point(fw0, fw1, fw2, fw3, iv0, iv1, norm, rn, cn, zn, tol_px, max_iter)
+                xs, ys, conv = _solve_point(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, rn, cn, zn, tol_px, max_iter)
                 if conv:
                     x[k] = xs
                     y[k] = ys
@@ -242,7 +296,7 @@ def _clamp_index_py(u, top):
     return int(uc)
 
 
-def _dem_refine_point_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, ux, u0, vy, v0, rn, cn, zn, tol_px, tol_m,
+def _dem_refine_point_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, ux, u0, vy, v0, rn, cn, zn, tol_px, tol_m,
                          max_iter):
     """Scalar refinement of one point from a height on its line of sight: ``(x, y, zn, flag)``."""
     h_off = norm[4]
@@ -250,12 +304,15 @@ def _dem_refine_point_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, ux, u0, vy, v0
     row_sc = norm[7]
     col_sc = norm[9]
     x, y, m_xr, m_xc, m_yr, m_yc, x_z, y_z = _inverse_guess(iv0, iv1, cn, rn, zn)
+    cx, cy = _correction(corr, cg, cn, rn, zn)
+    x += cx
+    y += cy
     prev = math.inf
     for _it in range(max_iter):
         rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
         er = rn - rr
         ec = cn - cc
-        err = math.hypot(er * row_sc, ec * col_sc)
+        err = math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
         hd, hu, hv, fl = _bilinear(hgt, ux * x + u0, vy * y + v0)
         if fl != OK:
             return x, y, zn, fl
@@ -282,8 +339,8 @@ def _dem_refine_point_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, ux, u0, vy, v0
     return x, y, zn, NOT_CONVERGED
 
 
-def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, tile_max, gx0, gy0, gdx, gdy, z_top, z_bot, row, col,
-                   tol_px, tol_m, max_iter, lon_out, lat_out, h_out, flag_out):
+def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, gx0, gy0, gdx, gdy, z_top, z_bot,
+                   row, col, tol_px, tol_m, max_iter, lon_out, lat_out, h_out, flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     zn_top = (z_top - h_off) / h_sc
     zn_bot = (z_bot - h_off) / h_sc
@@ -294,37 +351,51 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, tile_max, gx0, gy0, 
     v0 = (lat_off - gy0) / gdy
     top_j = hgt.shape[1] - 2.0
     top_i = hgt.shape[0] - 2.0
+    n_cj = hgt.shape[1] - 2
+    n_ci = hgt.shape[0] - 2
+    zn_mid = 0.5 * (zn_top + zn_bot)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in prange(n_blocks):
         i0 = b * BLOCK
         i1 = min(n, i0 + BLOCK)
         m = i1 - i0
-        sc = np.empty((10, m))
+        sc = np.empty((14, m))
         x = lon_out[i0:i1]
         y = lat_out[i0:i1]
         zn = h_out[i0:i1]
-        for k in range(m):  # the chord: line of sight at the top and bottom heights (vectorised)
+        for k in range(m):  # the chord: the polynomial's line of sight at the top and bottom heights (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
-            xt = _horner(iv0, cn, rn, zn_top)
-            yt = _horner(iv1, cn, rn, zn_top)
-            xb = _horner(iv0, cn, rn, zn_bot)
-            yb = _horner(iv1, cn, rn, zn_bot)
-            sc[0, k] = ux * xt + u0
-            sc[1, k] = vy * yt + v0
-            sc[2, k] = ux * xb + u0
-            sc[3, k] = vy * yb + v0
-        for k in range(m):  # the walk (scalar)
-            s, fl = _first_hit(hgt, tile_max, sc[0, k], sc[1, k], z_top, sc[2, k], sc[3, k], z_bot)
+            sc[10, k] = ux * _horner(iv0, cn, rn, zn_top) + u0
+            sc[11, k] = vy * _horner(iv1, cn, rn, zn_top) + v0
+            sc[12, k] = ux * _horner(iv0, cn, rn, zn_bot) + u0
+            sc[13, k] = vy * _horner(iv1, cn, rn, zn_bot) + v0
+        for k in range(m):  # the walk (scalar; one cell without the traversal when the chord stays in it)
+            ua = sc[10, k]
+            va = sc[11, k]
+            ub = sc[12, k]
+            vb = sc[13, k]
+            fl = -1
+            s = 0.0
+            if ua >= 0.0 and va >= 0.0 and ub >= 0.0 and vb >= 0.0 and ua <= top_j + 1.0 and ub <= top_j + 1.0 \
+                    and va <= top_i + 1.0 and vb <= top_i + 1.0:
+                j = min(int(ua), n_cj)
+                i = min(int(va), n_ci)
+                if j == min(int(ub), n_cj) and i == min(int(vb), n_ci):
+                    s = _cell_hit(hgt, i, j, ua, va, z_top, ub - ua, vb - va, z_bot - z_top, 0.0, 1.0)
+                    fl = NODATA if s == -2.0 else (OK if s >= 0.0 else NO_INTERSECTION)
+            if fl == -1:
+                s, fl = _first_hit(hgt, tile_max, ua, va, z_top, ub, vb, z_bot)
             flag_out[i0 + k] = fl
-            zn[k] = zn_top + s * (zn_bot - zn_top) if fl == OK else zn_top
+            zn[k] = zn_top + s * (zn_bot - zn_top) if fl == OK else zn_mid
         for k in range(m):  # start on the line of sight at the hit height (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
             xg, yg, a, bb, c, d, e, f = _inverse_guess(iv0, iv1, cn, rn, zn[k])
-            x[k] = xg
-            y[k] = yg
+            cx, cy = _correction(corr, cg, cn, rn, zn[k])
+            x[k] = xg + cx
+            y[k] = yg + cy
             sc[0, k] = a
             sc[1, k] = bb
             sc[2, k] = c
@@ -332,14 +403,15 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, tile_max, gx0, gy0, 
             sc[4, k] = e
             sc[5, k] = f
             sc[6, k] = zn[k]
-        for _p in range(PASSES + 1):  # pixel + height Newton passes, then the verification (vectorised)
+        for _p in range(PASSES + 1):  # pixel + height Newton passes, then the verification
             last = _p == PASSES
-            for k in range(m):
-                rn = (row[i0 + k] - row_off) / row_sc
-                cn = (col[i0 + k] - col_off) / col_sc
+            for k in range(m):  # the forward RPC alone (vectorised; no gathers in this loop)
                 rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], zn[k])
-                er = rn - rr
-                ec = cn - cc
+                sc[8, k] = (row[i0 + k] - row_off) / row_sc - rr
+                sc[9, k] = (col[i0 + k] - col_off) / col_sc - cc
+            for k in range(m):  # the DEM under the point and the update
+                er = sc[8, k]
+                ec = sc[9, k]
                 u = ux * x[k] + u0
                 v = vy * y[k] + v0
                 j = _clamp_index(u, top_j)
@@ -355,9 +427,9 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, tile_max, gx0, gy0, 
                 r = h00 - h01 - h10 + h11
                 g = zn[k] * h_sc + h_off - (h00 + p * a + q * bb + r * a * bb)
                 if last:
-                    err = math.hypot(er * row_sc, ec * col_sc)
+                    err2 = (er * row_sc) ** 2 + (ec * col_sc) ** 2
                     inside = (u >= 0.0) & (u <= top_j + 1.0) & (v >= 0.0) & (v <= top_i + 1.0)
-                    good = (err <= tol_px) & (abs(g) <= tol_m) & inside
+                    good = (err2 <= tol_px * tol_px) & (abs(g) <= tol_m) & inside
                     sc[7, k] = 1.0 if good else 0.0
                 else:
                     hu = p + r * bb
@@ -373,8 +445,8 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, tile_max, gx0, gy0, 
             if flag_out[i0 + k] == OK and sc[7, k] == 0.0:
                 rn = (row[i0 + k] - row_off) / row_sc
                 cn = (col[i0 + k] - col_off) / col_sc
-                xs, ys, zs, fl = _dem_refine_point(fw0, fw1, fw2, fw3, iv0, iv1, norm, hgt, ux, u0, vy, v0, rn, cn,
-                                                   sc[6, k], tol_px, tol_m, max_iter)
+                xs, ys, zs, fl = _dem_refine_point(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, ux, u0, vy, v0,
+                                                   rn, cn, sc[6, k], tol_px, tol_m, max_iter)
                 x[k] = xs
                 y[k] = ys
                 zn[k] = zs
@@ -396,6 +468,7 @@ if NUMBA_AVAILABLE:
     _forward = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_forward_py)
     _exact_inverse_jacobian = njit(cache=True, fastmath=False, error_model="numpy")(_exact_inverse_jacobian_py)
     _inverse_guess = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_inverse_guess_py)
+    _correction = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_py)
     _solve_point = njit(cache=True, fastmath=False, error_model="numpy")(_solve_point_py)
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
     _dem_refine_point = njit(cache=True, fastmath=False, error_model="numpy")(_dem_refine_point_py)
@@ -407,6 +480,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _forward = _forward_py
     _exact_inverse_jacobian = _exact_inverse_jacobian_py
     _inverse_guess = _inverse_guess_py
+    _correction = _correction_py
     _solve_point = _solve_point_py
     _clamp_index = _clamp_index_py
     _dem_refine_point = _dem_refine_point_py
@@ -414,6 +488,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _dem_blocks = _dem_blocks_py
 _first_hit = _dem.first_hit
 _bilinear = _dem.bilinear
+_cell_hit = _dem.cell_hit
 
 
 def _tuples(array: np.ndarray) -> tuple[tuple[float, ...], ...]:
@@ -437,7 +512,13 @@ class RPCInverse:
     h_min, h_max : float
         Height range of the fit, metres.
     guess_error_px : float
-        The polynomial's largest error on the validation grid, pixels.
+        The polynomial's largest error on the validation grid, pixels (before the correction grid).
+    correction : ndarray, shape (n_r - 1, n_c - 1, 16)
+        The polynomial's residual (normalised lon, lat; exact inverse minus polynomial) at the nodes of a
+        regular grid of normalised column and row at the lowest and highest height, stored per cell
+        (see :func:`_correction_py`), interpolated and added to the guess.
+    correction_grid : tuple of 6 float
+        c0, r0, z0 (first node) and dc, dr, dz (spacing) of that grid, normalised units.
     """
 
     forward: tuple
@@ -446,6 +527,8 @@ class RPCInverse:
     h_min: float
     h_max: float
     guess_error_px: float
+    correction: np.ndarray
+    correction_grid: tuple[float, ...]
 
     @classmethod
     def for_model(cls, rpc: RationalFunctionModel, h_min: float | None = None,
@@ -468,8 +551,34 @@ class RPCInverse:
                     rpc.height_scale, rpc.row_offset, rpc.row_scale, rpc.col_offset, rpc.col_scale)
             if len(cache) > 8:
                 cache.clear()
-            cache[key] = cls(_tuples(forward), _tuples(coefficients), tuple(float(v) for v in norm),
-                             h_min, h_max, error)
+            # the correction grid over the image (normalised, 2% margin) and the height range
+            if rpc.image_size is not None:
+                rows, cols = rpc.image_size
+                r_ends = (np.array([-0.5, rows - 0.5]) - rpc.row_offset) / rpc.row_scale
+                c_ends = (np.array([-0.5, cols - 0.5]) - rpc.col_offset) / rpc.col_scale
+            else:
+                r_ends = c_ends = np.array([-1.0, 1.0])
+            n_grid, n_z = CORRECTION_NODES, 2
+            r_lo, r_hi = r_ends.min() - 0.02 * np.ptp(r_ends), r_ends.max() + 0.02 * np.ptp(r_ends)
+            c_lo, c_hi = c_ends.min() - 0.02 * np.ptp(c_ends), c_ends.max() + 0.02 * np.ptp(c_ends)
+            z_lo, z_hi = ((np.array([h_min, h_max]) - rpc.height_offset) / rpc.height_scale)
+            z_lo, z_hi = min(z_lo, z_hi), max(z_lo, z_hi)
+            grid = (c_lo, r_lo, z_lo, (c_hi - c_lo) / (n_grid - 1), (r_hi - r_lo) / (n_grid - 1),
+                    (z_hi - z_lo) / (n_z - 1))
+            grid = tuple(float(v) for v in grid)
+            first = cls(_tuples(forward), _tuples(coefficients), tuple(float(v) for v in norm), h_min, h_max, error,
+                        np.zeros((n_grid - 1, n_grid - 1, 16)), grid)
+            zz, rr, cc = np.meshgrid(np.linspace(z_lo, z_hi, n_z), np.linspace(r_lo, r_hi, n_grid),
+                                     np.linspace(c_lo, c_hi, n_grid), indexing="ij")
+            lon, lat, flags = first.localize(rr.ravel() * rpc.row_scale + rpc.row_offset,
+                                             cc.ravel() * rpc.col_scale + rpc.col_offset,
+                                             zz.ravel() * rpc.height_scale + rpc.height_offset)
+            a = _monomials(cc.ravel(), rr.ravel(), zz.ravel())
+            residual = np.stack([(lon - rpc.lon_offset) / rpc.lon_scale - a @ coefficients[0],
+                                 (lat - rpc.lat_offset) / rpc.lat_scale - a @ coefficients[1]])
+            residual[~np.isfinite(residual)] = 0.0
+            cache[key] = cls(first.forward, first.inverse, first.norm, h_min, h_max, error,
+                             _correction_cells(residual.reshape(2, n_z, n_grid, n_grid)), grid)
         return cache[key]
 
     def localize(self, row: np.ndarray, col: np.ndarray, h: np.ndarray, *, tol_px: float = 1e-9,
@@ -497,8 +606,8 @@ class RPCInverse:
         lon, lat, flag = np.empty(n), np.empty(n), np.empty(n, np.int8)
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
-            _localize_blocks(*self.forward, *self.inverse, self.norm, row[sl], col[sl], h[sl], float(tol_px),
-                             int(max_iter), lon[sl], lat[sl], flag[sl])
+            _localize_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, row[sl],
+                             col[sl], h[sl], float(tol_px), int(max_iter), lon[sl], lat[sl], flag[sl])
         return lon, lat, flag
 
     def on_dem(self, row: np.ndarray, col: np.ndarray, grid: HeightGrid, *, tol_px: float = 1e-9,
@@ -529,7 +638,7 @@ class RPCInverse:
         z_top, z_bot = grid.z_max + pad, grid.z_min - pad
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
-            _dem_blocks(*self.forward, *self.inverse, self.norm, grid.heights, grid.tile_max, grid.x0, grid.y0,
-                        grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl], float(tol_px), float(tol_m),
-                        int(max_iter), lon[sl], lat[sl], h[sl], flag[sl])
+            _dem_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
+                        grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl],
+                        float(tol_px), float(tol_m), int(max_iter), lon[sl], lat[sl], h[sl], flag[sl])
         return lon, lat, h, flag
