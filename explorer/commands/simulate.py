@@ -32,10 +32,10 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
 def scene_from_args(args: argparse.Namespace, preset: str | None = None) -> Scene:
     """Build the scene named by ``--scene`` or ``--preset`` and the perturbation options."""
     from explorer.presets import build_scene
-    from explorer.scene import Scene
+    from explorer.real.linescan import load_scene
 
     if getattr(args, "scene", None):
-        return Scene.load(args.scene)
+        return load_scene(args.scene)  # an MPC or a rigorous line-scan scene file
     return build_scene(
         preset or args.preset,
         relief_m=args.relief,
