@@ -24,13 +24,17 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from explorer._lazy import LazyModule
 from explorer.points import PointSet
 
-torch = LazyModule("torch")  # imported on first use (about 2 s)
+if TYPE_CHECKING:  # the real module for annotations
+    import torch
+else:
+    torch = LazyModule("torch")  # imported on first use (about 2 s)
 
 # ------------------------------------------------------------------- parameters
 
@@ -67,7 +71,7 @@ class FeatureScaler:
         scale = (hi - lo) / 2.0
         bad = ~(scale > 0)
         if bad.any():
-            which = [names[k] if names else str(k) for k in np.flatnonzero(bad)]
+            which = [names[int(k)] if names else str(k) for k in np.flatnonzero(bad)]
             raise ValueError(f"feature(s) {', '.join(which)} constant over the control points: cannot scale")
         return cls((hi + lo) / 2.0, scale)
 
@@ -298,7 +302,7 @@ class LMResult:
     final_objective: float = float("nan")
 
 
-def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor | None = None,
+def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor,
              weight_decay: float = 0.0) -> torch.Tensor:
     """Solve ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` (Cholesky, least squares if singular).
 

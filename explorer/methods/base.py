@@ -21,7 +21,7 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import NotFittedError, UnknownNameError, as_points
-from explorer.geometry.kernels import collinearity_params_or_none, columns_at_rows
+from explorer.geometry.kernels import CollinearityParams, collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -30,7 +30,6 @@ _REGISTRY: dict[str, type[BestScanlineMethod]] = {}
 _DISCOVERED = False
 #: Method modules that failed to import during :func:`discover`: module name -> error.
 DISCOVERY_ERRORS: dict[str, str] = {}
-_UNSET = object()
 
 
 @dataclass
@@ -102,7 +101,8 @@ class BestScanlineMethod(ABC):
         self.params = params
         self._fitted = not self.needs_fit
         self.fit_info: dict = {}
-        self._kernel_params = _UNSET
+        self._kernel_params: CollinearityParams | None = None
+        self._kernel_params_known = False  # packed on first use
 
     # ------------------------------------------------------------------ API
     def fit(self, control: PointSet) -> BestScanlineMethod:
@@ -171,8 +171,9 @@ class BestScanlineMethod(ABC):
     def _column_at_row(self, ground: np.ndarray, row: np.ndarray) -> np.ndarray:
         """Column (N,) of ground points at rows (N,) by the collinearity (NaN where the row is NaN):
         the compiled evaluator for MPC scenes, :meth:`Scene.column_at_row` otherwise."""
-        if self._kernel_params is _UNSET:
+        if not self._kernel_params_known:
             self._kernel_params = collinearity_params_or_none(self.scene)
+            self._kernel_params_known = True
         if self._kernel_params is not None:
             return columns_at_rows(self._kernel_params, ground, row)
         col = np.full(row.shape, np.nan)
@@ -194,11 +195,11 @@ def concatenate_results(parts: list[ScanlineResult]) -> ScanlineResult:
             info[key] = {k: sum(p.info[key][k] for p in parts) for k in value}
         else:
             info[key] = value
-    return ScanlineResult(
-        *(np.concatenate([getattr(p, f) for p in parts]) for f in ("row", "col", "converged", "inside",
-                                                                  "ce_evaluations")),
-        None, info,
-    )
+    def joined(field: str) -> np.ndarray:
+        return np.concatenate([getattr(p, field) for p in parts])
+
+    return ScanlineResult(joined("row"), joined("col"), joined("converged"), joined("inside"),
+                          joined("ce_evaluations"), None, info)
 
 
 def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:

@@ -68,7 +68,8 @@ class RPCSensor:
         if ground.ndim != 2 or ground.shape[1] != 3:
             raise InputError(f"ground must have shape (N, 3), got {ground.shape}")
         lon, lat, h = self.frame.enu_to_geodetic(ground)
-        return self.rpc.projection(lon, lat, h)
+        row, col = self.rpc.projection(lon, lat, h)[:2]
+        return row, col
 
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
@@ -77,19 +78,19 @@ class RPCSensor:
         (default :attr:`mean_height`); NaN rows where the RPC does not localise."""
         row = check_finite(np.atleast_1d(np.asarray(row, dtype=np.float64)), "row")
         col = check_finite(np.atleast_1d(np.asarray(col, dtype=np.float64)), "col")
-        z = self.mean_height if height is None else check_finite(height, "height")
+        z = self.mean_height if height is None else check_finite(np.asarray(height, dtype=np.float64), "height")
         row, col, z = np.broadcast_arrays(row, col, np.asarray(z, dtype=np.float64))
         h = z + self.frame.h0_m
         out = np.full(row.shape + (3,), np.nan)
         ok = np.ones(row.shape, dtype=bool)
         for _ in range(PLANE_ITERATIONS):
-            lon, lat, ok = self.rpc.localization(row, col, h)
+            lon, lat, ok = self.rpc.localization(row, col, h)[:3]
             out = self.frame.geodetic_to_enu(lon, lat, h)
             dz = np.where(ok, z - out[:, 2], 0.0)
             h = h + dz
             if not np.max(np.abs(dz), initial=0.0) > PLANE_TOL_M:
                 break
-        lon, lat, ok = self.rpc.localization(row, col, h)
+        lon, lat, ok = self.rpc.localization(row, col, h)[:3]
         out = self.frame.geodetic_to_enu(lon, lat, h)
         out[~ok] = np.nan
         return out

@@ -4,6 +4,8 @@ written for scalars (compiled by numba) and numpy arrays alike."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from explorer._numba import NUMBA_AVAILABLE, njit, overload
@@ -238,7 +240,7 @@ def _collinearity_point_py(X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset,
     return g, g_t, yd, yd_t, vz
 
 
-collinearity_point = njit(cache=True, fastmath=False)(_collinearity_point_py) if NUMBA_AVAILABLE else None
+collinearity_point: Any = njit(cache=True, fastmath=False)(_collinearity_point_py) if NUMBA_AVAILABLE else None
 
 
 def _ce_fixed_py(X, Y, Z, t, P, V, A, AR, sc0, jn, jp, jt, js, jc, jt0, jinv_dt, dn, dist, cn, curv, focal, offset):
@@ -363,4 +365,4 @@ def _ce_fixed_py(X, Y, Z, t, P, V, A, AR, sc0, jn, jp, jt, js, jc, jt0, jinv_dt,
     return g, g_t, yd, yd_t, vz
 
 
-_ce_fixed = njit(cache=True, fastmath=False, inline="always")(_ce_fixed_py) if NUMBA_AVAILABLE else None
+_ce_fixed: Any = njit(cache=True, fastmath=False, inline="always")(_ce_fixed_py) if NUMBA_AVAILABLE else None

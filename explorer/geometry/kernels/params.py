@@ -4,7 +4,7 @@ branch-free evaluator's tables (:class:`FixedModel`) and the solver status codes
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,7 +53,7 @@ class FixedModel:
     cn: tuple  # L + 1 zeros: the curvature term count
     curv: np.ndarray  # (max(L, 1),) c1, c2, ...
 
-    def args(self) -> tuple:
+    def args(self) -> tuple[Any, ...]:
         """Positional arguments of :func:`_ce_fixed_py` after ``(X, Y, Z, t)`` (``focal, offset`` follow)."""
         return (
             self.P,
@@ -117,7 +117,7 @@ class CollinearityParams:
     n_columns: int
     sc0: np.ndarray
     column_polynomial: tuple = ()
-    interior: object = None
+    interior: Any = None  # InteriorOrientation (for column_polynomial)
 
     def to_columns(self, col: np.ndarray) -> np.ndarray:
         """Kernel columns (``y_d / pitch + principal_column``, evenly spaced detectors) -> image columns.
@@ -168,7 +168,7 @@ class CollinearityParams:
             interior=inner,
         )
 
-    def model_args(self, fast: bool = False) -> tuple:
+    def model_args(self, fast: bool = False) -> tuple[Any, ...]:
         """Positional arguments of :func:`_collinearity_point_py` after ``(X, Y, Z, t)``."""
         return (
             self.pos,

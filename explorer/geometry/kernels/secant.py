@@ -108,7 +108,7 @@ def _line_error_np(ground, row, p: CollinearityParams, fm: FixedModel | None, f_
     for mask, fixed in ((in_fixed, True), (~in_fixed, False)):
         if not mask.any():
             continue
-        if fixed:
+        if fixed and fm is not None:  # in_fixed is all False without a fixed model
             res = _ce_fixed_py(
                 ground[mask, 0], ground[mask, 1], ground[mask, 2], t[mask], *fm.args(), p.focal, p.offset
             )

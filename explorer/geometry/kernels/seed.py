@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +35,7 @@ def _seed_row_py(X, Y, Z, mean, inv_scale, coef):
     return c[0] + (u * ru + (v * rv + w * rw))
 
 
-_seed_row = njit(cache=True, fastmath=False, inline="always")(_seed_row_py) if NUMBA_AVAILABLE else None
+_seed_row: Any = njit(cache=True, fastmath=False, inline="always")(_seed_row_py) if NUMBA_AVAILABLE else None
 
 
 def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half):
@@ -54,6 +55,7 @@ def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_m
     return r
 
 
+_seed_full: Any  # compiled below when numba is available, else None
 if NUMBA_AVAILABLE:
 
     @njit(cache=True, fastmath=False, inline="always")
@@ -115,6 +117,7 @@ class SeedModel:
             c = np.zeros(0) if c is None else np.asarray(c, dtype=np.float64)
             return np.concatenate([c, np.zeros(SEED_TERMS - len(c))])
 
+        cs: tuple[int, ...]
         if self.correction is None:
             cs, H = (0,), np.zeros((2, 3))
         else:
