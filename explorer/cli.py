@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "explorer.commands.rpc",
     "explorer.commands.scene",
     "explorer.commands.ortho",
+    "explorer.commands.warmup",
 )
 
 
