@@ -4,7 +4,9 @@
   resection (``explorer.real.from_rpc``);
 * ``pushbroom scene from-dimap FILE`` / ``from-dg FILE`` -- rigorous line-scan models read from
   Pleiades DIMAP v1.4 and DigitalGlobe/Maxar XML metadata, compared with the vendor RPC of the
-  same file and converted to an MPC scene (``explorer.real``).
+  same file and converted to an MPC scene (``explorer.real``);
+* ``pushbroom scene from-isd FILE`` -- a USGS CSM line-scan camera (ISD written by ALE: Mars CTX,
+  HiRISE, LRO NAC, ...) converted to an MPC scene (``explorer.real.csm``).
 
 Every written scene is a regular MPC scene JSON that all commands accept (``--scene``).
 Pixel conventions: ``docs/conventions.md``; details and measured numbers: ``docs/real_images.md``.
@@ -19,7 +21,7 @@ from typing import Any
 
 from explorer.commands._args import existing_file, int_in_range, non_negative_int, output_file, raster_file
 
-__all__ = ["cmd_from_dg", "cmd_from_dimap", "cmd_from_rpc", "register"]
+__all__ = ["cmd_from_dg", "cmd_from_dimap", "cmd_from_isd", "cmd_from_rpc", "register"]
 
 
 def _write_report(path: str | None, payload: dict) -> None:
@@ -102,6 +104,26 @@ def cmd_from_dg(args: argparse.Namespace) -> int:
     return _rigorous(args, "dg")
 
 
+def cmd_from_isd(args: argparse.Namespace) -> int:
+    """Handler of ``scene from-isd``."""
+    from explorer.real.csm import read_isd, scene_from_camera
+
+    t0 = time.perf_counter()
+    camera = read_isd(args.file, interpolation=args.interpolation)
+    print(camera.describe())
+    scene = scene_from_camera(camera, degree=args.degree, n_check=args.check, seed=args.seed)
+    fit = scene.metadata.get("csm_fit")
+    if fit:
+        print(f"MPC fit to the CSM camera ({fit['n']} check points): row max {fit['row_max_px']:.3g} px, "
+              f"RMS {fit['row_rms_px']:.3g} px; column max {fit['col_max_px']:.3g} px, RMS {fit['col_rms_px']:.3g} px")
+    if args.out:
+        scene.save(args.out)
+        print(f"wrote {args.out} (MPC scene, degree {args.degree}; row = line - 0.5, col = sample - 0.5)")
+    print(f"  time {time.perf_counter() - t0:.2f} s")
+    _write_report(args.report, {"camera": camera.describe(), "csm_fit": fit, "csm": scene.metadata["csm"]})
+    return 0
+
+
 def _rigorous_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", type=existing_file, help="metadata file")
     p.add_argument("--out", type=output_file, help="MPC scene JSON (polynomials fitted to the rigorous model)")
@@ -118,7 +140,7 @@ def _rigorous_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def register(subparsers: Any) -> None:
-    """Add the ``scene`` command group (``from-rpc``, ``from-dimap``, ``from-dg``)."""
+    """Add the ``scene`` command group (``from-rpc``, ``from-dimap``, ``from-dg``, ``from-isd``)."""
     scene = subparsers.add_parser("scene", help="build scenes from real image metadata (RPC, DIMAP, DG XML)")
     sub = scene.add_subparsers(dest="scene_command", required=True)
 
@@ -167,3 +189,17 @@ def register(subparsers: Any) -> None:
     p.add_argument("--refraction", action=argparse.BooleanOptionalAction, default=True,
                    help="model atmospheric refraction (default on: 2 px across track without it on WV1)")
     p.set_defaults(func=cmd_from_dg)
+
+    p = sub.add_parser("from-isd",
+                       help="MPC scene from a USGS CSM line-scan ISD (ALE JSON: Mars CTX, HiRISE, LRO NAC, ...)")
+    p.add_argument("file", type=existing_file, help="image support data (JSON)")
+    p.add_argument("--out", type=output_file, help="output scene JSON")
+    p.add_argument("--degree", type=int_in_range(1, 9, "--degree"), default=3,
+                   help="degree of the position and attitude polynomials (default 3)")
+    p.add_argument("--interpolation", choices=("usgscsm", "tables"), default="usgscsm",
+                   help="usgscsm's resampled state (default) or the ISD's tables as given")
+    p.add_argument("--check", type=int_in_range(0, 1_000_000, "--check"), default=2000,
+                   help="CSM check points on which the scene's fit is reported (0: none)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the check points")
+    p.add_argument("--report", type=output_file, help="write the camera description and the fit as JSON")
+    p.set_defaults(func=cmd_from_isd)
