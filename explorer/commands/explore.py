@@ -1,28 +1,48 @@
-"""``pushbroom explore``: serve the interactive explorer (``docs/explorer.md``)."""
+"""``pushbroom explore``: serve the interactive explorer, or export what it shows (``docs/explorer.md``).
+
+One source: ``--preset ID | --scene FILE | --rpc FILE | --dimap FILE | --dg FILE | --isd FILE``
+(``--dem`` with the last three), checked before anything is served; ``--export DIR`` writes
+``summary.json``, ``residuals.csv`` and ``panels.html`` and exits.  Only the standard library is
+imported here; the explorer (viser, plotly, the methods) loads inside :func:`cmd_explore`.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from explorer.commands._args import port_number
+from explorer.commands._args import port_number, positive_int
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
-    from explorer.presets import preset_spec
+    """Handler of ``explore``: validate the source and address, then export or serve."""
+    from explorer.app.server import run_explore  # viser and plotly load only for this command
 
-    if args.preset:
-        preset_spec(args.preset)  # an unknown preset is an error before the server starts
-    from explorer.app import serve  # viser and plotly load only for this command
-
-    return serve(preset=args.preset, host=args.host, port=args.port,
-                 methods=args.methods.split(",") if args.methods else None)
+    return run_explore(args)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("explore", help="serve the interactive 3D explorer (viser) and print its URL")
-    p.add_argument("--preset", default=None, help="preset shown first (default: the presets file's default, WSU)")
+    """Add the ``explore`` command."""
+    p = sub.add_parser("explore", help="serve the interactive 3D explorer (viser) and print its URL, or --export",
+                       description="Serve the explorer on one source (default: the default preset), or export "
+                                   "the panels' numbers with --export DIR.")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--preset", default=None, help="a synthetic preset (default: the presets file's default, WSU)")
+    src.add_argument("--scene", default=None, metavar="FILE", help="a scene JSON written by the `scene` commands")
+    src.add_argument("--rpc", default=None, metavar="FILE", help="an RPC file: MPC scene by space resection")
+    src.add_argument("--dimap", default=None, metavar="FILE", help="a Pleiades DIMAP v1.4 PHRDIMAP_*.XML")
+    src.add_argument("--dg", default=None, metavar="FILE", help="a DigitalGlobe / Maxar XML (EPH, ATT, GEO, IMD)")
+    src.add_argument("--isd", default=None, metavar="FILE", help="a USGS CSM line-scan ISD (JSON)")
+    p.add_argument("--dem", default=None, metavar="DEM",
+                   help="DEM for --rpc / --dimap / --dg (GeoTIFF with EGM96 heights, or SRTM .hgt); must cover "
+                        "the image footprint")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
-    p.add_argument("--port", type=port_number, default=8080, help="port (default 8080; 0 picks a free one)")
+    p.add_argument("--port", type=port_number, default=8080,
+                   help="port (default 8080; 0 picks a free one; a busy port is an error)")
     p.add_argument("--methods", default=None,
-                   help="comma-separated methods checked at start (default lrm,prm,mlp,nr where registered)")
+                   help="comma-separated methods (default lrm,prm,mlp,nr where registered)")
+    p.add_argument("--scops", type=positive_int, default=100, help="SCOPs (control points) to train on (default 100)")
+    p.add_argument("--scps", type=positive_int, default=50_000, help="SCPs (check points) of the maps (default 50000)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the point heights and subsamples (default 0)")
+    p.add_argument("--export", default=None, metavar="DIR",
+                   help="write DIR/summary.json, residuals.csv and panels.html (every SCP) and exit without serving")
     p.set_defaults(func=cmd_explore)

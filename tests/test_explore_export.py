@@ -1,0 +1,121 @@
+"""``pushbroom explore <source> --export DIR``: what the panels show, written without serving, the
+same bytes on every run.
+
+Real files (provenance: tests/data/rpc/PROVENANCE.md, assets/dem/PROVENANCE.md): the shareloc
+Pleiades 2017 DIMAP with its DEM, and a Pleiades RPC (DIMAP v2 RPC XML).  Each is exported twice
+in separate directories; ``residuals.csv`` must be byte-identical and ``summary.json`` identical
+except the timings.  Truth for the numbers: the exact method ``nr`` reproduces the simulated rows
+to 1e-8 px, and the summary's RMSE / max / counts are recomputed here from the CSV rows.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from explorer.cli import main
+from tests.real.conftest import DEM_DIR, PHR_2017, RPC_DIR
+
+DEM_2017 = DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"
+RPC_PHR = RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"
+TIMINGS = ("fit_s", "eval_s")
+
+
+def _export(tmp_path, name: str, source: list[str], capsys) -> dict:
+    out = tmp_path / name
+    rc = main(["explore", *source, "--methods", "lrm,prm,nr", "--scops", "50", "--scps", "4000", "--seed", "3",
+               "--export", str(out)])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert "http://" not in captured.out  # exported, not served
+    return {f: (out / f).read_bytes() for f in ("summary.json", "residuals.csv", "panels.html")}
+
+
+def _without_timings(summary: bytes) -> dict:
+    d = json.loads(summary)
+    for m in d["methods"].values():
+        for k in TIMINGS:
+            assert m[k] is None or m[k] >= 0.0
+            m.pop(k)
+    return d
+
+
+def _check_summary_against_csv(files: dict) -> None:
+    summary = json.loads(files["summary.json"])
+    rows = list(csv.DictReader(files["residuals.csv"].decode().splitlines()))
+    assert set(rows[0]) >= {"method", "row_residual_px", "col_residual_px"}
+    assert summary["settings"]["subsampled"] is False
+    n = summary["settings"]["scps_used"]
+    for name, m in summary["methods"].items():
+        mine = [r for r in rows if r["method"] == name]
+        assert len(mine) == n  # one row per check point per method, no subsample
+        dr = np.array([float(r["row_residual_px"]) if r["row_residual_px"] else math.nan for r in mine])
+        dc = np.array([float(r["col_residual_px"]) if r["col_residual_px"] else math.nan for r in mine])
+        ok = np.isfinite(dr)
+        assert m["n_valid"] == ok.sum() and m["n_invalid"] == (~ok).sum()
+        assert m["n_refused"] == sum(r["status"] == "refused" for r in mine)
+        assert m["rmse_row_px"] == pytest.approx(np.sqrt(np.mean(dr[ok] ** 2)), rel=1e-12)
+        assert m["max_row_px"] == pytest.approx(np.max(np.abs(dr[ok])), rel=1e-12)
+        assert m["rmse_col_px"] == pytest.approx(np.sqrt(np.nanmean(dc ** 2)), rel=1e-12)
+        assert m["max_col_px"] == pytest.approx(np.nanmax(np.abs(dc)), rel=1e-12)
+    assert summary["methods"]["nr"]["max_row_px"] < 1e-8  # the exact method finds the simulated rows
+
+
+def _check_offline_page(page: bytes) -> None:
+    text = page.decode()
+    assert "<script src=" not in text.replace(" ", "")  # nothing loaded from the network
+    assert "Plotly.newPlot" in text and len(text) > 3_000_000  # plotly.js inlined
+    assert "nr row: RMSE" in text and "nr column: RMSE" in text
+
+
+@pytest.mark.slow
+def test_dimap_with_dem_exports_byte_identical_residuals(tmp_path, capsys):
+    src = ["--dimap", str(PHR_2017), "--dem", str(DEM_2017)]
+    a = _export(tmp_path, "a", src, capsys)
+    b = _export(tmp_path, "b", src, capsys)
+    assert a["residuals.csv"] == b["residuals.csv"]
+    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    _check_summary_against_csv(a)
+    _check_offline_page(a["panels.html"])
+    summary = json.loads(a["summary.json"])
+    assert summary["source"]["kind"] == "dimap" and summary["source"]["dem"] == str(DEM_2017)
+    assert (summary["settings"]["image_rows"], summary["settings"]["image_columns"]) == (49826, 39951)
+
+
+@pytest.mark.slow
+def test_rpc_exports_byte_identical_residuals(tmp_path, capsys):
+    src = ["--rpc", str(RPC_PHR)]
+    a = _export(tmp_path, "a", src, capsys)
+    b = _export(tmp_path, "b", src, capsys)
+    assert a["residuals.csv"] == b["residuals.csv"]
+    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    _check_summary_against_csv(a)
+    _check_offline_page(a["panels.html"])
+
+
+def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):
+    cases = [
+        (["--preset", "bogus"], "unknown preset 'bogus'"),
+        (["--preset", "wsu"], "did you mean 'WSU'"),
+        (["--scene", str(tmp_path / "missing.json")], "no such file"),
+        (["--dimap", str(RPC_DIR / "PHRDIMAP_P1BP--2018122638935449CP.XML"), "--dem", str(DEM_2017)],
+         "does not cover the image footprint"),
+        (["--preset", "WSU", "--port", "70000"], "70000"),
+        (["--preset", "WSU", "--host", "192.0.2.1", "--port", "0"], "192.0.2.1"),
+        (["--preset", "WSU", "--scene", "x.json"], "argument"),
+    ]
+    for args, words in cases:
+        try:
+            rc = main(["explore", *args])
+        except SystemExit as exc:  # argparse: a bad value or a conflicting option
+            rc = exc.code
+        captured = capsys.readouterr()
+        assert rc == 2, (args, captured.err)
+        assert "http://" not in captured.out, args
+        lines = [ln for ln in captured.err.splitlines() if ln.strip()]
+        assert len(lines) in (1, 2) and words in captured.err, (args, captured.err)  # argparse adds a usage line
+        assert "Traceback" not in captured.err
