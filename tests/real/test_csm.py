@@ -97,7 +97,7 @@ R_KM, H_KM, V_KM_S, F_MM, PITCH_MM = 1000.0, 50.0, 2.0, 100.0, 0.01
 
 
 def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_sample=0.0, order=None,
-              j2000_rotation_deg=0.0, distortion=None) -> dict:
+              j2000_rotation_deg=0.0, distortion=None, body_fixed=False, velocities=True, flip_signs=False) -> dict:
     """A camera flying straight along x at altitude H over a sphere, looking straight down."""
     scale = 1.0 if unit == "km" else 1000.0
     times = np.linspace(-2.0, 2.0, 41)
@@ -106,7 +106,7 @@ def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_
     # body rotation: J2000 -> body is a rotation by +a about z (quaternion w, x, y, z)
     qb = [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
     rz_inv = np.array([[np.cos(a), np.sin(a), 0], [-np.sin(a), np.cos(a), 0], [0, 0, 1]])
-    pos_j2000 = pos @ rz_inv.T  # so that the body-fixed positions are the straight line above
+    pos_j2000 = pos if body_fixed else pos @ rz_inv.T  # so that the body-fixed positions are the line above
     # pointing (J2000 -> sensor) makes the camera axes equal to the body axes
     qp = [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
     isd = {
@@ -132,6 +132,14 @@ def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_
     }
     if order is not None:
         isd["interpolation_order"] = order
+    if body_fixed:  # positions already in the body frame (ALE's reference_frame = the body's frame code)
+        isd["instrument_position"]["reference_frame"] = 10099
+    if not velocities:
+        del isd["instrument_position"]["velocities"]
+    if flip_signs:  # q and -q are the same rotation: every other sample negated
+        for table in ("instrument_pointing", "body_rotation"):
+            isd[table]["quaternions"] = [[-v for v in q] if k % 2 else q
+                                         for k, q in enumerate(isd[table]["quaternions"])]
     return isd
 
 
@@ -163,6 +171,9 @@ VARIANTS = {
     "summing": {"sample_summing": 2, "line_summing": 2, "start_sample": 10.0},
     "order-4": {"order": 4},
     "j2000-rotated": {"j2000_rotation_deg": 30.0},
+    "body-fixed-positions": {"j2000_rotation_deg": 30.0, "body_fixed": True},
+    "no-velocities": {"velocities": False, "order": 6},
+    "quaternion-signs": {"j2000_rotation_deg": 50.0, "flip_signs": True},
 }
 
 
