@@ -1,0 +1,157 @@
+"""Compile (or load from numba's on-disk cache) every compiled kernel once, so that no later command compiles.
+
+Every numba kernel of the package is declared with ``cache=True``: the machine code is written next to the
+module (``__pycache__``) or, where the installed package is not writable (a wheel in a system
+site-packages), to numba's user cache (``$NUMBA_CACHE_DIR``, else ``~/.cache/numba``), and later processes
+load it instead of compiling.  :func:`warm_up` runs the real entry points on tiny inputs for each kind of
+scene -- every preset (flat) with the compiled search methods, one paper preset with every registered
+method, the ``agile`` preset with relief (DEM kernel, relief paths of the methods), a rational function
+model at a height and on a DEM (serial and parallel projection loops, the inverse, the DEM walk) -- so
+numba compiles each kernel for the argument types the commands use.  ``pushbroom warmup`` runs it; the
+set-up script calls it once.
+
+A numba kernel is compiled per argument-type signature: the inputs here have the commands' types
+(float64 arrays, tuples of floats), so one warm-up covers every scene size.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["warm_up"]
+
+#: Methods with compiled kernels, warmed on every preset (the others, learned or numpy, on one preset).
+COMPILED_SEARCH_METHODS = ("exact", "nr", "csm-secant")
+
+
+def _rpc_for_warmup():
+    """A small, exactly known rational function model (affine with a height term and a mild denominator)."""
+    from explorer.rpc.model import RationalFunctionModel
+
+    row_num = np.zeros(20)
+    row_den = np.zeros(20)
+    col_num = np.zeros(20)
+    col_den = np.zeros(20)
+    row_num[[2, 1, 3]] = (-1.0, 0.02, 0.03)
+    col_num[[1, 2, 3]] = (1.0, 0.01, -0.02)
+    row_den[[0, 1]] = (1.0, 1e-3)
+    col_den[[0, 2]] = (1.0, -1e-3)
+    return RationalFunctionModel(row_num, row_den, col_num, col_den, row_offset=499.5, col_offset=499.5,
+                                 lat_offset=45.0, lon_offset=5.0, height_offset=500.0, row_scale=500.0,
+                                 col_scale=500.0, lat_scale=0.01, lon_scale=0.014, height_scale=500.0,
+                                 image_size=(1000, 1000), source_format="warmup")
+
+
+def _warm_rpc() -> None:
+    from explorer.geometry.dem_intersection import HeightGrid, intersect_segments
+    from explorer.rpc import _kernels
+    from explorer.rpc.inverse import RPCInverse
+
+    rpc = _rpc_for_warmup()
+    rng = np.random.default_rng(0)
+    row = rng.uniform(0, 999, 64)
+    col = rng.uniform(0, 999, 64)
+    h = rng.uniform(300, 700, 64)
+    lon, lat, _ = rpc.localization(row, col, h)
+    rpc.projection(lon, lat, h)
+    norm = (rpc.lon_offset, rpc.lon_scale, rpc.lat_offset, rpc.lat_scale, rpc.height_offset, rpc.height_scale,
+            rpc.row_offset, rpc.row_scale, rpc.col_offset, rpc.col_scale)
+    for parallel in (False, True):  # both loops (the choice is made by size in projection)
+        _kernels.project(lon, lat, h, (rpc.row_num, rpc.row_den, rpc.col_num, rpc.col_den), norm, parallel=parallel)
+    # a lon/lat DEM over the scene: smooth hills, one no-data node
+    lons = np.linspace(4.98, 5.02, 41)
+    lats = np.linspace(45.012, 44.988, 25)
+    heights = 500.0 + 150.0 * np.sin(lons[None, :] * 300.0) * np.cos(lats[:, None] * 200.0)
+    heights[3, 3] = np.nan
+    grid = HeightGrid.from_array(heights, lons[0], lats[0], lons[1] - lons[0], lats[1] - lats[0])
+    inverse = RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
+    inverse.localize(row, col, h)
+    inverse.on_dem(row, col, grid)
+    rpc.localization_on_dem(row, col, grid)
+    u, v = grid.to_grid(lon, lat)
+    intersect_segments(grid, u, v, np.full(64, grid.z_max), u + 0.5, v + 0.3, np.full(64, grid.z_min))
+
+
+def _warm_methods(scene, names, n_scops: int = 30, n_scps: int = 200) -> None:
+    from explorer.methods import create, registry
+    from explorer.points import simulate_points
+
+    controls = simulate_points(scene, n_scops, kind="scop")
+    checks = simulate_points(scene, n_scps, kind="scp")
+    reg = registry()
+    for name in names:
+        cls = reg.get(name)
+        if cls is None:
+            continue
+        method = create(name, scene)
+        if cls.needs_fit:
+            method.fit(controls)
+        method.ground_to_image(checks.ground)
+
+
+def _warm_ortho() -> None:
+    from explorer.ortho import OrthoGrid, RPCProjector, render_block
+
+    rpc = _rpc_for_warmup()
+    projector = RPCProjector(rpc, (1000, 1000), height=500.0)
+
+    class _Flat:
+        shape = (1000, 1000)
+
+        def sample_bilinear(self, row, col, valid):
+            return np.where(valid, 1.0, np.nan)
+
+    grid = OrthoGrid(32631, 730_000.0, 4_987_000.0, 10.0, 8, 8)
+    render_block(projector, _Flat(), grid, slice(0, 8), slice(0, 8))
+
+
+def steps() -> list[tuple[str, Callable[[], None]]]:
+    """The warm-up steps, in order: (description, callable)."""
+    from explorer.methods import available
+    from explorer.presets import build_scene, preset_ids
+
+    out: list[tuple[str, Callable[[], None]]] = [("rational function model (projection, inverse, DEM)", _warm_rpc)]
+    ids = preset_ids()
+    paper = "WSU" if "WSU" in ids else ids[0]
+    out.append((f"{paper}: every method", lambda: _warm_methods(build_scene(paper), available(), n_scops=60)))
+    out.append(("agile with 500 m relief: DEM kernel and compiled methods",
+                lambda: _warm_methods(build_scene("agile", relief_m=500.0), COMPILED_SEARCH_METHODS + ("lrm", "prm"))))
+    for pid in ids:
+        if pid != paper:
+            out.append((f"{pid}: compiled methods",
+                        lambda pid=pid: _warm_methods(build_scene(pid), COMPILED_SEARCH_METHODS)))
+    out.append(("orthorectification block", _warm_ortho))
+    return out
+
+
+def warm_up(progress: Callable[[str], None] | None = None) -> dict[str, float]:
+    """Run every warm-up step; returns seconds per step.
+
+    Parameters
+    ----------
+    progress : callable(str), optional
+        Called with a one-line message before each step (``pushbroom warmup`` prints it).
+
+    Returns
+    -------
+    dict
+        Step description -> seconds; a step that failed maps to ``-1`` and its error is reported through
+        ``progress`` (a warm-up failure never stops the set-up: the kernel then compiles on first use).
+    """
+    timings: dict[str, float] = {}
+    todo = steps()
+    for k, (name, fn) in enumerate(todo, 1):
+        if progress is not None:
+            progress(f"[{k}/{len(todo)}] warming {name}")
+        t0 = time.perf_counter()
+        try:
+            fn()
+            timings[name] = time.perf_counter() - t0
+        except Exception as exc:  # noqa: BLE001 - report and continue: the kernel compiles on first use instead
+            timings[name] = -1.0
+            if progress is not None:
+                progress(f"    failed: {type(exc).__name__}: {exc}")
+    return timings
