@@ -578,3 +578,13 @@ def test_slider_drag_is_debounced_to_the_last_value(server):
         assert f"{app.scene.name}" in app.handles["status"].content
     finally:
         app.close()
+
+
+def test_model_layer_imports_neither_viser_nor_plotly():
+    import subprocess
+    import sys
+
+    code = ("import sys; import explorer.app; from explorer.app import model, sources, export, jobs; "
+            "print(sorted(m for m in ('viser', 'plotly') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
