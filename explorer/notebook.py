@@ -78,7 +78,7 @@ class SceneView:
         Display height, CSS pixels.
     """
 
-    html: str
+    html: str = field(repr=False)
     nodes: list[str]
     best_row: float
     trace_rows: np.ndarray | None = None

@@ -112,3 +112,22 @@ def test_the_course_covers_the_3d_view_and_a_widget():
     sources = {p.stem: "\n".join(c.source for c in _read(p).cells) for p in NOTEBOOKS}
     assert any("scene_view(" in s for s in sources.values())
     assert any("residual_panel(" in s for s in sources.values())
+
+
+@pytest.mark.slow
+def test_build_course_writes_html_with_the_3d_view_and_static_figures(tmp_path):
+    """notebooks/build_course.py (what `./run.sh course` runs) on notebook 01: a page with the embedded 3D
+    view, plotly.js and the static copy of the interactive figure (a live widget needs a kernel), and an index."""
+    pytest.importorskip("nbconvert")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("build_course", NOTEBOOK_DIR / "build_course.py")
+    build_course = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_course)
+    records = build_course.build(tmp_path, small=True, include_solutions=False, only=["01"])
+    assert [r["file"] for r in records] == [NOTEBOOKS[0].stem + ".html"] and records[0]["error"] is None
+    page = (tmp_path / records[0]["file"]).read_text(encoding="utf-8")
+    assert VISER_EMBED in page and re.search(r"<iframe [^>]*srcdoc=", page)  # nbconvert reorders attributes
+    assert ".newPlot(" in page and "plotly" in page.lower()
+    assert records[0]["file"] in (tmp_path / "index.html").read_text(encoding="utf-8")
+    assert build_course.main([str(tmp_path / "none"), "--only", "99"]) == 1  # nothing built is a failure
