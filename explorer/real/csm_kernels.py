@@ -45,15 +45,35 @@ DIST_MAX_ITER = 60
 # --------------------------------------------------------------------------- tables
 @njit(cache=True)
 def interval_index(times, t):
-    """Index ``i`` of the table interval ``[times[i], times[i+1])`` holding ``t`` (clamped)."""
+    """Index ``i`` of the table interval ``[times[i], times[i+1])`` holding ``t`` (clamped).
+
+    A guess from the mean spacing, corrected by walking (a step or two on nearly even tables such as
+    usgscsm's resampled ones; a binary search beyond that)."""
     n = times.shape[0]
     if n < 2:
         return 0
-    i = np.searchsorted(times, t, side="right") - 1
-    if i < 0:
-        i = 0
-    if i > n - 2:
+    t0 = times[0]
+    span = times[n - 1] - t0
+    g = (t - t0) / span * (n - 1)
+    if not (g >= 0.0):  # also NaN
+        return 0
+    if g >= n - 2:
         i = n - 2
+    else:
+        i = int(g)
+    for _ in range(3):
+        if t < times[i] and i > 0:
+            i -= 1
+        elif i < n - 2 and t >= times[i + 1]:
+            i += 1
+        else:
+            return i
+    if t < times[i] and i > 0 or i < n - 2 and t >= times[i + 1]:
+        i = np.searchsorted(times, t, side="right") - 1
+        if i < 0:
+            i = 0
+        if i > n - 2:
+            i = n - 2
     return i
 
 
@@ -126,6 +146,30 @@ def window_tables(times, max_order):
 
 
 @njit(cache=True)
+def _weights8(times, first, den, i, t):
+    """The 8 Lagrange weights of window ``first`` (``den[i]`` their inverse denominators) at ``t``:
+    prefix / suffix products of ``t - t_b``, branch-free (the usgscsm window of order 8)."""
+    d0, d1, d2, d3 = t - times[first], t - times[first + 1], t - times[first + 2], t - times[first + 3]
+    d4, d5, d6, d7 = t - times[first + 4], t - times[first + 5], t - times[first + 6], t - times[first + 7]
+    p1 = d0
+    p2 = p1 * d1
+    p3 = p2 * d2
+    p4 = p3 * d3
+    p5 = p4 * d4
+    p6 = p5 * d5
+    p7 = p6 * d6
+    s6 = d7
+    s5 = s6 * d6
+    s4 = s5 * d5
+    s3 = s4 * d4
+    s2 = s3 * d3
+    s1 = s2 * d2
+    s0 = s1 * d1
+    return (den[i, 0] * s0, den[i, 1] * p1 * s1, den[i, 2] * p2 * s2, den[i, 3] * p3 * s3, den[i, 4] * p4 * s4,
+            den[i, 5] * p5 * s5, den[i, 6] * p6 * s6, den[i, 7] * p7)
+
+
+@njit(cache=True)
 def _lagrange3(times, values, win, den, t):
     """Lagrange interpolation of ``values`` (n, 3) at ``t`` with precomputed windows (allocation-free)."""
     n = times.shape[0]
@@ -134,6 +178,13 @@ def _lagrange3(times, values, win, den, t):
     i = interval_index(times, t)
     first, order = win[i, 0], win[i, 1]
     o0 = o1 = o2 = 0.0
+    if order == 8:
+        w = _weights8(times, first, den, i, t)
+        for a in range(8):
+            o0 += w[a] * values[first + a, 0]
+            o1 += w[a] * values[first + a, 1]
+            o2 += w[a] * values[first + a, 2]
+        return o0, o1, o2
     for a in range(order):
         w = den[i, a]
         for b in range(order):
@@ -155,6 +206,14 @@ def _quat(times, quats, win, den, t, mode):
         i = interval_index(times, t)
         first, order = win[i, 0], win[i, 1]
         q0 = q1 = q2 = q3 = 0.0
+        if order == 8:
+            ww = _weights8(times, first, den, i, t)
+            for a in range(8):
+                q0 += ww[a] * quats[first + a, 0]
+                q1 += ww[a] * quats[first + a, 1]
+                q2 += ww[a] * quats[first + a, 2]
+                q3 += ww[a] * quats[first + a, 3]
+            order = 0
         for a in range(order):
             w = den[i, a]
             for b in range(order):
