@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from explorer.errors import InputError, SceneFileError, as_points, check_finite
 from explorer.real import csm_kernels as K
@@ -305,18 +306,20 @@ class CsmCamera:
 
     def _exterior_args(self) -> tuple:
         """The ``ext`` tuple of the kernels (tables with their precomputed Lagrange windows)."""
-        if getattr(self, "_ext", None) is None:
+        ext = getattr(self, "_ext", None)
+        if ext is None:
             pw, pd = K.window_tables(self.position_times, int(self.position_order))
             qpw, qpd = K.window_tables(self.pointing_times, int(self.attitude_order))
             qbw, qbd = K.window_tables(self.body_times, int(self.attitude_order))
             ref = np.ascontiguousarray(self.positions_m[self.positions_m.shape[0] // 2])
-            self._ext = (self.position_times, np.ascontiguousarray(self.positions_m - ref), ref, pw, pd,
+            ext = (self.position_times, np.ascontiguousarray(self.positions_m - ref), ref, pw, pd,
                          self.pointing_times,
                          self.pointing_quaternions, qpw, qpd, self.pointing_constant, self.body_times,
                          self.body_quaternions, qbw, qbd, self.body_constant,
                          1 if self.attitude_interpolation == "lagrange" else 0, bool(self.position_in_j2000),
                          self._is_simple())
-        return self._ext
+            self._ext = ext
+        return ext
 
     def _is_simple(self) -> bool:
         """Identity body rotation and constant rotations with body-fixed positions (the usgscsm state)."""
@@ -371,7 +374,7 @@ class CsmCamera:
         return ox, oy
 
     # ------------------------------------------------------------------ image -> ground
-    def image_to_ground(self, line: np.ndarray, sample: np.ndarray, height: np.ndarray | float = 0.0) -> ImageToGround:
+    def image_to_ground(self, line: ArrayLike, sample: ArrayLike, height: ArrayLike = 0.0) -> ImageToGround:
         """Ground points of CSM image coordinates at heights above the file's ellipsoid.
 
         Parameters
@@ -390,16 +393,18 @@ class CsmCamera:
         n = line.size
         ground, status = np.empty((n, 3)), np.empty(n, np.int8)
         centre, look = np.empty((n, 3)), np.empty((n, 3))
-        K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre, look)
+        K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre,  # type: ignore[call-arg]
+                             look)
         return ImageToGround(ground, status == K.STATUS_OK)
 
-    def rays(self, line: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def rays(self, line: ArrayLike, sample: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Perspective centres (N, 3) and unit look directions (N, 3), body-fixed, of image points."""
         line, sample, height = self._broadcast(line, sample, 0.0)
         n = line.size
         ground, status = np.empty((n, 3)), np.empty(n, np.int8)
         centre, look = np.empty((n, 3)), np.empty((n, 3))
-        K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre, look)
+        K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre,  # type: ignore[call-arg]
+                             look)
         return centre, look
 
     @staticmethod
@@ -453,12 +458,12 @@ class CsmCamera:
             raise SceneFileError(f"{self.source}: the detector-line residual does not change with the line")
         self._cam[K.C_SLOPE] = slope
         offsets = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
-        pts = np.repeat(ground, offsets.size, axis=0)
+        probe = np.repeat(ground, offsets.size, axis=0)
         at = (line[:, None] + offsets[None, :]).ravel()
-        g, _ = self.detector_residual(pts, at)
-        g = g.reshape(-1, offsets.size)
-        d1 = 0.5 * (g[:, 2:] - g[:, :-2])
-        d2 = g[:, 2:] - 2 * g[:, 1:-1] + g[:, :-2]
+        res5, _ = self.detector_residual(probe, at)
+        res5 = res5.reshape(-1, offsets.size)
+        d1 = 0.5 * (res5[:, 2:] - res5[:, :-2])
+        d2 = res5[:, 2:] - 2 * res5[:, 1:-1] + res5[:, :-2]
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio = np.abs(d2) / (2.0 * np.abs(d1))
         ratio = ratio[np.isfinite(ratio)]
@@ -514,7 +519,7 @@ class CsmCamera:
         ground = np.ascontiguousarray(as_points(ground))
         line = np.ascontiguousarray(np.broadcast_to(np.asarray(line, dtype=np.float64), ground.shape[:1]))
         res, samp = np.empty(line.size), np.empty(line.size)
-        K.residual_many(ground, line, *self._all_args(), res, samp)
+        K.residual_many(ground, line, *self._all_args(), res, samp)  # type: ignore[call-arg]
         return res, samp
 
     def ground_to_image(self, ground: np.ndarray, *, tol: float = 1e-11, max_iter: int = 60,
@@ -546,8 +551,8 @@ class CsmCamera:
         seed = (mean, 1.0 / scale, np.ascontiguousarray(coef), *self._seed_table)
         line, sample = np.empty(n), np.empty(n)
         status, evals = np.empty(n, np.int8), np.empty(n, np.int64)
-        K.ground_to_image_nb(ground, seed, -margin, self.n_lines + margin, float(tol), int(max_iter),
-                             *self._all_args(), line, sample, status, evals)
+        K.ground_to_image_nb(ground, seed, -margin, self.n_lines + margin, float(tol),  # type: ignore[call-arg]
+                             int(max_iter), *self._all_args(), line, sample, status, evals)
         with np.errstate(invalid="ignore"):
             inside = (line >= 0) & (line <= self.n_lines) & (sample >= 0) & (sample <= self.n_samples)
         return GroundToImage(line, sample, (status == K.STATUS_OK) & inside, status, evals)
