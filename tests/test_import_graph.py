@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import sys
+from functools import cache
 from pathlib import Path
 
 import pytest
@@ -32,6 +33,7 @@ MODEL_LAYERS = 6  # layers below this never import the GUI libraries
 GUI_LIBRARIES = ("viser", "plotly", "IPython", "ipywidgets")
 
 
+@cache
 def module_files() -> dict[str, Path]:
     """Dotted module name -> file, for every module of the package."""
     out = {}
@@ -67,6 +69,7 @@ def _import_nodes(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
     return found
 
 
+@cache
 def imported_names(name: str, path: Path) -> list[tuple[str, int]]:
     """(absolute dotted name, line) of every runtime import of a module."""
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
@@ -84,6 +87,7 @@ def imported_names(name: str, path: Path) -> list[tuple[str, int]]:
     return out
 
 
+@cache
 def import_graph() -> dict[str, dict[str, int]]:
     """Module -> {imported package module: line}; ``from a import b`` counts as ``a.b`` when that is a module."""
     files = module_files()

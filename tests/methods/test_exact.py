@@ -65,6 +65,7 @@ def test_exact_rows_on_a_3d_grid_of_heights():
     _check_exact(create("exact", scene), check)
 
 
+@pytest.mark.slow  # brute-force truth on a strong-rate, jittered scene (about 20 s)
 @pytest.mark.parametrize(
     "kwargs",
     [
@@ -86,7 +87,7 @@ def test_exact_under_strong_rates_and_jitter_matches_brute_force(kwargs):
     assert np.max(np.abs(res.row - row)) <= 1e-7
 
 
-@pytest.mark.parametrize("preset", ["WSU", "agile"])
+@pytest.mark.parametrize("preset", ["WSU", pytest.param("agile", marks=pytest.mark.slow)])
 def test_points_off_the_image_are_flagged_never_clipped(preset):
     scene = build_scene(preset)
     n = scene.n_rows
