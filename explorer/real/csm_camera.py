@@ -10,24 +10,27 @@ returns a :class:`CsmCamera` whose two directions follow usgscsm's conventions
 
 * ``image_to_ground(line, sample, height)``: body-fixed metres on the ellipsoid of the file
   inflated by ``height`` (semi-axes ``a + h, a + h, b + h``, as usgscsm);
-* ``ground_to_image(xyz)``: the best line solved to ``tol`` lines (default 1e-10) by a
-  safeguarded secant on usgscsm's detector-line residual, then the sample -- where usgscsm
-  stops at 0.1 px (its tests) or its ``desired_precision``.
+* ``ground_to_image(xyz)``: the best line solved to ``tol`` lines (default 1e-11) by a
+  safeguarded secant on usgscsm's detector-line residual from a tabulated seed, then the sample
+  -- where usgscsm stops at its ``desired_precision`` (its tests accept 0.1 px).
 
 What is read (every key is checked; a missing key, a NaN or a bad unit raises
 :class:`~explorer.errors.SceneFileError` naming the file and the key):
 
 * ``image_lines``, ``image_samples``; ``line_scan_rate`` (rows ``[line, time relative to
   center_ephemeris_time, seconds per line]``, one or several rates); ``center_ephemeris_time``;
-* ``instrument_position`` (``ephemeris_times``, ``positions``, ``unit`` m or km -- km, ALE's unit,
-  when absent --
-  ``reference_frame``: 1 means J2000, rotated into the body frame by ``body_rotation``);
-  Lagrange interpolation of order ``interpolation_order`` (top level or in the table; default 8,
-  usgscsm's) with usgscsm's window; ``interpolation_method`` must be ``lagrange`` when present;
+* ``instrument_position`` (``ephemeris_times``, ``positions``, optional ``velocities``, ``unit``
+  m or km -- km, ALE's unit, when absent -- and ``reference_frame``: 1 means J2000, rotated into
+  the body frame by ``body_rotation``; the body's frame code means body-fixed); Lagrange of order
+  ``interpolation_order`` (top level or in the table; default 8, usgscsm's) with usgscsm's window;
+  ``interpolation_method`` must be ``lagrange`` when present;
 * ``instrument_pointing`` (J2000 -> sensor) and ``body_rotation`` (J2000 -> body):
   ``ephemeris_times``, ``quaternions`` ``(w, x, y, z)``, optional ``constant_rotation`` (3 x 3,
-  row-major) applied after the time-dependent rotation; slerp between samples (default) or
-  usgscsm's Lagrange on the components (``attitude_interpolation="lagrange"``);
+  row-major) applied after the time-dependent rotation;
+* how the tables are interpolated (``interpolation`` of :func:`read_isd`): ``"usgscsm"`` (default)
+  rebuilds usgscsm's state (Hermite-resampled positions, slerp-resampled sensor -> body
+  quaternions, both through usgscsm's Lagrange window); ``"tables"`` interpolates the samples as
+  given (Lagrange for positions, slerp for rotations);
 * ``focal_length_model.focal_length`` (mm), ``detector_center`` (line, sample),
   ``starting_detector_line``/``sample``, ``focal2pixel_lines``/``samples``,
   ``detector_line_summing``/``sample_summing``;
