@@ -149,11 +149,15 @@ def flyby_truth_time(line: np.ndarray, rates) -> np.ndarray:
     return rates[k, 1] + rates[k, 2] * (line - rates[k, 0] + 0.5)
 
 
-def flyby_ground(line, sample, h_m, rates=None, sample_summing=1, start_sample=0.0):
-    """Closed form: time -> x; the detector direction (0, -y, -f) hits the sphere R + h."""
+def flyby_ground(line, sample, h_m, rates=None, sample_summing=1, start_sample=0.0, radial=None):
+    """Closed form: time -> x; the detector direction (0, -y, -f) hits the sphere R + h (y undistorted by
+    usgscsm's radial removal ``y (1 - k0 - k1 y^2 - k2 y^4)`` on the detector line x = 0)."""
     t = flyby_truth_time(line, rates)
     x = V_KM_S * t * 1000.0
     y_mm = (sample * sample_summing + start_sample - 100.0) * PITCH_MM
+    if radial is not None:
+        k0, k1, k2 = radial
+        y_mm = y_mm * (1 - k0 - k1 * y_mm**2 - k2 * y_mm**4)
     d = np.stack([np.zeros_like(y_mm), -y_mm, -np.full_like(y_mm, F_MM)], axis=1)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     s = np.stack([x, np.zeros_like(x), np.full_like(x, (R_KM + H_KM) * 1000.0)], axis=1)
@@ -174,6 +178,7 @@ VARIANTS = {
     "body-fixed-positions": {"j2000_rotation_deg": 30.0, "body_fixed": True},
     "no-velocities": {"velocities": False, "order": 6},
     "quaternion-signs": {"j2000_rotation_deg": 50.0, "flip_signs": True},
+    "radial-distortion": {"distortion": {"radial": {"coefficients": [-0.007, 3e-4, 2e-6]}}},
 }
 
 
@@ -188,7 +193,9 @@ def test_flyby_closed_form(variant, interpolation):
     n_samples = 200 if kw.get("sample_summing", 1) == 1 else 90
     samples = rng.uniform(0, n_samples, n)
     h = rng.uniform(-500, 3000, n)
-    truth = flyby_ground(lines, samples, h, kw.get("rates"), kw.get("sample_summing", 1), kw.get("start_sample", 0.0))
+    radial = kw["distortion"]["radial"]["coefficients"] if "distortion" in kw else None
+    truth = flyby_ground(lines, samples, h, kw.get("rates"), kw.get("sample_summing", 1), kw.get("start_sample", 0.0),
+                         radial)
     g = cam.image_to_ground(lines, samples, h)
     assert g.hit.all()
     np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
