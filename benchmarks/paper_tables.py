@@ -1,6 +1,6 @@
 """The papers' published numbers, as data, for ``benchmarks/reproduce_papers.py`` and ``docs/results.md``.
 
-Transcribed from the text extractions in ``/work/shared/papers`` (see its README.md).  Every table cites
+Transcribed from text extractions of the five papers (cited by title and year with each table).  Every table cites
 its paper, table number and page.  The Remote Sensing paper's extraction keeps page anchors
 (``#page-N-0``, 0-based), so its pages are PDF pages; the other extractions carry no page marks, so only
 the journal page range is given.  Where the extraction garbled or lost a number it is ``None`` and the

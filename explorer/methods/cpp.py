@@ -1,7 +1,8 @@
 """Central perspective plane (CPP) best-scanline search (Wang, Hu, Li, Pan 2009,
 Photogramm. Eng. Remote Sens. 75:1059-1067), as described in the introductions of
-Ahooei Nezhad et al. (2024), Remote Sensing 16:2787 and (2024) Sensors 24:5594
-(``/work/shared/papers/000_*.txt``, ``001_*.txt``).
+Ahooei Nezhad et al., "Best Scanline Determination of Pushbroom Images for a Direct Object to
+Image Space Transformation Using Multilayer Perceptron" (2024, Remote Sensing 16:2787) and "A Linear
+Regression Approach for Best Scanline Determination" (2024, Sensors 24:5594).
 
 The central perspective plane of scanline ``t`` is the plane through the perspective
 centre ``S(t)`` that contains the lines of sight of the whole detector line.  For a

@@ -1,6 +1,7 @@
 """General (generalized) distance prediction, GDP (Geng, Xu, Xing, Lan 2019, Earth and
 Space Science 6:1805-1830), as described in the introduction of Ahooei Nezhad et al.
-(2024), Remote Sensing 16:2787 (``/work/shared/papers/000_*.txt``).
+(2024), "Best Scanline Determination of Pushbroom Images for a Direct Object to Image Space
+Transformation Using Multilayer Perceptron", Remote Sensing 16:2787.
 
 The ground point is back-projected with the exterior orientation of the **first**
 scanline; the "generalized distance" between the back-projected image point and the

@@ -1,6 +1,6 @@
 """Hybrid object-space best-scanline determination (Jannati 2012), as summarised by
 Ahooei Nezhad, Valadan Zoej and Jannati (2020), J. Geospatial Information Technology
-8(1), section 2-4 and eq. 4 (``/work/shared/papers/003_*.txt``).
+8(1), section 2-4 and eq. 4 ("Accuracy improvement of best scanline search algorithms", 2020).
 
 The method is not an iterative search; the best scanline of a ground point is
 determined in three stages:

@@ -1,7 +1,7 @@
 """``nn-rfm``: the hybrid neural network + RFM model of Habib et al. (2018).
 
 Paper: A. Habib, Z. Weshahy, M. El-Ghazaly, A. El-Shehaby, "Geometric Correction of High
-Resolution Satellite Imagery Using Hybrid Non-parametric Model" (``/work/shared/papers/004_*.txt``).
+Resolution Satellite Imagery Using Hybrid Non-parametric Model" (2018).
 Irregularly distributed control points (572 points matched automatically against an orthophoto,
 heights from a DTM) train a "downward" multilayer perceptron image -> ground (4 hidden layers,
 32 neurons, tanh or logistic sigmoid, MATLAB toolbox); the network then predicts the ground
