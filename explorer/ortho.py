@@ -22,10 +22,15 @@ import dask.array as da
 import numpy as np
 import pyproj
 
+from explorer.geometry.dem_intersection import heights_at
 from explorer.geometry.terrain import FlatTerrain, GridDEM
 from explorer.scene import Scene
+from explorer.terrain_io import height_grid_of
 
 NODATA = np.float32(-9999.0)
+
+#: Source pixels per block when rendering a synthetic source (bounds the temporaries to a few hundred MB).
+BLOCK_PIXELS = 1 << 21
 
 
 # ----------------------------------------------------------------------------- output grid
@@ -147,9 +152,15 @@ class RPCProjector:
         self.height = height
         self.dem = dem
         self.image_shape = tuple(int(v) for v in image_shape)
+        self._grid = height_grid_of(dem) if dem is not None else None
 
     def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        h = np.full(lon.shape, float(self.height)) if self.dem is None else self.dem.height(lon, lat)
+        if self.dem is None:
+            h = np.full(lon.shape, float(self.height))
+        elif self._grid is not None:  # the compiled bilinear lookup of the DEM kernel
+            h = heights_at(self._grid, lon, lat).reshape(np.shape(lon))
+        else:
+            h = self.dem.height(lon, lat)
         ok = np.isfinite(h)
         row = np.full(lon.shape, np.nan)
         col = np.full(lon.shape, np.nan)
@@ -216,15 +227,67 @@ class SourceImage:
 
 
 # ------------------------------------------------------------------------------ rendering
+#: Output pixels between the nodes where the map projection is evaluated exactly (see :func:`block_lonlat`).
+LONLAT_STEP = 16
+
+#: Largest interpolation error of :func:`block_lonlat` accepted, in output pixels (else every pixel is exact).
+LONLAT_TOLERANCE_PX = 1e-4
+
+
+def block_lonlat(grid: OrthoGrid, rows: slice, cols: slice, step: int = LONLAT_STEP) -> tuple[np.ndarray, np.ndarray]:
+    """Longitude and latitude (degrees) of the pixel centres of a block, shape (len(rows), len(cols)).
+
+    The map projection (PROJ) is evaluated exactly every ``step`` pixels (and on the block's last row and
+    column) and interpolated bilinearly in between; the interpolation error is measured on the centres of
+    the interpolation cells and when it exceeds :data:`LONLAT_TOLERANCE_PX` output pixels the whole block
+    is projected pixel by pixel.  (UTM over 16 pixels of 0.5 m: about 1e-6 pixel.)
+    """
+    to_geo = pyproj.Transformer.from_crs(grid.epsg, 4326, always_xy=True)
+    n_r, n_c = rows.stop - rows.start, cols.stop - cols.start
+    if step <= 1 or n_r < 2 * step or n_c < 2 * step:
+        e, n = grid.pixel_centres(rows, cols)
+        lon, lat = to_geo.transform(e, n)
+        return np.asarray(lon), np.asarray(lat)
+    ri = np.unique(np.append(np.arange(0, n_r, step), n_r - 1))
+    ci = np.unique(np.append(np.arange(0, n_c, step), n_c - 1))
+    e_n = grid.x0 + (cols.start + ci + 0.5) * grid.gsd
+    n_n = grid.y0 - (rows.start + ri + 0.5) * grid.gsd
+    node_lon, node_lat = (np.asarray(v) for v in to_geo.transform(*np.meshgrid(e_n, n_n)))
+
+    def interpolate(values: np.ndarray, r: np.ndarray, c: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(ri, r, side="right") - 1, 0, ri.size - 2)
+        j = np.clip(np.searchsorted(ci, c, side="right") - 1, 0, ci.size - 2)
+        wr = ((r - ri[i]) / (ri[i + 1] - ri[i]))[:, None]
+        wc = ((c - ci[j]) / (ci[j + 1] - ci[j]))[None, :]
+        ii, jj = i[:, None], j[None, :]
+        return ((1 - wr) * ((1 - wc) * values[ii, jj] + wc * values[ii, jj + 1])
+                + wr * ((1 - wc) * values[ii + 1, jj] + wc * values[ii + 1, jj + 1]))
+
+    # the check: exact vs interpolated at the centres of the interpolation cells
+    rm = 0.5 * (ri[:-1] + ri[1:])
+    cm = 0.5 * (ci[:-1] + ci[1:])
+    e_m = grid.x0 + (cols.start + cm + 0.5) * grid.gsd
+    n_m = grid.y0 - (rows.start + rm + 0.5) * grid.gsd
+    mid_lon, mid_lat = (np.asarray(v) for v in to_geo.transform(*np.meshgrid(e_m, n_m)))
+    err_m = np.hypot((interpolate(node_lon, rm, cm) - mid_lon) * 111_320.0 * np.cos(np.radians(mid_lat)),
+                     (interpolate(node_lat, rm, cm) - mid_lat) * 110_574.0)
+    if not np.all(err_m <= LONLAT_TOLERANCE_PX * grid.gsd):
+        e, n = grid.pixel_centres(rows, cols)
+        lon, lat = to_geo.transform(e, n)
+        return np.asarray(lon), np.asarray(lat)
+    r_all = np.arange(n_r, dtype=np.float64)
+    c_all = np.arange(n_c, dtype=np.float64)
+    return interpolate(node_lon, r_all, c_all), interpolate(node_lat, r_all, c_all)
+
+
 def render_block(projector: Projector, source: SourceImage, grid: OrthoGrid, rows: slice, cols: slice) -> np.ndarray:
     """Orthoimage block (len(rows), len(cols)) float32; :data:`NODATA` outside the footprint."""
-    e, n = grid.pixel_centres(rows, cols)
-    to_geo = pyproj.Transformer.from_crs(grid.epsg, 4326, always_xy=True)
-    lon, lat = to_geo.transform(e.ravel(), n.ravel())
-    row, col, valid = projector.locate(np.asarray(lon), np.asarray(lat))
+    lon, lat = block_lonlat(grid, rows, cols)
+    shape = lon.shape
+    row, col, valid = projector.locate(lon.ravel(), lat.ravel())
     values = source.sample_bilinear(row, col, valid)
     out = np.where(valid & np.isfinite(values), values, NODATA).astype(np.float32)
-    return out.reshape(e.shape)
+    return out.reshape(shape)
 
 
 def ortho_dask_array(projector: Projector, source: SourceImage, grid: OrthoGrid, chunk: int = 2048) -> da.Array:
@@ -371,6 +434,7 @@ def render_synthetic_source(
     arr = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=tuple(shape))
     to_utm = pyproj.Transformer.from_crs(4326, pattern.epsg, always_xy=True)
     cols = np.arange(shape[1], dtype=np.float64)
+    block_rows = max(1, min(block_rows, BLOCK_PIXELS // max(1, shape[1])))  # bounded memory per block
     for r0 in range(0, shape[0], block_rows):
         r1 = min(r0 + block_rows, shape[0])
         rr, cc = np.meshgrid(np.arange(r0, r1, dtype=np.float64), cols, indexing="ij")

@@ -100,6 +100,10 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         shape = scene.shape
         lon, lat, _ = scene.frame.enu_to_geodetic(scene.footprint())
         to_lonlat = scene_image_to_lonlat(scene)
+    if dem is not None:
+        from explorer.terrain_io import height_grid_of, require_coverage
+
+        require_coverage(height_grid_of(dem), lon, lat, "the image footprint", str(args.dem))
     from explorer.geometry.frames import LocalFrame
 
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()

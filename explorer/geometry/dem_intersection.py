@@ -54,6 +54,7 @@ __all__ = [
     "OUTSIDE_DEM",
     "TILE",
     "HeightGrid",
+    "heights_at",
     "intersect_rays",
     "intersect_segments",
 ]
@@ -439,6 +440,41 @@ else:  # pragma: no cover - numba missing: the same code, interpreted (slow, sam
 
 first_hit = _first_hit
 cell_hit = _cell_hit
+
+
+def _heights_loop_py(h, x0, y0, dx, dy, x, y, out):
+    for k in prange(x.shape[0]):
+        z, _du, _dv, flag = bilinear(h, (x[k] - x0) / dx, (y[k] - y0) / dy)
+        out[k] = z if flag == OK else math.nan
+
+
+if NUMBA_AVAILABLE:
+    _heights_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_heights_loop_py)
+else:  # pragma: no cover
+    _heights_loop = _heights_loop_py
+
+
+def heights_at(grid: HeightGrid, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear heights (N,) at horizontal positions (N,) (compiled); NaN outside the grid or next to no-data.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+    x, y : ndarray, shape (N,)
+        Same horizontal coordinates as the grid (metres of a local frame, or degrees).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Metres.
+    """
+    x = np.ascontiguousarray(np.ravel(x), dtype=np.float64)
+    y = np.ascontiguousarray(np.ravel(y), dtype=np.float64)
+    out = np.empty(x.shape[0])
+    for start in range(0, x.shape[0], CHUNK):
+        sl = slice(start, min(start + CHUNK, x.shape[0]))
+        _heights_loop(grid.heights, grid.x0, grid.y0, grid.dx, grid.dy, x[sl], y[sl], out[sl])
+    return out
 
 
 def intersect_segments(
