@@ -195,8 +195,12 @@ class Scene:
         terrain: Terrain | None = None,
         *,
         height: np.ndarray | float | None = None,
-    ) -> np.ndarray:
+        return_flags: bool = False,
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Intersect lines of sight with the terrain.
+
+        On a DEM the first intersection from the sensor is found by the compiled cell walk of
+        :mod:`explorer.geometry.dem_intersection` (exact on the bilinear surface).
 
         Parameters
         ----------
@@ -206,19 +210,28 @@ class Scene:
             Defaults to the scene's terrain.
         height : float or ndarray (N,), optional
             Intersect with the plane(s) Z = height instead (exact).
+        return_flags : bool
+            Also return a flag per point (int8; ``explorer.geometry.dem_intersection``: 0 OK, 1 outside
+            the DEM, 2 no-data, 3 no intersection).
 
         Returns
         -------
         ndarray, shape (N, 3)
             Ground points, metres; NaN rows where a DEM is missed (outside or no-data).
+        flags : ndarray of int8, shape (N,)
+            With ``return_flags``.
         """
         origin, direction = self.rays(row, col)
-        if height is not None:
-            return intersect_plane(origin, direction, check_finite(height, "height"))
+        if height is not None or isinstance(self.terrain if terrain is None else terrain, FlatTerrain):
+            h = check_finite(height, "height") if height is not None else (self.terrain if terrain is None
+                                                                          else terrain).height_m
+            points = intersect_plane(origin, direction, h)
+            if not return_flags:
+                return points
+            return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
         terrain = self.terrain if terrain is None else terrain
-        if isinstance(terrain, FlatTerrain):
-            return intersect_plane(origin, direction, terrain.height_m)
-        return intersect_dem(origin, direction, terrain)
+        points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
+        return (points, flags) if return_flags else points
 
     def footprint(self, height: float | None = None) -> np.ndarray:
         """Ground corners of the image at a height (default: mean terrain height), shape (4, 3).
