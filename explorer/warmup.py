@@ -47,7 +47,7 @@ def _rpc_for_warmup():
 
 def _warm_rpc() -> None:
     from explorer.geometry.dem_intersection import HeightGrid, intersect_segments
-    from explorer.rpc import _kernels
+    from explorer.rpc import project_compiled
     from explorer.rpc.inverse import RPCInverse
 
     rpc = _rpc_for_warmup()
@@ -60,7 +60,7 @@ def _warm_rpc() -> None:
     norm = (rpc.lon_offset, rpc.lon_scale, rpc.lat_offset, rpc.lat_scale, rpc.height_offset, rpc.height_scale,
             rpc.row_offset, rpc.row_scale, rpc.col_offset, rpc.col_scale)
     for parallel in (False, True):  # both loops (the choice is made by size in projection)
-        _kernels.project(lon, lat, h, (rpc.row_num, rpc.row_den, rpc.col_num, rpc.col_den), norm, parallel=parallel)
+        project_compiled(lon, lat, h, (rpc.row_num, rpc.row_den, rpc.col_num, rpc.col_den), norm, parallel=parallel)
     # a lon/lat DEM over the scene: smooth hills, one no-data node
     lons = np.linspace(4.98, 5.02, 41)
     lats = np.linspace(45.012, 44.988, 25)

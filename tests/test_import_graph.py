@@ -215,3 +215,33 @@ def test_the_model_layers_never_import_gui_libraries(library):
         if dotted == library or dotted.startswith(library + ".")
     ]
     assert offenders == []
+
+
+#: Private modules of the package root that every subpackage may use (the package's own infrastructure).
+SHARED_PRIVATE = {"explorer._numba", "explorer._lazy", "explorer._resources", "explorer._log"}
+
+
+def _package_of(module: str) -> str:
+    """``explorer.geometry.kernels.exact`` -> ``explorer.geometry``; top-level modules are their own package."""
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def test_private_names_stay_in_their_package():
+    """``from explorer.<pkg>... import _name`` (or of a ``_module``) only from inside ``explorer.<pkg>``."""
+    files = module_files()
+    offenders = []
+    for name, path in files.items():
+        for dotted, line in imported_names(name, path):
+            if not dotted.startswith("explorer."):
+                continue
+            parts = dotted.split(".")
+            private = [k for k, p in enumerate(parts) if p.startswith("_") and not p.startswith("__")]
+            if not private:
+                continue
+            owner = ".".join(parts[: max(private[0], 2)])  # the package (or root module) the name belongs to
+            if owner in SHARED_PRIVATE:
+                continue
+            if _package_of(name) != _package_of(owner):
+                offenders.append(f"{name}:{line} imports {dotted}")
+    assert offenders == []

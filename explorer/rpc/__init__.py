@@ -4,6 +4,7 @@ Pixel convention: 0-based rows/columns, integer = pixel centre (see ``docs/conve
 and ``docs/rpc.md``).
 """
 
+from explorer.rpc._kernels import project as project_compiled
 from explorer.rpc.model import (
     ConvergenceError,
     InverseRFM,
@@ -31,6 +32,7 @@ __all__ = [
     "RationalFunctionModel",
     "ValidityDomain",
     "detect_format",
+    "project_compiled",
     "read_dg_rpb",
     "read_dg_xml",
     "read_dimap_v1",
