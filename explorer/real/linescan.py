@@ -41,7 +41,7 @@ from explorer.geometry.exterior import LineTiming
 from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
-from explorer.geometry.terrain import terrain_from_dict
+from explorer.geometry.terrain import FlatTerrain, Terrain, intersect_dem, intersect_plane, terrain_from_dict
 from explorer.real.mpc_fit import mpc_scene_from_sensor
 from explorer.scene import RIGOROUS_SCENE_FORMAT, Scene
 
@@ -507,26 +507,32 @@ class RigorousLineScanScene(Scene):
             d /= np.linalg.norm(d, axis=1, keepdims=True)
         return centre, d
 
-    def image_to_ground(self, row, col, terrain=None, *, height=None):  # noqa: D417 - as Scene
+    def image_to_ground(
+        self,
+        row: np.ndarray,
+        col: np.ndarray,
+        terrain: Terrain | None = None,
+        *,
+        height: np.ndarray | float | None = None,
+        return_flags: bool = False,
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """As :meth:`Scene.image_to_ground`; the corrected lines of sight are evaluated at the
         intersection height (one extra pass on a DEM), so refraction is exact there too."""
-        from explorer.geometry.terrain import FlatTerrain, intersect_dem, intersect_plane
-
-        if height is not None:
-            h = check_finite(height, "height")
-            origin, direction = self.rays(row, col, height=h)
-            return intersect_plane(origin, direction, h)
         terrain = self.terrain if terrain is None else terrain
-        if isinstance(terrain, FlatTerrain):
-            origin, direction = self.rays(row, col, height=terrain.height_m)
-            return intersect_plane(origin, direction, terrain.height_m)
-        origin, direction = self.rays(row, col, height=terrain.mean_height)
-        first = intersect_dem(origin, direction, terrain)
-        if not self.refraction:
-            return first
-        h = np.where(np.isfinite(first[:, 2]), first[:, 2], terrain.mean_height)
-        origin, direction = self.rays(row, col, height=h)
-        return intersect_dem(origin, direction, terrain)
+        if height is not None or isinstance(terrain, FlatTerrain):
+            h = check_finite(np.asarray(height, dtype=np.float64), "height") if height is not None else \
+                terrain.height_m
+            origin, direction = self.rays(row, col, height=h)
+            points = intersect_plane(origin, direction, h)
+            flags = np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
+        else:
+            origin, direction = self.rays(row, col, height=terrain.mean_height)
+            points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
+            if self.refraction:
+                h = np.where(np.isfinite(points[:, 2]), points[:, 2], terrain.mean_height)
+                origin, direction = self.rays(row, col, height=h)
+                points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
+        return (points, flags) if return_flags else points
 
     # ------------------------------------------------------------ description
     def describe_dict(self) -> dict:
