@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from explorer.errors import SceneFileError
-from explorer.geometry.exterior import ExteriorOrientation, LineTiming
+from explorer.geometry.exterior import ExteriorOrientation, Jitter, LineTiming
 from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
@@ -74,7 +74,7 @@ def enu_to_body_fixed(scene: Scene, enu: np.ndarray) -> np.ndarray:
 
 
 def scene_from_isd(path: str | Path, *, degree: int = 3, interior_degree: int = 7, margin_rows: float = 64.0,
-                   n_check: int = 2000, seed: int = 0, interpolation: str = "usgscsm") -> Scene:
+                   n_check: int = 2000, seed: int = 0, interpolation: str = "usgscsm", harmonics: int = 0) -> Scene:
     """MPC :class:`~explorer.scene.Scene` of a CSM line-scan ISD (see the module docstring).
 
     Parameters
@@ -94,6 +94,12 @@ def scene_from_isd(path: str | Path, *, degree: int = 3, interior_degree: int = 
         Seed of the check points.
     interpolation : {"usgscsm", "tables"}
         Passed to :func:`~explorer.real.csm.read_isd`.
+    harmonics : int
+        Sinusoids per angle (the project's attitude jitter terms, frequencies ``k / T`` for
+        ``k = 1 .. harmonics`` over the fitted span ``T``) fitted to what the polynomials leave of the
+        attitude (default 0: none).  They follow attitude wander the polynomials cannot (CTX: 0.48 ->
+        about 0.1 px with 20), at the cost of slower methods (more than 8 terms leave the compiled
+        fixed evaluator).
 
     Returns
     -------
@@ -103,14 +109,15 @@ def scene_from_isd(path: str | Path, *, degree: int = 3, interior_degree: int = 
     """
     camera = read_isd(path, interpolation=interpolation)
     return scene_from_camera(camera, degree=degree, interior_degree=interior_degree, margin_rows=margin_rows,
-                             n_check=n_check, seed=seed)
+                             n_check=n_check, seed=seed, harmonics=harmonics)
 
 
 def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: int = 7, margin_rows: float = 64.0,
-                      n_check: int = 2000, seed: int = 0) -> Scene:
+                      n_check: int = 2000, seed: int = 0, harmonics: int = 0) -> Scene:
     """:func:`scene_from_isd` for an already read :class:`~explorer.real.csm.CsmCamera`."""
-    if degree < 1 or interior_degree < 1:
-        raise ValueError(f"degree and interior_degree must be >= 1, got {degree}, {interior_degree}")
+    if degree < 1 or interior_degree < 1 or harmonics < 0:
+        raise ValueError(f"degree and interior_degree must be >= 1 and harmonics >= 0, got {degree}, "
+                         f"{interior_degree}, {harmonics}")
     cam = camera
     n_rows, n_cols = cam.n_lines, cam.n_samples
     # ---- frame: ENU at the ground point of the image centre
@@ -160,7 +167,7 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
     t_ref = float(cam.line_time(np.array([ref_row + 0.5]))[0])
     timing = LineTiming(period, ref_row)
     # ---- exterior: sampled and fitted
-    rows = np.linspace(-0.5 - margin_rows, n_rows - 0.5 + margin_rows, 40 * (degree + 1) + 1)
+    rows = np.linspace(-0.5 - margin_rows, n_rows - 0.5 + margin_rows, 40 * (degree + 1 + 2 * harmonics) + 1)
     tau = (rows - ref_row) * period
     t_csm = cam.line_time(rows + 0.5)
     centres, rot = cam.exterior(t_csm)
@@ -171,7 +178,21 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
     t_scale = float(np.max(np.abs(tau)))
     pos_c = np.stack([_scaled_fit(tau, pos_enu[:, k], degree, t_scale) for k in range(3)])
     att_c = np.stack([_scaled_fit(tau, angles[k], degree, t_scale) for k in range(3)])
-    exterior = ExteriorOrientation(pos_c, att_c)
+    jitter = []
+    if harmonics:
+        span = float(tau[-1] - tau[0])
+        freqs = np.arange(1, harmonics + 1) / span
+        basis = [np.ones_like(tau)] + [(tau / t_scale) ** j for j in range(1, degree + 1)]
+        for f in freqs:
+            basis += [np.sin(2 * np.pi * f * tau), np.cos(2 * np.pi * f * tau)]
+        design = np.column_stack(basis)
+        for k, name in enumerate(("omega", "phi", "kappa")):
+            coef, *_ = np.linalg.lstsq(design, angles[k], rcond=None)
+            att_c[k] = coef[: degree + 1] / t_scale ** np.arange(degree + 1)
+            for j, f in enumerate(freqs):
+                a, b = coef[degree + 1 + 2 * j], coef[degree + 2 + 2 * j]  # a sin + b cos = A sin(w t + p)
+                jitter.append(Jitter(name, float(np.hypot(a, b)), float(f), float(np.arctan2(b, a))))
+    exterior = ExteriorOrientation(pos_c, att_c, jitter)
     meta = {
         "source": "usgscsm-isd", "isd": str(cam.source), "sensor": cam.metadata.get("sensor"),
         "platform": cam.metadata.get("platform"),

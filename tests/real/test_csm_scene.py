@@ -56,3 +56,18 @@ def test_ctx_scene_json_round_trip(ctx_scene, tmp_path):
     np.testing.assert_array_equal(back.image_to_ground(rows, cols, height=0.0),
                                   ctx_scene.image_to_ground(rows, cols, height=0.0))
     assert back.metadata["csm"]["semi_major_m"] == 3396190.0
+
+
+def test_ctx_harmonics_follow_the_attitude():
+    """Attitude sinusoids fitted to what the polynomials leave bring the CTX scene closer to the CSM camera,
+    and the exact methods stay exact on the scene (general evaluator: more than 8 jitter terms)."""
+    scene = scene_from_isd(DATA / "ctxLineScan.json", harmonics=20, n_check=500)
+    plain = scene_from_isd(DATA / "ctxLineScan.json", n_check=500)
+    assert scene.metadata["csm_fit"]["row_max_px"] < 0.5 * plain.metadata["csm_fit"]["row_max_px"]
+    assert scene.metadata["csm_fit"]["col_max_px"] < 0.5 * plain.metadata["csm_fit"]["col_max_px"]
+    rng = np.random.default_rng(1)
+    rows = rng.uniform(0, scene.n_rows - 1, 2000)
+    cols = rng.uniform(0, scene.n_columns - 1, 2000)
+    ground = scene.image_to_ground(rows, cols, height=0.0)
+    res = create("exact", scene).ground_to_image(ground)
+    assert res.valid.all() and np.max(np.abs(res.row - rows)) <= 1e-6 and np.max(np.abs(res.col - cols)) <= 1e-6
