@@ -78,3 +78,10 @@ def check_affine_plus_correction(method, check: PointSet):
     assert rmse < method.fit_info["affine_rmse_px"]
     assert np.all(res.ce_evaluations == 1)
     return res
+
+
+def ce_counts(name: str, preset: str) -> tuple[int, np.ndarray]:
+    """(setup CE, CE per point) of method ``name`` on the :func:`scps_for` check points of ``preset``."""
+    method = create(name, scene_for(preset))
+    res = method.ground_to_image(scps_for(preset).ground)
+    return method.setup_ce, res.ce_evaluations

@@ -10,7 +10,7 @@ from explorer.errors import InputError
 from explorer.methods import create
 from explorer.methods.cpp import CentralPerspectivePlane
 from explorer.points import simulate_points
-from tests.methods.cases import curved_scene, scene_for, scps_for
+from tests.methods.cases import ce_counts, curved_scene, scene_for, scps_for
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
 
@@ -63,12 +63,8 @@ def test_ce_per_point_is_plausible(preset, max_ce):
     the 1e-7-row tolerance in 2-3 more: measured <= 4 plane evaluations, bound 5 (+1 column).  The
     strong, varying rates of ``agile`` change the spacing by a few per cent (first step up to ~130
     rows off), costing 2 more secant steps: measured <= 6, bound 7 (+1 column)."""
-    scene, scps = scene_for(preset), scps_for(preset)
-    method = create("cpp", scene)
-    res = method.ground_to_image(scps.ground)
-    assert method.setup_ce == 3
-    assert res.ce_evaluations.min() >= 2
-    assert res.ce_evaluations.max() <= max_ce
+    setup, ce = ce_counts("cpp", preset)
+    assert setup == 3 and ce.min() >= 2 and ce.max() <= max_ce
 
 
 def test_trace_converges_to_exact_row():

@@ -9,7 +9,7 @@ from explorer.errors import InputError
 from explorer.methods import create
 from explorer.methods.gdp import GeneralDistancePrediction
 from explorer.presets import preset_ids
-from tests.methods.cases import scene_for, scps_for
+from tests.methods.cases import ce_counts, scene_for, scps_for
 
 BAR_PX = 1e-6  # the issue's accuracy bar for exact methods
 SMOOTH_PRESETS = [p for p in preset_ids() if p != "agile"]
@@ -31,12 +31,8 @@ def test_ce_per_point_is_plausible(preset, max_ce):
     plus 0.5 of rounding: from the first line (<= 8300 lines away) 8300 -> 333 -> 14 -> 1.1 -> < 1,
     i.e. <= 4-5 predictions, + 1 neighbour + 1 column <= 7.  On ``agile`` the slope is up to 1.14
     (14 % left per prediction): 6000 -> 840 -> 118 -> 17 -> 2.9 -> < 1, 6 predictions, <= 9."""
-    scene, scps = scene_for(preset), scps_for(preset)
-    method = create("gdp", scene)
-    res = method.ground_to_image(scps.ground)
-    assert method.setup_ce == 0
-    assert res.ce_evaluations.min() >= 3
-    assert res.ce_evaluations.max() <= max_ce
+    setup, ce = ce_counts("gdp", preset)
+    assert setup == 0 and ce.min() >= 3 and ce.max() <= max_ce
 
 
 def test_trace_converges_to_exact_row():
