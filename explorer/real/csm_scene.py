@@ -19,7 +19,9 @@ method, the bench, the 3D view and the residual maps run on it:
   (``column_polynomial``, degree ``interior_degree``) and the along-track coordinate as a
   polynomial of it (``line_curvature``);
 * exterior: the CSM centres and camera rotations sampled along the image (plus a margin) and
-  fitted by polynomials of degree ``degree``.
+  fitted by polynomials of degree ``degree`` (default 3: the compiled fixed evaluator applies),
+  optionally plus ``harmonics`` sinusoids per attitude angle (the project's jitter terms) for the
+  attitude wander the polynomials cannot follow.
 
 The conversion is an approximation of the CSM camera by the MPC model; ``metadata["csm_fit"]``
 reports its size in pixels on check points the CSM camera generates (row: along-track
