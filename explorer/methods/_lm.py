@@ -515,7 +515,7 @@ def levenberg_marquardt(
         lambda theta: yt - net.forward(theta, xt),
         lambda theta: per_sample(theta, xt),
         theta0.detach().clone().to(device=dev, dtype=torch.float64),
-        validation_error=(lambda theta: torch.mean((yv - net.forward(theta, xv)) ** 2)) if xv.shape[0] else None,
+        validation_error=(lambda theta: float(torch.mean((yv - net.forward(theta, xv)) ** 2))) if xv.shape[0] else None,
         max_epochs=max_epochs, mu=mu, mu_dec=mu_dec, mu_inc=mu_inc, mu_max=mu_max, min_grad=min_grad, goal=goal,
         max_fail=max_fail,
     )

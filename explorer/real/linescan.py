@@ -415,6 +415,8 @@ class RigorousLineScanScene(Scene):
     refraction: bool = False
     epoch_utc: str = ""
     rpc: Any = field(default=None, repr=False, compare=False)
+    # interpolated tables with ExteriorOrientation's evaluation interface (position, velocity, rotation, angles)
+    exterior: LineScanExterior  # type: ignore[assignment]
 
     #: Capability: interpolated ephemeris and attitude tables, not MPC polynomials (no compiled kernels).
     has_polynomial_exterior: ClassVar[bool] = False
@@ -519,12 +521,16 @@ class RigorousLineScanScene(Scene):
         """As :meth:`Scene.image_to_ground`; the corrected lines of sight are evaluated at the
         intersection height (one extra pass on a DEM), so refraction is exact there too."""
         terrain = self.terrain if terrain is None else terrain
-        if height is not None or isinstance(terrain, FlatTerrain):
-            h = check_finite(np.asarray(height, dtype=np.float64), "height") if height is not None else \
-                terrain.height_m
+
+        def on_plane(h: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
             origin, direction = self.rays(row, col, height=h)
             points = intersect_plane(origin, direction, h)
-            flags = np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
+            return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
+
+        if height is not None:
+            points, flags = on_plane(check_finite(np.asarray(height, dtype=np.float64), "height"))
+        elif isinstance(terrain, FlatTerrain):
+            points, flags = on_plane(terrain.height_m)
         else:
             origin, direction = self.rays(row, col, height=terrain.mean_height)
             points, flags = intersect_dem(origin, direction, terrain, return_flags=True)

@@ -26,6 +26,13 @@ _C2, _C4, _C6, _C8, _C10 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 /
 FIXED_MAX_TERMS = 8  # most jitter sinusoids / distortion / curvature terms the fixed evaluator takes
 
 
+_A = np.ndarray
+#: :meth:`FixedModel.args`: ``P, V, A, AR, sc0, jn, jp, jt, js, jc, jt0, jinv_dt, dn, dist, cn, curv``.
+FixedArgs = tuple[_A, _A, _A, _A, _A, tuple, _A, _A, _A, _A, float, float, tuple, _A, tuple, _A]
+#: :meth:`CollinearityParams.model_args`: ``pos, dpos, att, datt, jitter, focal, offset, curv, dist, sc0, fast``.
+ModelArgs = tuple[_A, _A, _A, _A, _A, float, float, _A, _A, _A, bool]
+
+
 @dataclass(frozen=True)
 class FixedModel:
     """Arrays of the branch-free evaluator :func:`_ce_fixed_py` (see :meth:`CollinearityParams.fixed_model`).
@@ -53,7 +60,7 @@ class FixedModel:
     cn: tuple  # L + 1 zeros: the curvature term count
     curv: np.ndarray  # (max(L, 1),) c1, c2, ...
 
-    def args(self) -> tuple[Any, ...]:
+    def args(self) -> FixedArgs:
         """Positional arguments of :func:`_ce_fixed_py` after ``(X, Y, Z, t)`` (``focal, offset`` follow)."""
         return (
             self.P,
@@ -168,7 +175,7 @@ class CollinearityParams:
             interior=inner,
         )
 
-    def model_args(self, fast: bool = False) -> tuple[Any, ...]:
+    def model_args(self, fast: bool = False) -> ModelArgs:
         """Positional arguments of :func:`_collinearity_point_py` after ``(X, Y, Z, t)``."""
         return (
             self.pos,
