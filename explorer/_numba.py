@@ -5,15 +5,21 @@ their numpy fallbacks."""
 from __future__ import annotations
 
 import os
+from typing import Any
 
 _DISABLED = os.environ.get("EXPLORER_DISABLE_NUMBA", "").strip() not in ("", "0")
+# Typed Any: the kernels are called with numpy arrays and tuples that numba's own annotations do not describe.
+numba: Any
+njit: Any
+prange: Any
+overload: Any
 try:
     if _DISABLED:
         raise ImportError("numba disabled by EXPLORER_DISABLE_NUMBA")
-    import numba
-    from numba import njit, prange
-    from numba.extending import overload
+    import numba as _numba_module
+    from numba.extending import overload as _numba_overload
 
+    numba, njit, prange, overload = _numba_module, _numba_module.njit, _numba_module.prange, _numba_overload
     NUMBA_AVAILABLE = True
 except ImportError:  # pragma: no cover - exercised only without numba
     numba = None
@@ -21,10 +27,13 @@ except ImportError:  # pragma: no cover - exercised only without numba
     NUMBA_AVAILABLE = False
     prange = range
 
-    def njit(*args, **kwargs):  # noqa: D103 - identity decorator when numba is missing
+    def _identity_njit(*args: Any, **kwargs: Any) -> Any:
+        """Identity decorator when numba is missing (``@njit`` and ``@njit(...)`` forms)."""
         if args and callable(args[0]):
             return args[0]
         return lambda f: f
+
+    njit = _identity_njit
 
 
 __all__ = ["NUMBA_AVAILABLE", "njit", "numba", "overload", "prange"]

@@ -54,7 +54,8 @@ class InteriorOrientation:
     focal_length_m: float
     detector_pitch_m: float
     n_columns: int
-    principal_column: float | None = None
+    # None (the default) means the image centre; always a float after __post_init__
+    principal_column: float = None  # type: ignore[assignment]
     along_track_offset_m: float = 0.0
     line_curvature: tuple[float, ...] = field(default_factory=tuple)
     radial_distortion: tuple[float, ...] = field(default_factory=tuple)
