@@ -251,9 +251,13 @@ def quaternion_at(times, quats, t, mode, max_order, q):
     """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` into ``q`` (4,).
 
     ``mode`` 0: slerp between the two samples around ``t`` (linear extrapolation of the angle
-    beyond the table); 1: Lagrange on the components (usgscsm), renormalised.
+    beyond the table); 1: Lagrange on the components (usgscsm), renormalised.  (The Lagrange windows
+    are built per call: for many times use the kernels with :func:`window_tables` built once.)
     """
-    win, den = window_tables(times, max_order)
+    if mode == 1:
+        win, den = window_tables(times, max_order)
+    else:  # slerp needs no window
+        win, den = np.zeros((1, 2), np.int64), np.zeros((1, 8))
     q[0], q[1], q[2], q[3] = _quat(times, quats, win, den, t, mode)
 
 
