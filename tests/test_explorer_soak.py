@@ -88,6 +88,8 @@ def test_clients_leaving_free_their_memory():
             _wait_trim(app, app.trimmer.trims + 1)  # the explorer hands freed memory back after the last left
             gc.collect()
             end = rss_bytes()
+            print(f"soak: idle {idle / 2**20:.1f} MiB, after {ROUNDS} x {CLIENTS} clients {end / 2**20:.1f} MiB, "
+                  f"peaks {[round(p / 2**20) for p in peaks]} MiB")
             assert end <= 1.10 * idle, (
                 f"resident memory {end / 2**20:.1f} MiB after {ROUNDS} x {CLIENTS} clients, idle "
                 f"{idle / 2**20:.1f} MiB (peaks {[round(p / 2**20) for p in peaks]} MiB)")

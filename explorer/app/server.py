@@ -52,16 +52,21 @@ def release_freed_memory() -> bool:
 
 MALLOC_ARENAS = 2
 """glibc malloc arenas the serving process may use (``mallopt(M_ARENA_MAX)``)."""
+MMAP_THRESHOLD = 1 << 20
+"""Allocations from this size (bytes) get their own mapping, returned on free (``M_MMAP_THRESHOLD``)."""
 
 
-def limit_malloc_arenas(n: int = MALLOC_ARENAS) -> bool:
-    """Cap glibc's malloc arenas at ``n`` for the threads created from now on.
+def limit_malloc_arenas(n: int = MALLOC_ARENAS, mmap_threshold: int = MMAP_THRESHOLD) -> bool:
+    """Tune glibc's allocator for a server whose browsers come and go.
 
-    The websocket server encodes the scene for each browser on pool threads; glibc gives threads
-    their own arenas (up to 8 per core), and freed memory scattered over many arenas is neither
-    reused nor returned, so the resident memory grew by ~40 % over 500 browser visits.  With two
-    arenas and :func:`release_freed_memory` after browsers leave it returns to within a few per cent
-    of idle (``tests/test_explorer_soak.py``).  False where there is no glibc.
+    Each browser is sent the whole scene (plotly.js alone is 3.5 MB) in buffers freed when it
+    leaves.  glibc (a) gives threads their own arenas (up to 8 per core) and (b) after freeing a
+    large mapped block raises its mmap threshold, so later large buffers come from the heap and
+    fragment it; freed memory is then neither reused nor returned.  Over 500 browser visits the
+    resident memory grew by ~40 % (plateauing ~11 % above idle with the arenas capped alone).  Two
+    arenas (``M_ARENA_MAX``) and a fixed 1 MiB mmap threshold (which also stops the dynamic
+    raise), with :func:`release_freed_memory` after browsers leave, keep it within ~2 % of idle
+    (``tests/test_explorer_soak.py``).  False where there is no glibc.
     """
     import ctypes
     import ctypes.util
@@ -70,7 +75,9 @@ def limit_malloc_arenas(n: int = MALLOC_ARENAS) -> bool:
     if not name:
         return False
     try:
-        return bool(ctypes.CDLL(name).mallopt(-8, int(n)))  # M_ARENA_MAX = -8
+        libc = ctypes.CDLL(name)
+        ok = libc.mallopt(-8, int(n))  # M_ARENA_MAX
+        return bool(ok and libc.mallopt(-3, int(mmap_threshold)))  # M_MMAP_THRESHOLD
     except (OSError, AttributeError):
         return False
 
