@@ -344,7 +344,12 @@ class CsmCamera:
         return self.rate_times[k] + self.rate_periods[k] * (line - self.rate_lines[k] + 0.5)
 
     def time_line(self, t: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`line_time` (the line whose centre is exposed at time ``t``)."""
+        """Inverse of :meth:`line_time` (the line whose centre is exposed at time ``t``).
+
+        With several rates usgscsm's map is not monotonic: each ``line_scan_rate`` row gives its line's
+        start time and the formula adds half a line, so the time steps back by ``(dt_(k-1) - dt_k) / 2``
+        at a change to a faster rate; there the later segment's line is returned.
+        """
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         starts = self.rate_times  # the time of line_k - 0.5 ... times increase with the table
         k = np.clip(np.searchsorted(starts + 0.5 * self.rate_periods, t, side="right") - 1, 0, None)

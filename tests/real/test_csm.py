@@ -308,3 +308,15 @@ def test_not_json(tmp_path):
     p.write_text(json.dumps([1, 2]))
     with pytest.raises(SceneFileError, match="JSON object"):
         read_isd(p)
+
+
+def test_line_time_two_rates_closed_form():
+    rates = VARIANTS["two-rates"]["rates"]
+    cam = camera_from_isd(flyby_isd(rates=rates), source="two-rates")
+    lines = np.array([0.0, 0.5, 100.0, 200.4, 200.5, 200.6, 399.5, 400.0])
+    np.testing.assert_allclose(cam.line_time(lines), flyby_truth_time(lines, rates), rtol=0, atol=1e-12)
+    # usgscsm's map steps back by half a line of the rate change at 200.5 (each rate row times its line's
+    # start, the formula its centre): the inverse is unique away from the last half line before it
+    unique = lines != 200.4
+    np.testing.assert_allclose(cam.time_line(cam.line_time(lines[unique])), lines[unique], rtol=0, atol=1e-9)
+    assert cam.line_time(np.array([200.4]))[0] > cam.line_time(np.array([200.5]))[0]
