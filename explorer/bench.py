@@ -308,7 +308,7 @@ def run_one(
 def plan_runs(presets: Sequence[str], methods: Sequence[str], scops: Sequence[int]) -> list[tuple[str, str, int]]:
     """The ``(preset, method, n_scops)`` runs, search methods once per preset with ``n_scops`` 0."""
     reg = registry()
-    runs = []
+    runs: list[tuple[str, str, int]] = []
     for p in presets:
         for m in methods:
             if reg[m].needs_fit:

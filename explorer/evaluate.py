@@ -31,9 +31,9 @@ class Evaluation:
     converged_frac: float
     valid_frac: float
     ce_evals_max: int = 0
-    residual_row: np.ndarray = field(repr=False, default=None)
-    residual_col: np.ndarray = field(repr=False, default=None)
-    evaluated_index: np.ndarray = field(repr=False, default=None)
+    residual_row: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    residual_col: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    evaluated_index: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def summary(self) -> dict:
         """JSON-ready dict without the per-point arrays."""

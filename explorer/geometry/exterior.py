@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from explorer.geometry.rotations import rotation_from_opk
 
@@ -174,7 +175,7 @@ class LineTiming:
         if not self.line_period_s > 0:
             raise ValueError(f"line_period_s must be positive, got {self.line_period_s}")
 
-    def scanline_time(self, row: np.ndarray) -> np.ndarray:
+    def scanline_time(self, row: ArrayLike) -> np.ndarray:
         """Row (N,) -> exposure time (N,), seconds."""
         return (np.asarray(row, dtype=np.float64) - self.reference_row) * self.line_period_s
 

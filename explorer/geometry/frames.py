@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -18,7 +19,7 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 WGS84_B = WGS84_A * (1.0 - WGS84_F)
 
 
-def geodetic_to_ecef(lon_deg: np.ndarray, lat_deg: np.ndarray, h: np.ndarray) -> np.ndarray:
+def geodetic_to_ecef(lon_deg: ArrayLike, lat_deg: ArrayLike, h: ArrayLike) -> np.ndarray:
     """WGS84 geodetic (degrees, metres above the ellipsoid) -> ECEF, shape (N, 3), metres."""
     lon = np.radians(np.asarray(lon_deg, dtype=np.float64))
     lat = np.radians(np.asarray(lat_deg, dtype=np.float64))

@@ -184,7 +184,7 @@ class InteriorOrientation:
             focal_length_m=float(d["focal_length_m"]),
             detector_pitch_m=float(d["detector_pitch_m"]),
             n_columns=int(d["n_columns"]),
-            principal_column=d.get("principal_column"),
+            principal_column=d.get("principal_column"),  # type: ignore[arg-type]  # None: the image centre
             along_track_offset_m=float(d.get("along_track_offset_m", 0.0)),
             line_curvature=tuple(d.get("line_curvature", ())),
             radial_distortion=tuple(d.get("radial_distortion", ())),

@@ -67,6 +67,8 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from explorer.geometry.kernels import (
@@ -179,7 +181,8 @@ class Exact(BestScanlineMethod):
         self.kernel_params = CollinearityParams.from_scene(scene)
         self.window = (-0.5 - self.margin_rows, scene.n_rows - 0.5 + self.margin_rows)
         self.setup_ce = 0
-        self._setup(tuple(int(v) for v in seed_grid))
+        gx, gy, gz = (int(v) for v in seed_grid)
+        self._setup((gx, gy, gz))
 
     # ------------------------------------------------------------------ setup
     def _setup(self, seed_grid: tuple[int, int, int]) -> None:
@@ -249,8 +252,9 @@ class Exact(BestScanlineMethod):
 
     # ------------------------------------------------------------------ locate
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
-        kw = {"window": self.window, "orient": self.orient, "tol": self.tol, "accept_step": self.accept_step,
-              "max_iter": self.max_iter, "first_evaluations": self.first_evaluations}
+        kw: dict[str, Any] = {"window": self.window, "orient": self.orient, "tol": self.tol,
+                              "accept_step": self.accept_step, "max_iter": self.max_iter,
+                              "first_evaluations": self.first_evaluations}
         if self.backend == "torch" and not trace:
             from explorer.geometry.torch_solver import solve_exact_torch
 

@@ -130,7 +130,7 @@ class _RegressionBase(BestScanlineMethod):
             defaults["degree"] = 2
         p = take_params(self.name, params, defaults)
         super().__init__(scene, **p)
-        self.degree = int(p.get("degree", self._fixed_degree))
+        self.degree = int(p["degree"] if "degree" in p else self._fixed_degree or 0)  # one of the two is set
         if self.degree < 1:
             raise ValueError(f"{self.name}: degree must be >= 1, got {self.degree}")
         if p["column"] not in ("collinearity", "regression"):

@@ -197,7 +197,7 @@ def fit_scene_rfm(
     setup_ce : int
         Collinearity evaluations spent building the grid (all points together).
     """
-    h_range = default_height_range(scene) if height_range is None else tuple(height_range)
+    h_range = default_height_range(scene) if height_range is None else (float(height_range[0]), float(height_range[1]))
     if grid_space == "image":
         row, col, g = image_space_grid(scene, grid, h_range)
         fit = fit_rfm_from_gcps(g[:, 0], g[:, 1], g[:, 2], row, col, order=3, rational=True,
@@ -217,7 +217,7 @@ def fit_scene_rfm(
                 raise RuntimeError(f"rigorous ground->image failed for {int((~ok).sum())} grid node(s)")
             return r, c
 
-        fit = fit_rfm_terrain_independent(g2i, x_range, y_range, h_range, tuple(grid),
+        fit = fit_rfm_terrain_independent(g2i, x_range, y_range, h_range, (int(grid[0]), int(grid[1]), int(grid[2])),
                                           regularization=regularization)
         return fit, spent[0]
     raise ValueError(f"grid_space must be 'image' or 'ground', got {grid_space!r}")
@@ -308,7 +308,7 @@ class RFMMethod(BestScanlineMethod):
         super().__init__(scene, grid=grid, grid_space=grid_space, height_range=height_range,
                          regularization=regularization, domain_margin=domain_margin)
         self.domain_margin = float(domain_margin)
-        fit, self.setup_ce = fit_scene_rfm(scene, tuple(grid), grid_space=grid_space,
+        fit, self.setup_ce = fit_scene_rfm(scene, (int(grid[0]), int(grid[1]), int(grid[2])), grid_space=grid_space,
                                            height_range=height_range, regularization=regularization)
         self.model: RationalFunctionModel = fit.model
         self.fit_info = {

@@ -122,7 +122,7 @@ def sequential_walk(
 
     while act.size:
         cand = row_prev + 1.0
-        if fh is not None:
+        if fh is not None and ch is not None:  # given together
             # points whose next row is the already-known end: bracket [hi - 1, hi] without a CE
             at_end = cand >= h
             if at_end.any():
@@ -146,7 +146,7 @@ def sequential_walk(
         if stop.any():
             keep = ~stop
             act, g, h, cand, f, c = act[keep], g[keep], h[keep], cand[keep], f[keep], c[keep]
-            if fh is not None:
+            if fh is not None and ch is not None:
                 fh, ch = fh[keep], ch[keep]
         row_prev, f_prev, c_prev = cand, f, c
 
