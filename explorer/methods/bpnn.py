@@ -123,7 +123,7 @@ class MLPRegressor:
         name: str = "network",
     ) -> None:
         self.name = str(name)
-        self.hidden = (int(hidden),) if np.isscalar(hidden) else tuple(int(h) for h in hidden)
+        self.hidden = (int(hidden),) if isinstance(hidden, int | np.integer | float) else tuple(int(h) for h in hidden)
         if not self.hidden or min(self.hidden) < 1:
             raise ValueError(f"hidden layer sizes must be >= 1, got {hidden}")
         if activation not in ("sigmoid", "tanh"):
@@ -246,13 +246,17 @@ class MLPRegressor:
         sum of squared errors plus ``weight_decay |theta|^2``, plateau rule, validation failures
         counted when the error does not improve (ties included)."""
 
-        def validation_error(th: torch.Tensor) -> float:
-            rv = self._forward(th, u_val) - t_val
-            return float((rv * rv).sum())
+        validation_error = None
+        if u_val is not None and t_val is not None:
+            uv, tv = u_val, t_val
+
+            def validation_error(th: torch.Tensor) -> float:
+                rv = self._forward(th, uv) - tv
+                return float((rv * rv).sum())
 
         res = lm_minimise(
             lambda th: (t - self._forward(th, u)).reshape(-1), lambda th: self._jacobian(th, u), theta,
-            validation_error=validation_error if u_val is not None else None, mean=False,
+            validation_error=validation_error, mean=False,
             weight_decay=self.weight_decay, max_epochs=self.max_iter, goal=1e-28, max_fail=self.max_fail,
             fail_on_tie=True, count_initial_validation=False, plateau=(self.window, self.tol),
         )
@@ -321,12 +325,14 @@ class MLPRegressor:
                 score = info["val_loss"] if u_val is not None else info["loss"]
                 if best is None or score < best[0]:
                     best = (score, theta, info, k)
-            _, self._theta, info, k = best
+            assert best is not None  # n_restarts >= 1
+            _, theta, info, k = best
+            self._theta = theta
             with torch.no_grad():
-                err = (self._forward(self._theta, u).numpy() - t.numpy()) * self._out_scale
+                err = (self._forward(theta, u).numpy() - t.numpy()) * self._out_scale
                 ev = None
-                if u_val is not None:
-                    ev = (self._forward(self._theta, u_val).numpy() - t_val.numpy()) * self._out_scale
+                if u_val is not None and t_val is not None:
+                    ev = (self._forward(theta, u_val).numpy() - t_val.numpy()) * self._out_scale
         # Stopping at max_iter while the error still falls by more than ``fail_tol`` per window
         # means more iterations would change the model materially: flag it.
         converged = (info["stop"] != "max_iter" or info["window_decrease"] < self.fail_tol) and bool(
@@ -360,23 +366,25 @@ class MLPRegressor:
     def fitted(self) -> bool:
         return self._theta is not None
 
-    def _require_fit(self) -> None:
+    def _require_fit(self) -> torch.Tensor:
+        """The trained parameters; :class:`NotFittedError` before :meth:`fit_arrays`."""
         if self._theta is None:
             raise NotFittedError(f"{type(self).__name__} must be fit before use")
+        return self._theta
 
     def predict(self, inputs: np.ndarray) -> np.ndarray:
         """Outputs (N, d_out) of inputs (N, d_in), in target units."""
-        self._require_fit()
+        theta = self._require_fit()
         with torch.no_grad(), torch_threads(1):
-            out = self._forward(self._theta, self._normalise_inputs(np.atleast_2d(inputs))).numpy()
+            out = self._forward(theta, self._normalise_inputs(np.atleast_2d(inputs))).numpy()
         return out * self._out_scale + self._out_off
 
     def predict_with_jacobian(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Outputs (N, d_out) and their derivatives d out / d in (N, d_out, d_in), physical units."""
-        self._require_fit()
+        theta = self._require_fit()
         with torch_threads(1):
             u = self._normalise_inputs(np.atleast_2d(inputs)).requires_grad_(True)
-            out = self._forward(self._theta, u)
+            out = self._forward(theta, u)
             n_out = out.shape[1]
             jac = np.empty((u.shape[0], n_out, u.shape[1]))
             for k in range(n_out):  # points are independent: grad of the sum is the per-point gradient
@@ -489,7 +497,7 @@ class BPNetworkGeometryModel(MLPRegressor):
         n = x.size
         iterations = np.zeros(n, dtype=np.int64)
         converged = np.zeros(n, dtype=bool)
-        rows_seen = [row.copy()] if trace else None
+        rows_seen: list[np.ndarray] | None = [row.copy()] if trace else None
         active = np.arange(n)
         for _ in range(max_iter):
             if active.size == 0:
@@ -507,7 +515,7 @@ class BPNetworkGeometryModel(MLPRegressor):
             done = ok & (np.abs(d_row) <= tol_px) & (np.abs(d_col) <= tol_px)
             converged[active[done]] = True
             active = active[ok & ~done]
-            if trace:
+            if rows_seen is not None:
                 rows_seen.append(row.copy())
         return row, col, converged, iterations, rows_seen
 
@@ -687,7 +695,8 @@ def compare_bpnn_rfm(
     tr_n = tr + rng.normal(0.0, noise_px, tr.shape) if noise_px else tr
     tc_n = tc + rng.normal(0.0, noise_px, tc.shape) if noise_px else tc
     gsd = float(np.mean(scene.ground_sample_distance()))
-    nodes = [int(hidden_nodes)] if np.isscalar(hidden_nodes) else [int(n) for n in hidden_nodes]
+    nodes = ([int(hidden_nodes)] if isinstance(hidden_nodes, int | np.integer | float)
+             else [int(n) for n in hidden_nodes])
     rows = []
     for n_hidden in nodes:
         net = BPNetworkGeometryModel(n_hidden, n_restarts=n_restarts, max_iter=max_iter, seed=seed)
