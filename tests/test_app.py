@@ -588,3 +588,29 @@ def test_model_layer_imports_neither_viser_nor_plotly():
             "print(sorted(m for m in ('viser', 'plotly') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_reset_view_frames_every_client_on_the_footprint(server):
+    class Camera:
+        far = look_at = position = None
+
+    class Client:
+        def __init__(self) -> None:
+            self.camera = Camera()
+
+        def atomic(self):
+            return contextlib.nullcontext()
+
+    app = make_app(server)
+    clients = {1: Client(), 2: Client()}
+    server.get_clients = lambda: clients  # two browsers looking elsewhere
+    app.reset_view()
+    pos, look, far = app.camera_pose
+    for c in clients.values():
+        assert c.camera.position == pos and c.camera.look_at == look and c.camera.far == far
+    # the pose frames the footprint: it looks at a point between the ground and the displayed track,
+    # from farther than the footprint's diagonal
+    assert np.linalg.norm(np.subtract(pos, look)) > app.frame.diagonal_km
+    centre_track = app.frame.sensor(app.scene.exterior.position(app.scene.scanline_time(
+        np.array([(app.scene.n_rows - 1) / 2.0]))))[0]
+    np.testing.assert_allclose(look, 0.5 * centre_track, rtol=0.05, atol=0.05 * app.frame.diagonal_km)

@@ -397,7 +397,8 @@ class ExplorerModel:
                 return est, t1 / max(n1, 1)
             n2 = min(8 * n1, n_all)
             t2 = timed(n2)
-            per = max(t2 - t1, 1e-3 * t2) / (n2 - n1) if n2 > n1 else t2 / n2
+            # a noisy first probe (a busy machine) must not make the marginal cost vanish
+            per = max(t2 - t1, 0.25 * t2) / (n2 - n1) if n2 > n1 else t2 / n2
             return t2 + per * (n_all - n2), per
         return self._probes.get_or(key, make)
 
