@@ -72,16 +72,19 @@ class PointSet:
 
         The file is written atomically under exactly ``path`` (no ``.npz`` is appended).
         """
-        extra = {"scene_json": np.array(scene.to_json())} if scene is not None else {}
+        arrays = {"row": self.row, "col": self.col, "ground": self.ground, "time": self.time,
+                  "grid_shape": np.array(self.grid_shape)}
+        if scene is not None:
+            arrays["scene_json"] = np.array(scene.to_json())
         with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-            np.savez(handle, row=self.row, col=self.col, ground=self.ground, time=self.time,
-                     grid_shape=np.array(self.grid_shape), **extra)
+            np.savez(handle, **arrays)
 
     @classmethod
     def load_npz(cls, path: str | Path) -> PointSet:
         """Inverse of :meth:`save_npz` (the scene, if any, via ``Scene.from_dict(json.loads(...))``)."""
         with np.load(path) as z:
-            return cls(z["row"], z["col"], z["ground"], z["time"], tuple(int(v) for v in z["grid_shape"]))
+            rows, cols, layers = (int(v) for v in z["grid_shape"])
+            return cls(z["row"], z["col"], z["ground"], z["time"], (rows, cols, layers))
 
 
 def grid_shape_for(n: int, n_rows: int, n_columns: int) -> tuple[int, int]:

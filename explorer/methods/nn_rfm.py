@@ -41,6 +41,7 @@ evaluation: CE = 0).  Conventions: ``docs/conventions.md``.
 from __future__ import annotations
 
 import warnings
+from typing import Any
 
 import numpy as np
 
@@ -154,7 +155,7 @@ def fit_nn_rfm(
     if synthetic == "surface" and nz != 1:
         raise ValueError(f"synthetic='surface' puts the grid on the learned terrain: n_layers must be 1, got {nz}")
     g = gcps.ground
-    options = dict(activation=activation, max_iter=max_iter, n_restarts=n_restarts,
+    options: dict[str, Any] = dict(activation=activation, max_iter=max_iter, n_restarts=n_restarts,
                    validation_fraction=validation_fraction, seed=seed, name="nn-rfm")
     rows = np.linspace(0.0, image_shape[0] - 1.0, nr)
     cols = np.linspace(0.0, image_shape[1] - 1.0, nc)
@@ -358,7 +359,7 @@ class NNRFMMethod(BestScanlineMethod):
         super().__init__(scene, synthetic=synthetic, hidden=hidden, activation=activation, grid=grid,
                          validation_fraction=validation_fraction, max_iter=max_iter, n_restarts=n_restarts,
                          rfm_regularization=rfm_regularization, domain_margin=domain_margin, seed=seed)
-        self._options = dict(synthetic=synthetic, hidden=tuple(hidden), activation=activation,
+        self._options: dict[str, Any] = dict(synthetic=synthetic, hidden=tuple(hidden), activation=activation,
                              grid=None if grid is None else tuple(grid), validation_fraction=validation_fraction,
                              max_iter=max_iter, n_restarts=n_restarts, rfm_regularization=rfm_regularization,
                              seed=seed)
