@@ -88,20 +88,26 @@ def read_dimap_v1_geometry(path: str | Path) -> dict:
     if len(points) < 2 or len(atts) < 2:
         raise InputError(f"{path.name}: no ephemeris Point_List or WGS84 corrected attitudes")
 
-    def text(tag: str) -> str:
-        e = root.find(tag)
-        if e is None or e.text is None:
+    def child(node: ElementTree.Element, tag: str) -> ElementTree.Element:
+        e = node.find(tag)
+        if e is None:
+            raise InputError(f"{path.name}: missing {tag}")
+        return e
+
+    def text(tag: str, node: ElementTree.Element = root) -> str:
+        e = child(node, tag)
+        if e.text is None:
             raise InputError(f"{path.name}: missing {tag}")
         return e.text.strip()
 
     out = {
         "rows": int(text(".//Raster_Dimensions/NROWS")),
         "columns": int(text(".//Raster_Dimensions/NCOLS")),
-        "eph_times": [p.find("UTC_TIME").text.strip() for p in points],
-        "eph_position": np.array([_float_list(p.find("LOCATION_VALUES")) for p in points]),
-        "eph_velocity": np.array([_float_list(p.find("VELOCITY_VALUES")) for p in points]),
-        "att_times": [a.find("UTC_TIME").text.strip() for a in atts],
-        "att_quaternion": np.array([_float_list(a.find("Q_VALUES")) for a in atts]),
+        "eph_times": [text("UTC_TIME", p) for p in points],
+        "eph_position": np.array([_float_list(child(p, "LOCATION_VALUES")) for p in points]),
+        "eph_velocity": np.array([_float_list(child(p, "VELOCITY_VALUES")) for p in points]),
+        "att_times": [text("UTC_TIME", a) for a in atts],
+        "att_quaternion": np.array([_float_list(child(a, "Q_VALUES")) for a in atts]),
         "line_period_raw_s": float(text(".//Time_Stamp/PA_LINE_PERIOD")) * 1e-3,
         "origin_time": text(".//Time_Stamp//ORIGIN_TIME"),
         "acquisition_start": text(".//UTC_Acquisition_Range/START"),
@@ -111,7 +117,7 @@ def read_dimap_v1_geometry(path: str | Path) -> dict:
         "tai_utc_s": float(text(".//TAI_UTC")),
     }
     for key in ("LOCATION_VALUES", "VELOCITY_VALUES"):
-        unit = points[0].find(key).get("unit")
+        unit = child(points[0], key).get("unit")
         if unit not in (None, "m", "m/s"):
             raise InputError(f"{path.name}: {key} in {unit!r}, expected m and m/s")
     return out
