@@ -132,6 +132,9 @@ STATUS_STYLE = {
     "outside image": ("rgb(255,255,255)", "square-open", "outside the image"),
 }
 """Marker colour, symbol and legend text of points without a residual, by status name."""
+MANY_SCOPS = 200
+"""Beyond this many SCOPs the maps start with them hidden (one legend click shows them), so they never
+cover the residuals."""
 _TITLE_PX = 34
 _AXIS_PX = 40
 _REF_WIDTH_PX = 520
@@ -221,7 +224,8 @@ def residual_maps(
     check : PointSet
         The SCPs the evaluations used (image row/col of each point).
     control : PointSet, optional
-        SCOPs, drawn as small gold crosses on every map (one legend entry toggles them).
+        SCOPs, drawn as gold crosses on every map (one legend entry toggles them); beyond
+        :data:`MANY_SCOPS` they are small and start hidden.
     shape : (int, int), optional
         Image (rows, columns) for the axis ranges (pixel edges).
     limit_px : float, optional
@@ -339,12 +343,14 @@ def residual_maps(
                 "hovertemplate": f"row %{{y:.2f}}<br>col %{{x:.2f}}<br>{text}<extra></extra>",
             })
         if show_control and control is not None and len(control):
+            many = len(control) > MANY_SCOPS
             data.append({
                 "type": "scattergl", "x": control.col, "y": control.row, "mode": "markers",
                 "xaxis": xr, "yaxis": yr,
-                "marker": {"color": rgb_string(SCOP_RGB), "size": 4 if len(control) > 100 else 6,
-                           "symbol": "cross", "opacity": 0.8},
-                "name": f"SCOPs ({len(control)}): click to hide", "legendgroup": "scop",
+                "marker": {"color": rgb_string(SCOP_RGB), "size": 3 if many else 6, "symbol": "cross",
+                           "opacity": 0.8},
+                "visible": "legendonly" if many else True,
+                "name": f"SCOPs ({len(control)}): click to {'show' if many else 'hide'}", "legendgroup": "scop",
                 "showlegend": "scop" not in legend_seen,
                 "hovertemplate": "SCOP<br>row %{y:.2f}<br>col %{x:.2f}<extra></extra>",
             })

@@ -498,9 +498,10 @@ def add_points(
 
 
 def add_scops(api: viser.SceneApi, frame: DisplayFrame, ground_m: np.ndarray) -> Handles:
-    """SCOPs as gold points, node ``/points/scops``."""
+    """SCOPs as gold points, node ``/points/scops``: 1.2 % of the footprint diagonal, smaller when they are
+    many (30 % of their spacing), so 1,000 SCOPs leave the ground visible."""
     return add_points(api, "/points/scops", frame, ground_m, SCOP_RGB,
-                      size_km=max(point_size_km(frame, len(ground_m), 0.15), 0.012 * frame.diagonal_km),
+                      size_km=min(point_size_km(frame, len(ground_m), 0.3), 0.012 * frame.diagonal_km),
                       shape="diamond")
 
 

@@ -246,8 +246,11 @@ def test_titles_keep_clear_of_the_maps_and_many_scops_stay_small(results):
     for a in fig.layout.annotations:
         assert a.yanchor == "bottom" and a.text.count("<br>") == 1
     scop = [t for t in fig.data if t.name.startswith("SCOPs")]
-    assert scop[0].marker.size <= 4 and scop[0].showlegend  # small, and one legend entry hides them all
-    assert all(t.legendgroup == "scop" for t in scop)
+    # 1,000 SCOPs: small and hidden at first, so they never cover the map; one legend entry shows them all
+    assert scop[0].marker.size <= 4 and scop[0].showlegend and "click to show" in scop[0].name
+    assert all(t.legendgroup == "scop" and t.visible == "legendonly" for t in scop)
+    few = F.residual_maps(five, scps, control=simulate_points(scene, 100, kind="scop"))
+    assert all(t.visible is not False and t.visible != "legendonly" for t in few.data if t.name.startswith("SCOPs"))
     hidden = F.residual_maps(five, scps, control=scops, show_control=False)
     assert not [t for t in hidden.data if t.name.startswith("SCOPs")]
 
