@@ -39,7 +39,7 @@ import numpy as np
 from explorer._numba import NUMBA_AVAILABLE, njit, prange
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
-from explorer.geometry.dem_intersection import NO_INTERSECTION, NODATA, NOT_CONVERGED, OK, HeightGrid
+from explorer.geometry.dem_intersection import NODATA, NOT_CONVERGED, OK, HeightGrid
 from explorer.rpc._kernels import horner_rpc00b
 
 if TYPE_CHECKING:
@@ -289,6 +289,39 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
             y[k] = y[k] * lat_sc + lat_off
 
 
+def _one_cell_start_py(h, i, j, ua, va, za, du, dv, dz):
+    """Start of the refinement for a segment that stays in cell (i, j): ``(s, flag)`` (flag -1: walk instead).
+
+    The bilinear patch along the segment is a quadratic f(s) = z(s) - h(s) with f(0) > 0 >= f(1) when the
+    segment enters above the surface and ends below it (it ends below the DEM's lowest height): exactly one
+    root, approached by the secant and one Newton step (no square root; the refinement that follows is exact).
+    Anything else (a no-data corner, f(0) <= 0, a dip below and back up) returns -1: the exact walk decides.
+    """
+    h00 = h[i, j]
+    h01 = h[i, j + 1]
+    h10 = h[i + 1, j]
+    h11 = h[i + 1, j + 1]
+    if math.isnan(h00) or math.isnan(h01) or math.isnan(h10) or math.isnan(h11):
+        return 0.0, NODATA
+    a0 = ua - j
+    b0 = va - i
+    p = h01 - h00
+    q = h10 - h00
+    r = h00 - h01 - h10 + h11
+    c0 = za - (h00 + p * a0 + q * b0 + r * a0 * b0)
+    c1 = dz - (p * du + q * dv + r * (a0 * dv + b0 * du))
+    c2 = -r * du * dv
+    fb = c0 + c1 + c2
+    if not (c0 > 0.0 and fb <= 0.0):
+        return 0.0, -1
+    s = c0 / (c0 - fb)
+    ds = c1 + 2.0 * c2 * s
+    if ds < 0.0:
+        s2 = s - (c0 + s * (c1 + s * c2)) / ds
+        s = s2 if 0.0 <= s2 <= 1.0 else s
+    return s, OK
+
+
 def _clamp_index_py(u, top):
     """Cell index of fractional node coordinate u, clamped to [0, top] (NaN -> 0); branch-free selects."""
     uc = u if u >= 0.0 else 0.0
@@ -383,8 +416,7 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
                 j = min(int(ua), n_cj)
                 i = min(int(va), n_ci)
                 if j == min(int(ub), n_cj) and i == min(int(vb), n_ci):
-                    s = _cell_hit(hgt, i, j, ua, va, z_top, ub - ua, vb - va, z_bot - z_top, 0.0, 1.0)
-                    fl = NODATA if s == -2.0 else (OK if s >= 0.0 else NO_INTERSECTION)
+                    s, fl = _one_cell_start(hgt, i, j, ua, va, z_top, ub - ua, vb - va, z_bot - z_top)
             if fl == -1:
                 s, fl = _first_hit(hgt, tile_max, ua, va, z_top, ub, vb, z_bot)
             flag_out[i0 + k] = fl
@@ -471,6 +503,7 @@ if NUMBA_AVAILABLE:
     _correction = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_py)
     _solve_point = njit(cache=True, fastmath=False, error_model="numpy")(_solve_point_py)
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
+    _one_cell_start = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_one_cell_start_py)
     _dem_refine_point = njit(cache=True, fastmath=False, error_model="numpy")(_dem_refine_point_py)
     _localize_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
     _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
@@ -483,6 +516,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _correction = _correction_py
     _solve_point = _solve_point_py
     _clamp_index = _clamp_index_py
+    _one_cell_start = _one_cell_start_py
     _dem_refine_point = _dem_refine_point_py
     _localize_blocks = _localize_blocks_py
     _dem_blocks = _dem_blocks_py
