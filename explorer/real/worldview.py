@@ -62,6 +62,14 @@ def _text(node: ElementTree.Element | None, tag: str, path: str) -> str:
     return e.text.strip()
 
 
+def _child(node: ElementTree.Element, tag: str, path: str) -> ElementTree.Element:
+    """``node.find(tag)``; :class:`InputError` naming the file and the tag when it is missing."""
+    e = node.find(tag)
+    if e is None:
+        raise InputError(f"{Path(path).name}: missing {tag}")
+    return e
+
+
 def _list(node: ElementTree.Element, list_tag: str, item: str) -> np.ndarray:
     rows = [[float(v) for v in e.text.split()] for e in node.iter(item) if e.text]
     if not rows:
@@ -87,12 +95,12 @@ def read_dg_metadata(path: str | Path) -> DGMetadata:
         root = ElementTree.parse(path).getroot()
     except ElementTree.ParseError as exc:
         raise InputError(f"{path.name}: not well-formed XML ({exc})") from exc
-    imd, eph, att, geo = (root.find(t) for t in ("IMD", "EPH", "ATT", "GEO"))
-    missing = [t for t, e in zip(("IMD", "EPH", "ATT", "GEO"), (imd, eph, att, geo), strict=True) if e is None]
+    missing = [t for t in ("IMD", "EPH", "ATT", "GEO") if root.find(t) is None]
     if missing:
         raise InputError(f"{path.name}: no rigorous model (missing {', '.join(missing)}); use the RPC instead")
-    image = imd.find("IMAGE")
     p = str(path)
+    imd, eph, att, geo = (_child(root, t, p) for t in ("IMD", "EPH", "ATT", "GEO"))
+    image = _child(imd, "IMAGE", p)
     md = DGMetadata()
     md["sat_id"] = _text(image, "SATID", p)
     md["rows"] = int(_text(imd, "NUMROWS", p))
@@ -109,14 +117,14 @@ def read_dg_metadata(path: str | Path) -> DGMetadata:
     md["att_start"] = _text(att, "STARTTIME", p)
     md["att_interval"] = float(_text(att, "TIMEINTERVAL", p))
     md["att"] = _list(att, "ATTLISTList", "ATTLIST")[:, :5]
-    md["pd_mm"] = float(_text(geo.find("PRINCIPAL_DISTANCE"), "PD", p))
-    array = geo.find(".//DETECTOR_ARRAY")
+    md["pd_mm"] = float(_text(_child(geo, "PRINCIPAL_DISTANCE", p), "PD", p))
+    array = _child(geo, ".//DETECTOR_ARRAY", p)
     md["det_origin_mm"] = np.array([float(_text(array, "DETORIGINX", p)), float(_text(array, "DETORIGINY", p))])
     md["det_rot_rad"] = float(_text(array, "DETROTANGLE", p))
     md["det_pitch_mm"] = float(_text(array, "DETPITCH", p))
-    cam = geo.find("CAMERA_ATTITUDE")
+    cam = _child(geo, "CAMERA_ATTITUDE", p)
     md["camera_quaternion"] = np.array([float(_text(cam, f"QCS{i}", p)) for i in range(1, 5)])
-    pcn = geo.find("PERSPECTIVE_CENTER")
+    pcn = _child(geo, "PERSPECTIVE_CENTER", p)
     md["perspective_center"] = np.array([float(_text(pcn, f"C{a}", p)) for a in "XYZ"])
     dist = geo.find("OPTICAL_DISTORTION")
     md["distortion_order"] = int(_text(dist, "POLYORDER", p)) if dist is not None else -1
@@ -199,12 +207,12 @@ def rigorous_scene_from_dg(
     pitch = md["det_pitch_mm"] * 1e-3
     focal = md["pd_mm"] * 1e-3
     m = _camera_frame(md["det_rot_rad"])  # sensor -> camera
-    origin = np.array([md["det_origin_mm"][0], md["det_origin_mm"][1], 0.0]) * 1e-3
+    det_origin = np.array([md["det_origin_mm"][0], md["det_origin_mm"][1], 0.0]) * 1e-3  # metres
     qc = md["camera_quaternion"]
     camera_to_body = quaternion_to_matrix(np.array([[qc[3], qc[0], qc[1], qc[2]]]))[0]
     interior = InteriorOrientation(
         focal_length_m=focal, detector_pitch_m=pitch, n_columns=cols,
-        principal_column=-(origin @ m[:, 1]) / pitch, along_track_offset_m=float(origin @ m[:, 0]),
+        principal_column=-(det_origin @ m[:, 1]) / pitch, along_track_offset_m=float(det_origin @ m[:, 0]),
     )  # fmt: skip
     # ---------------------------------------------------------------- frame
     from explorer.rpc import read_dg_xml
