@@ -112,3 +112,33 @@ def test_ortho_cli_synthetic(tmp_path, capsys):
     assert '"geolocation"' in text
     with rasterio.open(out) as ds:
         assert ds.width > 10 and ds.height > 10
+
+
+def test_block_lonlat_interpolation_matches_proj_per_pixel():
+    import pyproj
+
+    from explorer.ortho import LONLAT_TOLERANCE_PX, OrthoGrid, block_lonlat
+
+    grid = OrthoGrid(32631, 430_000.0, 3_440_000.0, 0.5, 700, 500)
+    rows, cols = slice(37, 337), slice(11, 411)
+    lon, lat = block_lonlat(grid, rows, cols)
+    e, n = grid.pixel_centres(rows, cols)
+    lon_x, lat_x = pyproj.Transformer.from_crs(32631, 4326, always_xy=True).transform(e, n)
+    err_m = np.hypot((lon - lon_x) * 111_320.0 * np.cos(np.radians(lat_x)), (lat - lat_x) * 110_574.0)
+    assert lon.shape == (300, 400)
+    assert err_m.max() <= LONLAT_TOLERANCE_PX * grid.gsd
+
+
+def test_compiled_dem_lookup_matches_numpy_bilinear():
+    from explorer.geometry.dem_intersection import heights_at
+    from explorer.terrain_io import DEFAULT_ASSETS_DIR, read_geotiff_dem
+
+    dem = read_geotiff_dem(DEFAULT_ASSETS_DIR / "MNT_P1BP--2018122638935449CP.tif")
+    rng = np.random.default_rng(4)
+    x0, y0, x1, y1 = dem.bounds
+    lon = rng.uniform(x0 - 0.01, x1 + 0.01, 5000)
+    lat = rng.uniform(y0 - 0.01, y1 + 0.01, 5000)
+    ours = heights_at(dem.height_grid(), lon, lat)
+    ref = dem.height(lon, lat)
+    assert np.array_equal(np.isnan(ours), np.isnan(ref)) and np.isnan(ref).any()
+    np.testing.assert_allclose(ours[np.isfinite(ref)], ref[np.isfinite(ref)], atol=1e-9)

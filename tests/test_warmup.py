@@ -1,0 +1,38 @@
+"""The warm-up covers every preset and the RPC/DEM/ortho kernels, and its steps run."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from explorer.presets import preset_ids
+from explorer.warmup import _rpc_for_warmup, _warm_ortho, _warm_rpc, steps
+
+
+def test_steps_cover_every_preset_and_the_rpc():
+    names = [name for name, _ in steps()]
+    for pid in preset_ids():
+        assert any(name.startswith(f"{pid}:") for name in names), pid
+    assert any("rational function model" in name for name in names)
+    assert any("relief" in name for name in names)
+
+
+def test_warmup_model_is_consistent_and_rpc_steps_run():
+    rpc = _rpc_for_warmup()
+    lon, lat, ok = rpc.localization(np.array([10.0, 900.0]), np.array([20.0, 800.0]), np.array([400.0, 600.0]))
+    assert ok.all()
+    row, col = rpc.projection(lon, lat, np.array([400.0, 600.0]))
+    np.testing.assert_allclose(row, [10.0, 900.0], atol=1e-8)
+    np.testing.assert_allclose(col, [20.0, 800.0], atol=1e-8)
+    _warm_rpc()
+    _warm_ortho()
+
+
+def test_warmup_command_parses():
+    from explorer.commands.warmup import register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["warmup", "--quiet"])
+    assert args.quiet and callable(args.func)
