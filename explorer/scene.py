@@ -311,8 +311,10 @@ class Scene:
             raise SceneFileError(f"{source}: not a pushbroom-explorer scene file (missing 'format')")
         if d.get("version") != SCENE_FILE_VERSION:
             raise SceneFileError(f"{source}: unsupported scene version {d.get('version')!r}")
+        if (where := _non_finite_field({k: v for k, v in d.items() if k != "metadata"})) is not None:
+            raise SceneFileError(f"{source}: {where} is not finite; a scene file holds finite numbers only")
         try:
-            return cls(
+            scene = cls(
                 name=str(d["name"]),
                 interior=InteriorOrientation.from_dict(d["interior"]),
                 exterior=ExteriorOrientation.from_dict(d["exterior"]),
@@ -324,8 +326,13 @@ class Scene:
             )
         except KeyError as exc:
             raise SceneFileError(f"{source}: missing field {exc.args[0]!r}") from exc
-        except (TypeError, ValueError) as exc:
-            raise SceneFileError(f"{source}: {exc}") from exc
+        except (TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
+            # a field of the wrong type or shape (an object where a number belongs, a short array...)
+            raise SceneFileError(f"{source}: malformed scene ({type(exc).__name__}: {exc})") from exc
+        for what, n in (("n_rows", scene.n_rows), ("interior.n_columns", scene.interior.n_columns)):
+            if not 1 <= n <= 10**9:
+                raise SceneFileError(f"{source}: {what} = {n} is not an image size (1 .. 1e9)")
+        return scene
 
     def to_json(self) -> str:
         """The scene as JSON; :class:`SceneFileError` naming the field if a number is NaN or infinite.
@@ -338,7 +345,6 @@ class Scene:
         except ValueError:  # a NaN or infinity would be written as the non-JSON NaN / Infinity
             raise SceneFileError(f"scene {self.name!r}: {_non_finite_field(d)} is not finite; "
                                  "a scene file holds finite numbers only") from None
-
 
     def save(self, path: str | Path) -> None:
         """Write the scene to a JSON file (atomically: a failed write leaves no file under ``path``)."""
@@ -354,9 +360,6 @@ class Scene:
             d = json.loads(path.read_text(), parse_constant=_NonFinite)
         except json.JSONDecodeError as exc:
             raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
-        geometry = {k: v for k, v in d.items() if k != "metadata"} if isinstance(d, dict) else d
-        if (where := _non_finite_field(geometry)) is not None:
-            raise SceneFileError(f"{path}: {where} is not finite; a scene file holds finite numbers only")
         if cls is Scene and isinstance(d, dict) and d.get("format") == RIGOROUS_SCENE_FORMAT:
             raise SceneFileError(
                 f"{path}: a rigorous line-scan scene; load it with explorer.load_scene (explorer.real.load_scene)"
@@ -383,6 +386,8 @@ def _non_finite_field(obj: object, where: str = "") -> str | None:
     """Dotted path of the first NaN/infinite number (or :class:`_NonFinite` marker) in ``obj``, else None."""
     if isinstance(obj, float) and not np.isfinite(obj):
         return f"{where or 'value'} ({obj})"
+    if isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > 1.7976931348623157e308:
+        return f"{where or 'value'} (an integer of {len(str(abs(obj)))} digits)"
     if isinstance(obj, np.ndarray) and obj.dtype.kind == "f" and not np.all(np.isfinite(obj)):
         return f"{where} (array with NaN/infinite values)"
     items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, (list, tuple)) else ()

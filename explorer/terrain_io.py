@@ -228,34 +228,51 @@ def read_geotiff_dem(
     InputError
         If the file cannot be read as a raster, or the band does not exist.
     """
+    import warnings
+
     import rasterio
-    from rasterio.errors import RasterioIOError
+    from rasterio._err import CPLE_BaseError
+    from rasterio.errors import NotGeoreferencedWarning, RasterioError, RasterioIOError
 
     try:
-        dataset = rasterio.open(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", NotGeoreferencedWarning)
+            dataset = rasterio.open(path)
+    except NotGeoreferencedWarning:
+        raise InputError(f"DEM {path} is not georeferenced (no geotransform): cannot place its heights") from None
     except RasterioIOError as exc:
         raise InputError(f"cannot read DEM {path}: {exc}") from exc
-    with dataset:
-        if not 1 <= band <= dataset.count:
-            raise InputError(f"DEM {path} has {dataset.count} band(s), band {band} requested")
-        data = dataset.read(band, masked=True).astype(np.float64)
-        heights = np.ma.filled(data, np.nan)
-        if dataset.nodata is None and not np.ma.is_masked(data):
-            heights[heights == SRTM_NODATA] = np.nan  # SRTM voids in a file without a no-data tag
-        transform = tuple(dataset.transform)[:6]
-        crs = dataset.crs.to_string() if dataset.crs else ""
-        if to_geographic and dataset.crs is not None and not dataset.crs.is_geographic:
-            heights, transform, crs = _reproject_to_lonlat(heights, dataset.transform, dataset.crs,
-                                                           dataset.width, dataset.height)
+
+    try:  # a file that opens but cannot be read, or a CRS PROJ cannot transform (issue 18 fuzzing)
+        with dataset:
+            if not 1 <= band <= dataset.count:
+                raise InputError(f"DEM {path} has {dataset.count} band(s), band {band} requested")
+            data = dataset.read(band, masked=True).astype(np.float64)
+            heights = np.ma.filled(data, np.nan)
+            if dataset.nodata is None and not np.ma.is_masked(data):
+                heights[heights == SRTM_NODATA] = np.nan  # SRTM voids in a file without a no-data tag
+            transform = tuple(dataset.transform)[:6]
+            crs = dataset.crs.to_string() if dataset.crs else ""
+            if to_geographic and dataset.crs is not None and not dataset.crs.is_geographic:
+                heights, transform, crs = _reproject_to_lonlat(heights, dataset.transform, dataset.crs,
+                                                               dataset.width, dataset.height)
+    except InputError:
+        raise
+    except (RasterioError, CPLE_BaseError, ValueError, OverflowError) as exc:
+        raise InputError(f"cannot read DEM {path}: {exc}") from None
     if b_or_d_nonzero(transform):
         raise InputError(f"DEM {path}: rotated geotransforms are not supported")
-    return GeoDEM(
-        heights=heights,
-        transform=transform,  # type: ignore[arg-type]
-        crs=crs,
-        vertical_reference=vertical_reference,
-        source_path=str(path),
-    )
+    heights[~np.isfinite(heights)] = np.nan  # infinite heights are no-data, never numbers
+    try:
+        return GeoDEM(
+            heights=heights,
+            transform=transform,  # type: ignore[arg-type]
+            crs=crs,
+            vertical_reference=vertical_reference,
+            source_path=str(path),
+        )
+    except ValueError as exc:  # zero pixel size, non-finite transform
+        raise InputError(f"DEM {path}: {exc}") from None
 
 
 def b_or_d_nonzero(transform: tuple[float, ...]) -> bool:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from explorer.errors import InputError
 from explorer.geometry.dem_intersection import HeightGrid, intersect_rays
 
 
@@ -157,6 +158,10 @@ class GridDEM:
 Terrain = FlatTerrain | GridDEM
 
 
+#: Largest synthetic relief grid (nodes) :func:`synthetic_relief` builds: 4096 x 4096 (134 MB of float64).
+MAX_SYNTHETIC_NODES = 4096 * 4096
+
+
 def synthetic_relief(
     extent: tuple[float, float, float, float],
     amplitude_m: float,
@@ -187,6 +192,15 @@ def synthetic_relief(
     xmin, xmax, ymin, ymax = (float(v) for v in extent)
     if cell_m is None:
         cell_m = max(xmax - xmin, ymax - ymin) / 128.0
+    # bounded work: a scene file must not be able to ask for a giant grid (issue 18 fuzzing)
+    if not (np.isfinite([xmin, xmax, ymin, ymax, amplitude_m, base_height_m]).all() and xmax >= xmin
+            and ymax >= ymin and np.isfinite(cell_m) and cell_m > 0):
+        raise InputError(f"synthetic relief: extent {extent}, amplitude {amplitude_m}, base {base_height_m} and "
+                         f"cell {cell_m} must be finite, the extent ordered and the cell positive")
+    nodes = ((xmax - xmin) / cell_m + 6) * ((ymax - ymin) / cell_m + 6)
+    if nodes > MAX_SYNTHETIC_NODES or not 0 < correlation_cells <= 1000:
+        raise InputError(f"synthetic relief of {nodes:.3g} nodes (limit {MAX_SYNTHETIC_NODES:,}) or correlation "
+                         f"{correlation_cells} cells (limit (0, 1000]): cell_m {cell_m} is too small for the extent")
     nx = int(np.ceil((xmax - xmin) / cell_m)) + 5
     ny = int(np.ceil((ymax - ymin) / cell_m)) + 5
     rng = np.random.default_rng(seed)

@@ -81,8 +81,8 @@ def load_dem(dem: Any, datum: str = "geoid") -> Any:
         raise InputError(f"DEM datum must be 'geoid' or 'ellipsoid', got {datum!r}")
     if isinstance(dem, (str, Path)):
         path = Path(dem)
-        if not path.exists():
-            raise FileNotFoundError(f"DEM not found: {path}")
+        if not path.is_file():
+            raise InputError(f"DEM not found (or not a file): {path}")
         if path.suffix.lower() == ".hgt":
             dem = read_hgt(path)
         else:

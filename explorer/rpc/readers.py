@@ -57,6 +57,14 @@ def _to_float(path: str | Path, key: str, text: str) -> float:
         raise _fail(path, f"{key} is not a number: {text.strip()[:40]!r}") from None
 
 
+def _to_size(path: str | Path, key: str, text: object) -> int:
+    """A positive image dimension (pixels) from a file field, or :class:`RPCFormatError` naming it."""
+    value = _to_float(path, key, str(text))
+    if not (np.isfinite(value) and 0 < value < 1e9 and value == int(value)):
+        raise _fail(path, f"{key} is not a positive whole number of pixels: {str(text).strip()[:40]!r}")
+    return int(value)
+
+
 def _from_dict(
     path: str | Path,
     values: Mapping[str, Any],
@@ -130,7 +138,7 @@ def _read_text(path: str | Path) -> str:
 def _parse_xml(path: str | Path) -> ElementTree.Element:
     try:
         return ElementTree.parse(path).getroot()
-    except ElementTree.ParseError as exc:
+    except (ElementTree.ParseError, LookupError, ValueError) as exc:  # LookupError: a bad encoding name
         raise _fail(path, f"is not well-formed XML ({exc})") from None
 
 
@@ -238,7 +246,8 @@ def read_ossim_geom(path: str | Path) -> RationalFunctionModel:
         values[key] = _collect_indexed(path, raw, key.lower(), 0, width=2)
     image_size = None
     if "number_lines" in raw and "number_samples" in raw:
-        image_size = (int(float(raw["number_lines"])), int(float(raw["number_samples"])))
+        image_size = (_to_size(path, "number_lines", raw["number_lines"]),
+                      _to_size(path, "number_samples", raw["number_samples"]))
     meta = {k: raw[k] for k in ("type", "sensor", "image_id") if k in raw}
     return _from_dict(
         path, values, source_format="ossim_geom", image_size=image_size, metadata=meta
@@ -311,7 +320,8 @@ def _dimap_validity(
         last_col = _to_float(path, "LAST_COL", _xml_text(path, image_dom, "LAST_COL"))
         kwargs.update(row_min=first_row - 1, row_max=last_row - 1,
                       col_min=first_col - 1, col_max=last_col - 1)  # fmt: skip
-        size = (int(last_row - first_row + 1), int(last_col - first_col + 1))
+        size = (_to_size(path, "LAST_ROW - FIRST_ROW + 1", last_row - first_row + 1),
+                _to_size(path, "LAST_COL - FIRST_COL + 1", last_col - first_col + 1))
     if ground_dom is not None:
         kwargs.update(
             lon_min=_to_float(path, "FIRST_LON", _xml_text(path, ground_dom, "FIRST_LON")),
@@ -412,7 +422,7 @@ def read_dg_xml(path: str | Path) -> RationalFunctionModel:
     size = None
     rows, cols = root.find("IMD/NUMROWS"), root.find("IMD/NUMCOLUMNS")
     if rows is not None and cols is not None and rows.text and cols.text:
-        size = (int(rows.text), int(cols.text))
+        size = (_to_size(path, "IMD/NUMROWS", rows.text), _to_size(path, "IMD/NUMCOLUMNS", cols.text))
     sat = root.find("RPB/SATID")
     meta = {"satId": None if sat is None else sat.text}
     return _from_dict(path, values, source_format="dg_xml", image_size=size, metadata=meta)
@@ -437,7 +447,8 @@ def read_gdal_vrt(path: str | Path) -> RationalFunctionModel:
             values[key] = [_to_float(path, key, t) for t in raw[key].split()]
     meta = {}
     if root.get("rasterXSize") and root.get("rasterYSize"):
-        meta["raster_size"] = (int(root.get("rasterYSize", 0)), int(root.get("rasterXSize", 0)))
+        meta["raster_size"] = (_to_size(path, "rasterYSize", root.get("rasterYSize", 0)),
+                               _to_size(path, "rasterXSize", root.get("rasterXSize", 0)))
     return _from_dict(path, values, source_format="gdal_vrt", metadata=meta)
 
 
@@ -553,4 +564,12 @@ def read_rpc(path: str | Path) -> RationalFunctionModel:
         Unsupported content, a truncated file or a missing coefficient (message names the file
         and the fault, e.g. ``"x_RPC.TXT: missing LINE_NUM_COEFF_12"``).
     """
-    return _READERS[detect_format(path)](path)
+    reader = _READERS[detect_format(path)]
+    try:
+        return reader(path)
+    except (ValueError, TypeError, KeyError, IndexError, OverflowError, AttributeError) as exc:
+        if isinstance(exc, RPCFormatError | InputError):
+            raise
+        # a malformed field the reader does not check by name: still the file's fault, named
+        raise _fail(path, f"malformed {reader.__name__.removeprefix('read_')} content "
+                          f"({type(exc).__name__}: {exc})") from None
