@@ -68,9 +68,11 @@ def _warm_rpc() -> None:
     heights[3, 3] = np.nan
     grid = HeightGrid.from_array(heights, lons[0], lats[0], lons[1] - lons[0], lats[1] - lats[0])
     inverse = RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
-    inverse.localize(row, col, h)
-    inverse.on_dem(row, col, grid)
-    rpc.localization_on_dem(row, col, grid)
+    big = rng.uniform(0, 999, (2, 25_000))  # above the parallel threshold: the threaded loops too
+    for r, c in ((row, col), (big[0], big[1])):
+        inverse.localize(r, c, np.full(r.size, 500.0))
+        inverse.on_dem(r, c, grid)
+        rpc.localization_on_dem(r, c, grid)
     u, v = grid.to_grid(lon, lat)
     intersect_segments(grid, u, v, np.full(64, grid.z_max), u + 0.5, v + 0.3, np.full(64, grid.z_min))
 
@@ -118,7 +120,8 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
     paper = "WSU" if "WSU" in ids else ids[0]
     out.append((f"{paper}: every method", lambda: _warm_methods(build_scene(paper), available(), n_scops=60)))
     out.append(("agile with 500 m relief: DEM kernel and compiled methods",
-                lambda: _warm_methods(build_scene("agile", relief_m=500.0), COMPILED_SEARCH_METHODS + ("lrm", "prm"))))
+                lambda: _warm_methods(build_scene("agile", relief_m=500.0), COMPILED_SEARCH_METHODS + ("lrm", "prm"),
+                                      n_scps=25_000)))
     for pid in ids:
         if pid != paper:
             out.append((f"{pid}: compiled methods",

@@ -73,6 +73,9 @@ TILE = 16
 #: Points per chunk of the public wrappers (bounds the temporaries to a few tens of MB).
 CHUNK = 1 << 20
 
+#: Below this many rays the loop runs on one thread (waking the second thread costs more on a busy machine).
+PARALLEL_MIN_POINTS = 20_000
+
 
 @dataclass(frozen=True)
 class HeightGrid:
@@ -431,12 +434,13 @@ if NUMBA_AVAILABLE:
     bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
     _segments_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_segments_loop_py)
     _rays_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
+    _rays_loop_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
 else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
     _cell_hit = _cell_hit_py
     _first_hit = _first_hit_py
     bilinear = _bilinear_py
     _segments_loop = _segments_loop_py
-    _rays_loop = _rays_loop_py
+    _rays_loop = _rays_loop_serial = _rays_loop_py
 
 first_hit = _first_hit
 cell_hit = _cell_hit
@@ -540,6 +544,7 @@ def intersect_rays(origin: np.ndarray, direction: np.ndarray, grid: HeightGrid) 
     z_top, z_bot = grid.z_max + pad, grid.z_min - pad
     for start in range(0, n, CHUNK):
         sl = slice(start, min(start + CHUNK, n))
-        _rays_loop(grid.heights, grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot,
+        kernel = _rays_loop if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _rays_loop_serial
+        kernel(grid.heights, grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot,
                    origin[sl], direction[sl], out[sl], flag[sl])
     return out, flag

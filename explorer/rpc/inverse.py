@@ -50,6 +50,10 @@ __all__ = ["RPCInverse", "fit_inverse_polynomial"]
 #: Points per call of the compiled loops (bounds the temporaries).
 CHUNK = 1 << 20
 
+#: Below this many points the loops run on one thread: a ``prange`` call on the shared 2-core machine cost
+#: 10-20 ms when the other core was busy (1,000 and 10,000 points both took 20 ms at a load of 7.7).
+PARALLEL_MIN_POINTS = 20_000
+
 
 def _monomials(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     one = np.ones_like(x)
@@ -507,6 +511,10 @@ if NUMBA_AVAILABLE:
     _dem_refine_point = njit(cache=True, fastmath=False, error_model="numpy")(_dem_refine_point_py)
     _localize_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
     _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
+    # the same loops without threads, for small calls (waking the second thread costs more than they take)
+    _localize_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
+        _localize_blocks_py)
+    _dem_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
 else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _horner = horner_rpc00b
     _poly_grad = _poly_grad_py
@@ -518,8 +526,8 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _clamp_index = _clamp_index_py
     _one_cell_start = _one_cell_start_py
     _dem_refine_point = _dem_refine_point_py
-    _localize_blocks = _localize_blocks_py
-    _dem_blocks = _dem_blocks_py
+    _localize_blocks = _localize_blocks_serial = _localize_blocks_py
+    _dem_blocks = _dem_blocks_serial = _dem_blocks_py
 _first_hit = _dem.first_hit
 _bilinear = _dem.bilinear
 _cell_hit = _dem.cell_hit
@@ -640,7 +648,8 @@ class RPCInverse:
         lon, lat, flag = np.empty(n), np.empty(n), np.empty(n, np.int8)
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
-            _localize_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, row[sl],
+            kernel = _localize_blocks if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _localize_blocks_serial
+            kernel(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, row[sl],
                              col[sl], h[sl], float(tol_px), int(max_iter), lon[sl], lat[sl], flag[sl])
         return lon, lat, flag
 
@@ -672,7 +681,8 @@ class RPCInverse:
         z_top, z_bot = grid.z_max + pad, grid.z_min - pad
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
-            _dem_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
+            kernel = _dem_blocks if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _dem_blocks_serial
+            kernel(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
                         grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl],
                         float(tol_px), float(tol_m), int(max_iter), lon[sl], lat[sl], h[sl], flag[sl])
         return lon, lat, h, flag
