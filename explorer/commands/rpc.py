@@ -133,23 +133,31 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def cmd_project(args: argparse.Namespace) -> int:
     """``rpc project FILE``: ground (lon, lat, h) to image (row, col), 0-based pixel centre."""
+    import numpy as np
+
     from explorer.errors import InputError
     from explorer.rpc import read_rpc
 
     if not args.points and (args.lon is None or args.lat is None):
         raise InputError("give --lon and --lat (and --h), or --points")
     model = read_rpc(args.file)
+    # valid: inside the RPC's validity domain (RationalFunctionModel.ground_validity / image_validity);
+    # outside, the row and column are extrapolated numbers and are flagged, not hidden
     if args.points:
         rows, arrays = _read_csv(args.points, ("lon", "lat", "h"))
-        row, col = model.projection(arrays["lon"], arrays["lat"], arrays["h"])
+        row, col, valid = model.projection(arrays["lon"], arrays["lat"], arrays["h"], return_valid=True)
         out_rows = [
-            {**r, "row": _fmt(rr), "col": _fmt(cc)} for r, rr, cc in zip(rows, row, col,
-                                                                          strict=True)
+            {**r, "row": _fmt(rr), "col": _fmt(cc), "valid": bool(v)} for r, rr, cc, v in zip(rows, row, col, valid,
+                                                                                             strict=True)
         ]
-        _write_csv(out_rows, [*rows[0].keys(), "row", "col"], args.out)
-        return 0
-    row, col = model.projection(args.lon, args.lat, args.h)
-    print(f"row={_fmt(row)} col={_fmt(col)}")
+        _write_csv(out_rows, [*rows[0].keys(), "row", "col", "valid"], args.out)
+    else:
+        row, col, valid = model.projection(args.lon, args.lat, args.h, return_valid=True)
+        print(f"row={_fmt(row)} col={_fmt(col)} valid={bool(valid)}")
+    n_outside = int(np.size(valid) - np.count_nonzero(valid))
+    if n_outside:
+        print(f"warning: {n_outside} point(s) outside the RPC's validity domain: extrapolated (valid=False)",
+              file=sys.stderr)
     return 0
 
 

@@ -352,3 +352,25 @@ def test_localization_far_outside_is_not_converged_and_flags_are_returned():
     np.testing.assert_allclose(c2, col[1:3], atol=1e-6)
     # the default return API is unchanged
     assert len(model.localization(row, col, model.height_offset)) == 3
+
+
+def test_cli_project_prints_the_validity_flag(capsys, tmp_path):
+    from explorer.cli import main
+
+    path = RPC_DIR / "rpc_IKONOS.txt"
+    model = read_rpc(path)
+    assert main(["rpc", "project", str(path), "--lon", "-56.17", "--lat", "-34.9", "--h", "20"]) == 0
+    out = capsys.readouterr()
+    assert out.out.strip().endswith("valid=True") and out.err == ""
+    # 100 degrees of longitude away: the extrapolated numbers are printed with valid=False and one warning line
+    assert main(["rpc", "project", str(path), "--lon", "43.83", "--lat", "-34.9", "--h", "20"]) == 0
+    out = capsys.readouterr()
+    values = dict(item.split("=") for item in out.out.split())
+    r_far, c_far = model.projection(43.83, -34.9, 20.0)
+    assert float(values["row"]) == pytest.approx(r_far) and values["valid"] == "False"
+    assert out.err.count("\n") == 1 and "outside the RPC's validity domain" in out.err
+    src = tmp_path / "in.csv"
+    src.write_text("lon,lat,h\n-56.17,-34.9,20\n43.83,-34.9,20\n")
+    assert main(["rpc", "project", str(path), "--points", str(src), "--out", str(tmp_path / "out.csv")]) == 0
+    lines = (tmp_path / "out.csv").read_text().splitlines()
+    assert lines[0].endswith(",valid") and lines[1].endswith(",True") and lines[2].endswith(",False")
