@@ -371,8 +371,9 @@ def residual_maps(
             ya["range"] = [shape[0] - 0.5, -0.5]
         else:
             ya["autorange"] = "reversed"
-        xa["nticks"] = 4
-        ya["nticks"] = 5
+        # few, upright, small tick labels: rotated ones would grow into the title of the map below
+        xa.update(nticks=3, tickangle=0, tickfont={"size": 9})
+        ya.update(nticks=5, tickfont={"size": 9})
     pct = f"p{percentile:g} |residual|"
     if per_map:
         for k, lim in enumerate(limits):
