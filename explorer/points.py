@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class PointSet:
 
         The file is written atomically under exactly ``path`` (no ``.npz`` is appended).
         """
-        arrays = {"row": self.row, "col": self.col, "ground": self.ground, "time": self.time,
+        arrays: dict[str, Any] = {"row": self.row, "col": self.col, "ground": self.ground, "time": self.time,
                   "grid_shape": np.array(self.grid_shape)}
         if scene is not None:
             arrays["scene_json"] = np.array(scene.to_json())
