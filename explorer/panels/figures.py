@@ -148,6 +148,7 @@ class MapPanel:
     values: np.ndarray
     index: np.ndarray
     missing: dict[str, np.ndarray]
+    method: str = ""
 
 
 def _panels(
@@ -182,7 +183,7 @@ def _panels(
                         missing["not converged"] = np.union1d(missing.get("not converged", []), idx[rest])
                 else:
                     missing["not converged"] = idx[~ok]
-            out.append(MapPanel(title, res[ok], idx[ok], missing))
+            out.append(MapPanel(title, res[ok], idx[ok], missing, _label(n, labels)))
     if difference is not None:
         a, b = difference
         if a in evaluations and b in evaluations and a != b:
@@ -193,7 +194,7 @@ def _panels(
             rms = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
             title = (f"{_label(a, labels)} minus {_label(b, labels)} (row): RMS {rms:.3g} px"
                      f"<br>({int(ok.sum()):,} points both evaluated)")
-            out.append(MapPanel(title, d[ok], common[ok], {}))
+            out.append(MapPanel(title, d[ok], common[ok], {}, "difference"))
     return out
 
 
@@ -335,13 +336,15 @@ def residual_maps(
         for what, where in p.missing.items():
             colour_s, symbol, text = STATUS_STYLE[what]
             total = len(p.values) + sum(len(v) for v in p.missing.values())
+            group = f"{p.method}: {what}"  # one legend entry per method and status (its row and column maps)
             data.append({
                 "type": "scattergl", "x": check.col[where], "y": check.row[where], "mode": "markers",
                 "xaxis": xr, "yaxis": yr, "marker": {"color": colour_s, "size": 6, "symbol": symbol},
-                "name": f"{p.title.split(':')[0]}: {text}: {count_text(len(where), total)}",
-                "legendgroup": what, "showlegend": True,
+                "name": f"{p.method}: {text}: {count_text(len(where), total)}",
+                "legendgroup": group, "showlegend": group not in legend_seen,
                 "hovertemplate": f"row %{{y:.2f}}<br>col %{{x:.2f}}<br>{text}<extra></extra>",
             })
+            legend_seen.add(group)
         if show_control and control is not None and len(control):
             many = len(control) > MANY_SCOPS
             data.append({

@@ -224,6 +224,10 @@ def test_refused_points_are_named_refused(results):
     assert len(ref.x) == 37 and len(nc.x) == 3 and "invalid" not in ref.name
     assert ref.name.endswith(f"37 ({100 * 37 / len(res):.2g}%)")
     np.testing.assert_array_equal(np.asarray(ref.x), scps.col[ev.evaluated_index[:37]])
+    both = F.residual_maps({"m": dataclasses.replace(ev, residual_row=res, residual_col=res)}, scps,
+                           status={"m": status}, max_points=None, component="row and column")
+    refused = [t for t in both.data if "refused" in t.name]
+    assert len(refused) == 2 and sum(bool(t.showlegend) for t in refused) == 1  # one entry toggles both maps
 
 
 def test_titles_keep_clear_of_the_maps_and_many_scops_stay_small(results):
