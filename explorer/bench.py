@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from explorer import _log
 from explorer.bench_defaults import (
     DEFAULT_MAX_POINTS_SLOW,
     DEFAULT_SCOPS,
@@ -260,7 +261,7 @@ def run_one(
                   len(control) if (cls.needs_fit and control is not None) else 0,
                   check, n_scps_requested, relief_m, params)
     try:
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, _log.collect_warnings() as logged:
             warnings.simplefilter("always")
             method = _create(name, scene, params, seed if cls.needs_fit else None)
             fit_s = 0.0
@@ -287,12 +288,12 @@ def run_one(
             ev = evaluate_method(method, check, control if cls.needs_fit else None, max_points=max_points,
                                  seed=seed, fit=False)
             ev.fit_s = fit_s
-        rec["warnings"] = sorted({str(w.message) for w in caught})
+        rec["warnings"] = sorted({str(w.message) for w in caught} | set(logged))
     except (KeyboardInterrupt, MemoryError):
         raise
     except Exception as exc:  # a broken method must not stop the benchmark of the others
         rec["error"] = f"{type(exc).__name__}: {exc}"
-        warnings.warn(f"bench: {name} on {preset} (n_scops={n_scops}) failed: {rec['error']}", stacklevel=2)
+        _log.warn(f"bench: {name} on {preset} (n_scops={n_scops}) failed: {rec['error']}")
         return rec, None
     rec.update(
         n_evaluated=ev.n_evaluated, subsampled=ev.n_evaluated < len(check), rmse_px=ev.rmse_px,

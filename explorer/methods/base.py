@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from explorer import _log
 from explorer.errors import NotFittedError, UnknownNameError, as_points
 from explorer.geometry.kernels import CollinearityParams, collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
@@ -229,7 +229,7 @@ def discover() -> None:
             importlib.import_module(f"{__package__}.{mod.name}")
         except Exception as exc:  # noqa: BLE001 - reported, never swallowed silently
             DISCOVERY_ERRORS[mod.name] = f"{type(exc).__name__}: {exc}"
-            warnings.warn(f"method module {mod.name!r} failed to import: {exc}", RuntimeWarning, stacklevel=2)
+            _log.warn(f"method module {mod.name!r} failed to import: {exc}")  # one line (explorer/_log.py)
     _DISCOVERED = True
 
 
