@@ -413,6 +413,55 @@ def default_pattern(epsg: int, gsd: float, origin: tuple[float, float]) -> Groun
     return GroundPattern(epsg, (17.0 * gsd, 29.0 * gsd, 41.0 * gsd), (15.0, 75.0, 130.0), origin)
 
 
+def lonlat_to_projected(transformer: pyproj.Transformer, lon: np.ndarray, lat: np.ndarray, *,
+                        step_deg: float = 5e-4, tolerance_m: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """Map projection of scattered points through PROJ on a lon/lat grid, interpolated bilinearly.
+
+    PROJ runs on the nodes of a ``step_deg`` grid over the points' bounding box (about 50 m) and is
+    interpolated in between; the interpolation error is measured at the centres of the grid cells and the
+    points are projected one by one by PROJ when it exceeds ``tolerance_m`` (UTM over 50 m: about 1e-5 m).
+    NaN points stay NaN.
+    """
+    lon = np.asarray(lon, np.float64)
+    lat = np.asarray(lat, np.float64)
+    finite = np.isfinite(lon) & np.isfinite(lat)
+    if not finite.any():
+        return np.full(lon.shape, np.nan), np.full(lon.shape, np.nan)
+    lo0, lo1 = float(lon[finite].min()), float(lon[finite].max())
+    la0, la1 = float(lat[finite].min()), float(lat[finite].max())
+    n_lon = int(np.ceil((lo1 - lo0) / step_deg)) + 2
+    n_lat = int(np.ceil((la1 - la0) / step_deg)) + 2
+    if n_lon * n_lat > lon.size // 4 + 16:  # not worth it: project every point
+        x, y = transformer.transform(lon, lat)
+        return np.asarray(x, np.float64), np.asarray(y, np.float64)
+    glon = lo0 + step_deg * np.arange(n_lon)
+    glat = la0 + step_deg * np.arange(n_lat)
+    gx, gy = (np.asarray(v) for v in transformer.transform(*np.meshgrid(glon, glat)))
+
+    def interpolate(grid: np.ndarray, fj: np.ndarray, fi: np.ndarray) -> np.ndarray:
+        j = np.clip(np.floor(fj).astype(np.int64), 0, n_lon - 2)
+        i = np.clip(np.floor(fi).astype(np.int64), 0, n_lat - 2)
+        a = fj - j
+        b = fi - i
+        return ((1 - b) * ((1 - a) * grid[i, j] + a * grid[i, j + 1])
+                + b * ((1 - a) * grid[i + 1, j] + a * grid[i + 1, j + 1]))
+
+    # the check at the cell centres
+    mlon, mlat = np.meshgrid(glon[:-1] + 0.5 * step_deg, glat[:-1] + 0.5 * step_deg)
+    mx, my = (np.asarray(v) for v in transformer.transform(mlon, mlat))
+    fj_m = (mlon - lo0) / step_deg
+    fi_m = (mlat - la0) / step_deg
+    err = np.hypot(interpolate(gx, fj_m, fi_m) - mx, interpolate(gy, fj_m, fi_m) - my)
+    if not np.all(err <= tolerance_m):
+        x, y = transformer.transform(lon, lat)
+        return np.asarray(x, np.float64), np.asarray(y, np.float64)
+    fj = np.where(finite, (lon - lo0) / step_deg, 0.0)
+    fi = np.where(finite, (lat - la0) / step_deg, 0.0)
+    x = np.where(finite, interpolate(gx, fj, fi), np.nan)
+    y = np.where(finite, interpolate(gy, fj, fi), np.nan)
+    return x, y
+
+
 def render_synthetic_source(
     image_to_lonlat: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
     shape: tuple[int, int],
@@ -423,26 +472,31 @@ def render_synthetic_source(
 ) -> Path:
     """Render the pattern as the sensor sees it: every source pixel -> ground -> pattern value.
 
+    Blocks of at most :data:`BLOCK_PIXELS` pixels are rendered and appended to the file in row order (no
+    memory map of the whole file is held, so the resident memory stays bounded by the block, whatever the
+    image size).  Ground to map coordinates: :func:`lonlat_to_projected`.
+
     Parameters
     ----------
     image_to_lonlat : callable(row (N,), col (N,)) -> (lon, lat)
-        The sensor's image -> ground on the terrain (degrees).
+        The sensor's image -> ground on the terrain (degrees); NaN where not located.
     shape : (rows, cols)
-    path : .npy file written block by block (memory-mapped), float32.
+    path : .npy file, float32 (NaN where a pixel's line of sight was not located).
     """
     path = Path(path)
-    arr = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=tuple(shape))
     to_utm = pyproj.Transformer.from_crs(4326, pattern.epsg, always_xy=True)
     cols = np.arange(shape[1], dtype=np.float64)
     block_rows = max(1, min(block_rows, BLOCK_PIXELS // max(1, shape[1])))  # bounded memory per block
-    for r0 in range(0, shape[0], block_rows):
-        r1 = min(r0 + block_rows, shape[0])
-        rr, cc = np.meshgrid(np.arange(r0, r1, dtype=np.float64), cols, indexing="ij")
-        lon, lat = image_to_lonlat(rr.ravel(), cc.ravel())
-        e, n = to_utm.transform(lon, lat)
-        arr[r0:r1] = pattern.value(np.asarray(e), np.asarray(n)).reshape(rr.shape)
-    arr.flush()
-    del arr
+    header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False,
+              "shape": (int(shape[0]), int(shape[1]))}
+    with open(path, "wb") as f:
+        np.lib.format.write_array_header_1_0(f, header)
+        for r0 in range(0, shape[0], block_rows):
+            r1 = min(r0 + block_rows, shape[0])
+            rr, cc = np.meshgrid(np.arange(r0, r1, dtype=np.float64), cols, indexing="ij")
+            lon, lat = image_to_lonlat(rr.ravel(), cc.ravel())
+            e, n = lonlat_to_projected(to_utm, lon, lat)
+            f.write(pattern.value(e, n).astype(np.float32).tobytes())
     return path
 
 
