@@ -141,6 +141,11 @@ class ExplorerApp(Views):
         self._last_request = 0.0
         self._worker: threading.Thread | None = None
         self.fits: FitPool | None = None
+        self.panel: Any = None
+        self._methods_folder: Any = None
+        self._changed_cb: Any = None
+        self.trimmer: Any = None
+        """Set by :func:`explorer.app.server.serve`: hands freed memory back after browsers leave."""
 
         self.method_names: list[str] = []
         self.methods_ready = threading.Event()

@@ -14,8 +14,8 @@ import io
 import threading
 import time
 import zipfile
-from collections.abc import Hashable
-from typing import Any
+from collections.abc import Callable, Hashable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +41,34 @@ class Views:
     _sent: dict[str, Hashable]
     _F: Any
     _B: Any
+    if TYPE_CHECKING:  # pragma: no cover  (provided by ExplorerApp)
+        runs: dict[str, MethodRun]
+        pending: dict[str, str]
+        sweeps: dict[str, list]
+        selection: Selection | None
+        frame: Any
+        scene: Scene | None
+        cloud_index: np.ndarray | None
+        cloud_residual: np.ndarray | None
+        last_update_s: float | None
+        last_times: dict[str, float]
+        camera_pose: tuple | None
+        exports: int
+        fits: Any
+        methods_ready: threading.Event
+        method_names: list[str]
+        max_cloud_points: int
+        max_map_points: int | None
+        fit_wait_s: float
+        background: bool
+        _lock: threading.Condition
+        _completed_gen: int
+        _status: Callable[..., None]
+        _check: Callable[[int | None], None]
+        _get_fits: Callable[..., dict]
+        _pending_text: Callable[[str, Settings], str]
+        settings: Callable[[], Settings]
+        quiet: Callable[[], Any]
 
     # ---------------------------------------------------------------- helpers
     def _put(self, key: str, handles: dict[str, Any]) -> None:
