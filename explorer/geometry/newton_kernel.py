@@ -40,9 +40,7 @@ def _newton_raphson_nb(
     scale_f = 1.0 / pitch
     scale_d = line_period / pitch
     for i in prange(ground.shape[0]):
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         r = start
         lo = lo0
         hi = hi0

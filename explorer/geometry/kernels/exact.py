@@ -60,9 +60,7 @@ def _newton_first_nb(
     mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half = sx
     n_trace = trace.shape[0]
     for i in prange(ground.shape[0]):
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         rr = min(max(_seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half), w_lo),
                  w_hi)
         for s in range(len(steps)):  # 1 or 2 unconditional Newton evaluations (unrolled)
@@ -94,9 +92,7 @@ def _newton_next_nb(
         if n_trace > k:
             trace[k, i] = rr
         t = (rr - ref_row) * line_period
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         g, gt, yd, ydt, vz = _ce_fixed(
             X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
         )
@@ -118,9 +114,7 @@ def _solve_exact_nb(
     n = ground.shape[0]
     n_trace = trace.shape[0]
     for i in prange(n):
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         r = start[i]
         if not (r >= w_lo):  # also catches NaN
             r = w_lo if r < w_lo else 0.5 * (w_lo + w_hi)

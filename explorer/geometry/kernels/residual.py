@@ -37,9 +37,7 @@ def _residual_nb(
 def _residual_fixed_nb(ground, t_all, fx, focal, offset, pitch, pc, g_out, gt_out, col_out):  # pragma: no cover
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     for i in prange(ground.shape[0]):
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         t = t_all[i]
         g, gt, yd, ydt, vz = _ce_fixed(
             X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset

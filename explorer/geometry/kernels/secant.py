@@ -23,9 +23,7 @@ def _solve_secant_nb(
     n = ground.shape[0]
     n_trace = trace.shape[0]
     for i in prange(n):
-        X = ground[i, 0]
-        Y = ground[i, 1]
-        Z = ground[i, 2]
+        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
         # projective approximation (usgscsm computeProjectiveApproximation), clamped to the image
         u = (X - proj[8]) / proj[11]
         v = (Y - proj[9]) / proj[12]
