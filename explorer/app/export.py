@@ -26,12 +26,13 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, _Recording, point_status
 from explorer.evaluate import Evaluation, evaluate_method
+from explorer.methods.base import BestScanlineMethod
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status")
 
@@ -67,7 +68,7 @@ def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRec
         return {"error": error or fit.error, "fit_s": fit.fit_s, "eval_s": None, "n_valid": 0, "n_invalid": 0}
     r, c = np.asarray(ev.residual_row), np.asarray(ev.residual_col)
     ok_r, ok_c = np.isfinite(r), np.isfinite(c)
-    counts = np.bincount(status.astype(np.int64), minlength=len(STATUS_NAMES))
+    counts = np.bincount(np.asarray(status, dtype=np.int64), minlength=len(STATUS_NAMES))
     return {
         "rmse_row_px": _finite_or_none(float(np.sqrt(np.mean(r[ok_r] ** 2))) if ok_r.any() else math.nan),
         "rmse_col_px": _finite_or_none(float(np.sqrt(np.mean(c[ok_c] ** 2))) if ok_c.any() else math.nan),
@@ -106,15 +107,17 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     summary: dict[str, Any] = {}
     for name in s.methods:
         rec = (fits or {}).get(name) or model.fit(name, s)
-        ev, st, err = None, None, rec.error
+        ev: Evaluation | None = None
+        st: np.ndarray | None = None
+        err = rec.error
         if rec.method is not None:
             rec_m = _Recording(rec.method)
             try:
-                ev = evaluate_method(rec_m, scps, seed=seed, fit=False)
+                ev = evaluate_method(cast(BestScanlineMethod, rec_m), scps, seed=seed, fit=False)
                 st = point_status(rec_m.result)
             except Exception as exc:  # a failing method is reported, not fatal
                 err = f"{type(exc).__name__}: {exc}"
-        if ev is not None:
+        if ev is not None and st is not None:
             evaluations[name], status[name] = ev, st
         summary[name] = method_summary(ev, st, rec, err)
     settings = {"methods": list(s.methods), "scops": int(s.scop_density), "scops_used": len(scops),

@@ -334,7 +334,7 @@ class ExplorerApp(Views):
         if self._closing or key in self._waiting_for:
             return
         now = time.monotonic()
-        if priority == 0 or not self.fits.queued() or now - self._last_trigger > 2.0:
+        if priority == 0 or self.fits is None or not self.fits.queued() or now - self._last_trigger > 2.0:
             self._last_trigger = now
             self._gen += 1
             self._lock.notify_all()
@@ -388,24 +388,25 @@ class ExplorerApp(Views):
         ``wait_s`` together (less if a newer request for ``gen`` arrives); None for those still
         training."""
         m = self.model
+        fits = self.fits
         out: dict[tuple[str, int | None], FitRecord | None] = {}
         missing = []
         for name, d in jobs:
-            if not self.background or not registry()[name].needs_fit:
+            if fits is None or not registry()[name].needs_fit:
                 out[(name, d)] = m.fit(name, s, d)
                 continue
             out[(name, d)] = m.cached_fit(name, s, d)
             if out[(name, d)] is None:
                 key = m.fit_key(name, s, d)
                 cost = m.fit_seconds.get(name, 1.0) * (d or s.scop_density) / 100.0
-                self.fits.submit(key, lambda n=name, dd=d: m.fit(n, s, dd), priority, cost)
+                fits.submit(key, lambda n=name, dd=d: m.fit(n, s, dd), priority, cost)  # type: ignore[misc]
                 missing.append((name, d, key))
-        if missing and wait_s > 0:
+        if missing and wait_s > 0 and fits is not None:
             keys = [k for _, _, k in missing]
             with self._lock:
                 self._waiting_for = set(keys)
             try:
-                self.fits.wait_for(keys, time.monotonic() + wait_s,
+                fits.wait_for(keys, time.monotonic() + wait_s,
                                    abort=lambda: gen is not None and (self._gen != gen or self._closing))
             finally:
                 with self._lock:

@@ -25,7 +25,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -204,7 +204,7 @@ def accepted_params(cls: type) -> dict[str, Any]:
         if isinstance(d, dict):
             out.update(d)
     try:
-        sig = inspect.signature(cls.__init__)
+        sig = inspect.signature(cls.__init__)  # type: ignore[misc]  (the class's own constructor)
     except (TypeError, ValueError):  # pragma: no cover
         sig = None
     if sig is not None:
@@ -352,6 +352,7 @@ class ExplorerModel:
                 m = create(name, scene, **params)
                 t0 = time.perf_counter()
                 if m.needs_fit:
+                    assert scops is not None
                     m.fit(scops)
                 fit_s = time.perf_counter() - t0 if m.needs_fit else 0.0
                 err = None
@@ -382,10 +383,14 @@ class ExplorerModel:
             return known * len(scps), known
         key = (s.scene_key, rec.n_scops, name, tuple(sorted(rec.params.items())), len(scps))
 
+        method = rec.method
+        budget = self.locate_budget_s
+        assert method is not None and budget is not None
+
         def timed(n: int) -> float:
             sub = scps.sample(n, self.seed + 1)
             t0 = time.perf_counter()
-            rec.method.ground_to_image(sub.ground)
+            method.ground_to_image(sub.ground)
             return time.perf_counter() - t0
 
         def make() -> tuple[float, float]:
@@ -393,7 +398,7 @@ class ExplorerModel:
             n1 = min(self.probe_points, n_all)
             t1 = timed(n1)
             est = t1 * n_all / max(n1, 1)
-            if est <= self.locate_budget_s or n1 == n_all:
+            if est <= budget or n1 == n_all:
                 return est, t1 / max(n1, 1)
             n2 = min(8 * n1, n_all)
             t2 = timed(n2)
@@ -411,13 +416,14 @@ class ExplorerModel:
         if rec.method is None:
             return MethodRun(name, self.label(name), None, rec, error=rec.error)
         scps = self.scps(s)
-        if max_points is None and self.locate_budget_s is not None:
+        budget = self.locate_budget_s
+        if max_points is None and budget is not None:
             plan_key = (fkey, int(s.scp_count))
 
             def plan() -> tuple[int | None]:  # decided once per input, so a revisit is a cache hit
                 projected, per_point = self._projection(name, rec, s, scps)
-                if projected > self.locate_budget_s:
-                    return (max(self.min_subsample, int(self.locate_budget_s / per_point)),)
+                if projected > budget:
+                    return (max(self.min_subsample, int(budget / per_point)),)
                 return (None,)
             (max_points,) = self._plans.get_or(plan_key, plan)
         if max_points is not None and max_points >= len(scps):
@@ -426,10 +432,12 @@ class ExplorerModel:
 
         def make() -> MethodRun:
             self.counters["evaluate"] += 1
+            assert rec.method is not None
             recorder = _Recording(rec.method)
             try:
                 # fit=False: fits are cached separately, so changing the SCPs never retrains
-                ev = evaluate_method(recorder, scps, max_points=max_points, seed=self.seed, fit=False)
+                ev = evaluate_method(cast(BestScanlineMethod, recorder), scps, max_points=max_points, seed=self.seed,
+                                     fit=False)
             except Exception as exc:
                 return MethodRun(name, self.label(name), None, rec, error=f"{type(exc).__name__}: {exc}")
             status = point_status(recorder.result)
@@ -460,7 +468,7 @@ class ExplorerModel:
         scene = self.scene(s)
         run = runs.get(s.color_method) if s.color_method else None
         sel = None
-        if s.selection[0] == "worst" and run is not None and run.ok:
+        if s.selection[0] == "worst" and run is not None and run.evaluation is not None:
             ev = run.evaluation
             res = np.abs(ev.residual_row)
             if np.isfinite(res).any():
@@ -544,6 +552,7 @@ def summary_markdown(runs: dict[str, MethodRun], n_scps: int) -> str:
             notes.append(f"**{n}** failed: {r.error}")
             continue
         e = r.evaluation
+        assert e is not None
         ev = f"{e.n_evaluated:,}" + (" (subsample)" if r.subsampled else "")
         lines.append(f"| {n} | {e.rmse_px:.3g} | {e.dr_max_px:.3g} | {e.ce_evals_per_point:.1f} | "
                      f"{e.fit_s:.3g} | {e.locate_s:.3g} | {ev} |")

@@ -182,8 +182,8 @@ class Views:
         scps, scops = self.model.scps(s), self.model.scops(s)
         cm = s.color_method
         run = self.runs.get(cm) if cm else None
-        ev = run.evaluation if run is not None and run.ok else None
-        ev_key = run.key if ev is not None else None
+        ev = run.evaluation if run is not None else None
+        ev_key = run.key if run is not None and ev is not None else None
         limit = s.limit_px
         if ev is not None and s.colour_mode != "fixed":
             from explorer.panels import robust_limit
@@ -218,7 +218,7 @@ class Views:
         F, m = self._F, self.model  # noqa: N806
         scene, scps, scops = m.scene(s), m.scps(s), m.scops(s)
         runs, pending = self.runs, self.pending
-        ok = {n: r.evaluation for n, r in runs.items() if r.ok}
+        ok = {n: r.evaluation for n, r in runs.items() if r.evaluation is not None}
         maps_key = (tuple((n, runs[n].key) for n in ok), s.limit_px, s.colour_mode, s.component, s.diff,
                     s.show_scops, s.scop_density, tuple(pending), self.methods_ready.is_set())
         if not self._changed("maps", maps_key):
@@ -351,10 +351,12 @@ class Views:
         dist = max(np.linalg.norm(mid), frame.diagonal_km)
         view = 1.0 * side - 0.35 * flight + np.array([0.0, 0.0, 0.1])
         cam = look + 1.15 * dist * view / np.linalg.norm(view)
-        far = float(max(5000.0, 4 * np.linalg.norm(cam)))
+        far = max(5000.0, 4.0 * float(np.linalg.norm(cam)))
         return tuple(float(v) for v in cam), tuple(float(v) for v in look), far
 
     def _apply_camera(self, clients: list[Any]) -> None:
+        if self.camera_pose is None:
+            return
         pos, look, far = self.camera_pose
         for client in clients:
             with contextlib.suppress(Exception):

@@ -310,7 +310,7 @@ def residual_maps(
     elif mode == "shared":
         limits = [robust_limit(np.concatenate([p.values for p in panels]), percentile)]
     elif mode == "fixed":
-        limits = [float(limit_px)]
+        limits = [float(limit_px or 0.0)]
     else:
         limits = [robust_limit(p.values, percentile) for p in panels]
     hover_what = "log10 |residual| %{marker.color:.3f}" if mode == "log magnitude" else ""

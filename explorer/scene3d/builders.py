@@ -25,7 +25,7 @@ exaggerated.  ``sensor_distance="true"`` draws everything at true scale.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -488,7 +488,7 @@ def add_points(
     colors: np.ndarray | tuple[int, int, int],
     *,
     size_km: float,
-    shape: str = "circle",
+    shape: Literal["square", "diamond", "circle", "rounded", "sparkle"] = "circle",
 ) -> Handles:
     """A point cloud of ground-side points (float32 km; colours (N, 3) uint8 or one RGB)."""
     pts = frame.ground(points_m).astype(np.float32)
