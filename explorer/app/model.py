@@ -204,7 +204,8 @@ def accepted_params(cls: type) -> dict[str, Any]:
         if isinstance(d, dict):
             out.update(d)
     try:
-        sig = inspect.signature(cls.__init__)  # type: ignore[misc]  (the class's own constructor)
+        # the class's own constructor
+        sig = inspect.signature(cls.__init__)  # type: ignore[misc]
     except (TypeError, ValueError):  # pragma: no cover
         sig = None
     if sig is not None:
