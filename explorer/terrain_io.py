@@ -343,7 +343,7 @@ def height_grid_of(dem: object) -> HeightGrid | None:
 
 
 def require_coverage(grid: HeightGrid, lon: ArrayLike, lat: ArrayLike, what: str = "the footprint",
-                     source: str | None = None) -> None:
+                     source: str | None = None, *, partial: bool = False) -> None:
     """Raise :class:`InputError` unless every (lon, lat) lies inside the DEM's node grid.
 
     Parameters
@@ -353,11 +353,14 @@ def require_coverage(grid: HeightGrid, lon: ArrayLike, lat: ArrayLike, what: str
         Degrees, e.g. the image corners on the ground.
     what, source : str
         Named in the message.
+    partial : bool
+        Accept a DEM that covers part of the points (the rest is flagged point by point); raise only when
+        it covers none of them.
     """
     u, v = grid.to_grid(lon, lat)
     ny, nx = grid.heights.shape
     inside = (u >= 0) & (u <= nx - 1) & (v >= 0) & (v <= ny - 1)
-    if not np.all(inside):
+    if not (np.any(inside) if partial else np.all(inside)):
         x1, y1 = grid.x0 + (nx - 1) * grid.dx, grid.y0 + (ny - 1) * grid.dy
         raise InputError(
             f"DEM {source or ''} does not cover {what}: DEM lon [{min(grid.x0, x1):.5f}, {max(grid.x0, x1):.5f}], "

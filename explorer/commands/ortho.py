@@ -103,7 +103,9 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
     if dem is not None:
         from explorer.terrain_io import height_grid_of, require_coverage
 
-        require_coverage(height_grid_of(dem), lon, lat, "the image footprint", str(args.dem))
+        # corners and centre at one height: a DEM that misses them all is the wrong DEM; one that misses
+        # a corner by metres is not (the pixels it does not cover are no-data in the output)
+        require_coverage(height_grid_of(dem), lon, lat, "the image footprint", str(args.dem), partial=True)
     from explorer.geometry.frames import LocalFrame
 
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()
