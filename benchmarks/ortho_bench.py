@@ -111,6 +111,10 @@ def main() -> None:
         if args.scale:
             out["scale"] = scale_run(args.scale, args.chunk, Path(tmp))
             print(json.dumps(out["scale"], indent=1))
+    if "scale" not in out and args.out.exists():  # keep the last scale run when this one skipped it
+        previous = json.loads(args.out.read_text())
+        if "scale" in previous:
+            out["scale"] = previous["scale"]
     args.out.write_text(json.dumps(out, indent=1) + "\n")
 
 
