@@ -587,7 +587,7 @@ def _convergence_check(problem: _ResectionProblem, x: np.ndarray) -> dict:
     rms_after = float(np.sqrt(max(f @ f - g @ g, 0.0) / n))
     return {
         "gauss_newton_gain_px": rms - rms_after,
-        "condition_number": float(s[0] / s[-1]) if s[-1] > 0 else float("inf"),
+        "condition_number": float(s[0] / max(s[-1], 1e-300 * s[0], 1e-300)),  # finite: JSON reports
         "converged": bool(rms - rms_after <= CONVERGED_RELATIVE * rms + AGREEMENT_FLOOR_PX),
     }
 
