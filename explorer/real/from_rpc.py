@@ -459,6 +459,13 @@ def scene_from_rpc(
     report : ResectionReport
         GCP and check-point residuals (pixels, true ground -> image projection).
     """
+    for what, value, lo, hi in (("n_gcps", n_gcps, 4, 1_000_000), ("layers", layers, 1, 100),
+                                ("n_check", n_check, 0, 1_000_000), ("degree", degree, 0, 10),
+                                ("column_terms", column_terms, 0, 10)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+            raise InputError(f"{what} must be a whole number in [{lo}, {hi:,}], got {value!r}")
+    if not (np.isfinite(prior_scale) and prior_scale >= 0):
+        raise InputError(f"prior_scale must be finite and >= 0, got {prior_scale!r}")
     rpc = path if isinstance(path, RationalFunctionModel) else read_rpc(path)
     src = rpc.source_path or (str(path) if not isinstance(path, RationalFunctionModel) else "<model>")
     if name is None:

@@ -268,3 +268,20 @@ def test_resection_gives_the_same_answer_with_other_cpu_kernels():
     for res in results:
         assert abs(res["rmse"] - report.rmse_px) < 1e-6
         assert np.max(np.hypot(np.subtract(res["row"], row), np.subtract(res["col"], col))) < 1e-4
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"n_gcps": 0}, "n_gcps"), ({"n_gcps": -5}, "n_gcps"), ({"n_gcps": 10**12}, "n_gcps"), ({"layers": 0}, "layers"),
+    ({"n_check": -1}, "n_check"), ({"degree": -1}, "degree"), ({"prior_scale": float("nan")}, "prior_scale"),
+])
+def test_bad_counts_are_refused_before_any_work(kwargs, message):
+    """``--gcps 0`` / ``--layers 0`` used to be raised silently to a minimum (90 px check RMSE, exit 0)."""
+    with pytest.raises(InputError, match=message):
+        scene_from_rpc(RPC_DIR / "rpc_WV1.xml", **kwargs)
+
+
+def test_missing_dem_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="DEM not found"):
+        load_dem(tmp_path / "nope.tif")
+    with pytest.raises(InputError, match="DEM not found"):
+        load_dem(tmp_path)  # a directory
