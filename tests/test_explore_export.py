@@ -119,3 +119,13 @@ def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):
         lines = [ln for ln in captured.err.splitlines() if ln.strip()]
         assert len(lines) in (1, 2) and words in captured.err, (args, captured.err)  # argparse adds a usage line
         assert "Traceback" not in captured.err
+
+
+def test_isd_exports_byte_identical_residuals(tmp_path, capsys):
+    isd = RPC_DIR.parent / "usgscsm" / "orbitalLineScan.json"  # usgscsm's public-domain fixture
+    a = _export(tmp_path, "a", ["--isd", str(isd)], capsys)
+    b = _export(tmp_path, "b", ["--isd", str(isd)], capsys)
+    assert a["residuals.csv"] == b["residuals.csv"]
+    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    _check_summary_against_csv(a)
+    assert json.loads(a["summary.json"])["source"]["kind"] == "isd"
