@@ -10,9 +10,10 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, Literal, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from explorer.errors import SceneFileError, as_points, check_finite
 from explorer.geometry.bracket import bracket_best_scanline
@@ -32,6 +33,7 @@ from explorer.io_atomic import write_text_atomic
 
 SCENE_FILE_VERSION = 1
 RIGOROUS_SCENE_FORMAT = "pushbroom-explorer rigorous line-scan scene"
+HeightArg = np.ndarray | float | None  # heights of image_to_ground: plane(s) Z = height, or the terrain
 CHUNK = 1 << 18  # points per block in per-point matrix work (bounds memory to ~50 MB)
 
 
@@ -94,7 +96,7 @@ class Scene:
         """Detector pitch, metres: focal-plane metres per pixel."""
         return self.interior.detector_pitch_m
 
-    def scanline_time(self, row: np.ndarray) -> np.ndarray:
+    def scanline_time(self, row: ArrayLike) -> np.ndarray:
         """Row (N,) -> exposure time (N,), seconds."""
         return self.timing.scanline_time(row)
 
@@ -188,6 +190,12 @@ class Scene:
 
         return _chunked(row.shape[0], block, (3, 3))
 
+    @overload
+    def image_to_ground(self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
+                        height: HeightArg = None, return_flags: Literal[False] = False) -> np.ndarray: ...
+    @overload
+    def image_to_ground(self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
+                        height: HeightArg = None, return_flags: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
     def image_to_ground(
         self,
         row: np.ndarray,
@@ -221,17 +229,24 @@ class Scene:
         flags : ndarray of int8, shape (N,)
             With ``return_flags``.
         """
-        origin, direction = self.rays(row, col)
-        if height is not None or isinstance(self.terrain if terrain is None else terrain, FlatTerrain):
-            h = check_finite(height, "height") if height is not None else (self.terrain if terrain is None
-                                                                          else terrain).height_m
-            points = intersect_plane(origin, direction, h)
-            if not return_flags:
-                return points
-            return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
-        terrain = self.terrain if terrain is None else terrain
-        points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
+        points, flags = self.intersect_terrain(row, col, terrain, height=height)
         return (points, flags) if return_flags else points
+
+    def intersect_terrain(
+        self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
+        height: np.ndarray | float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Ground points (N, 3) and flags (N,) int8 of :meth:`image_to_ground` (the part a sensor model
+        with other lines of sight overrides, e.g. :class:`explorer.real.linescan.RigorousLineScanScene`)."""
+        origin, direction = self.rays(row, col)
+        terrain = self.terrain if terrain is None else terrain
+        if height is not None:
+            points = intersect_plane(origin, direction, check_finite(np.asarray(height, dtype=np.float64), "height"))
+        elif isinstance(terrain, FlatTerrain):
+            points = intersect_plane(origin, direction, terrain.height_m)
+        else:
+            return intersect_dem(origin, direction, terrain, return_flags=True)
+        return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
 
     def footprint(self, height: float | None = None) -> np.ndarray:
         """Ground corners of the image at a height (default: mean terrain height), shape (4, 3).

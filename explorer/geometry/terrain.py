@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 from dataclasses import dataclass, field
+from typing import Literal, overload
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
@@ -256,6 +257,12 @@ def intersect_plane(origin: np.ndarray, direction: np.ndarray, height: np.ndarra
     return origin + lam[:, None] * direction
 
 
+@overload
+def intersect_dem(origin: np.ndarray, direction: np.ndarray, dem: GridDEM, *,
+                  return_flags: Literal[False] = False) -> np.ndarray: ...
+@overload
+def intersect_dem(origin: np.ndarray, direction: np.ndarray, dem: GridDEM, *,
+                  return_flags: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
 def intersect_dem(
     origin: np.ndarray,
     direction: np.ndarray,

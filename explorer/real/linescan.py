@@ -509,17 +509,13 @@ class RigorousLineScanScene(Scene):
             d /= np.linalg.norm(d, axis=1, keepdims=True)
         return centre, d
 
-    def image_to_ground(
-        self,
-        row: np.ndarray,
-        col: np.ndarray,
-        terrain: Terrain | None = None,
-        *,
+    def intersect_terrain(
+        self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
         height: np.ndarray | float | None = None,
-        return_flags: bool = False,
-    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-        """As :meth:`Scene.image_to_ground`; the corrected lines of sight are evaluated at the
-        intersection height (one extra pass on a DEM), so refraction is exact there too."""
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`Scene.intersect_terrain` (behind :meth:`Scene.image_to_ground`); the corrected lines of
+        sight are evaluated at the intersection height (one extra pass on a DEM), so refraction is exact
+        there too."""
         terrain = self.terrain if terrain is None else terrain
 
         def on_plane(h: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
@@ -538,7 +534,7 @@ class RigorousLineScanScene(Scene):
                 h = np.where(np.isfinite(points[:, 2]), points[:, 2], terrain.mean_height)
                 origin, direction = self.rays(row, col, height=h)
                 points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
-        return (points, flags) if return_flags else points
+        return points, flags
 
     # ------------------------------------------------------------ description
     def describe_dict(self) -> dict:

@@ -12,7 +12,7 @@ ellipsoid. Everything is vectorised with numpy over arrays of any (broadcastable
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -477,6 +477,17 @@ class RationalFunctionModel:
                     ok &= (value >= -0.5 - pad) & (value <= n - 0.5 + pad)
         return ok
 
+    @overload
+    def projection(
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto",
+        return_valid: Literal[False] = False,
+    ) -> tuple[FloatArray, FloatArray]: ...
+
+    @overload
+    def projection(
+        self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto", return_valid: Literal[True]
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]: ...
+
     def projection(
         self, lon: ArrayLike, lat: ArrayLike, h: ArrayLike, *, backend: str = "auto", return_valid: bool = False
     ) -> tuple[FloatArray, FloatArray] | tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
@@ -613,6 +624,34 @@ class RationalFunctionModel:
         col_x = (cn_x * cd - cn * cd_x) / (cd * cd) * self.col_scale
         col_y = (cn_y * cd - cn * cd_y) / (cd * cd) * self.col_scale
         return row, col, row_x, row_y, col_x, col_y
+
+    @overload
+    def localization(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        h: ArrayLike,
+        *,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+        residual_tol_px: float = 1e-6,
+        raise_on_failure: bool = False,
+        return_valid: Literal[False] = False,
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]: ...
+
+    @overload
+    def localization(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        h: ArrayLike,
+        *,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+        residual_tol_px: float = 1e-6,
+        raise_on_failure: bool = False,
+        return_valid: Literal[True],
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_]]: ...
 
     @np.errstate(invalid="ignore", over="ignore", divide="ignore")
     def localization(
@@ -761,6 +800,38 @@ class RationalFunctionModel:
         return row_n * self.row_scale + self.row_offset, col_n * self.col_scale + self.col_offset
 
     # ------------------------------------------------------- DEM intersection
+    @overload
+    def localization_on_dem(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        dem: HeightSource | Any,
+        *,
+        h_min: float | None = None,
+        h_max: float | None = None,
+        n_levels: int = 65,
+        height_tol: float = 1e-4,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+        return_flags: Literal[False] = False,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]: ...
+
+    @overload
+    def localization_on_dem(
+        self,
+        row: ArrayLike,
+        col: ArrayLike,
+        dem: HeightSource | Any,
+        *,
+        h_min: float | None = None,
+        h_max: float | None = None,
+        n_levels: int = 65,
+        height_tol: float = 1e-4,
+        tol: float = 1e-10,
+        max_iter: int = 50,
+        return_flags: Literal[True],
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.int8]]: ...
+
     def localization_on_dem(
         self,
         row: ArrayLike,
@@ -774,7 +845,8 @@ class RationalFunctionModel:
         tol: float = 1e-10,
         max_iter: int = 50,
         return_flags: bool = False,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]] | tuple[FloatArray, ...]:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]] | tuple[FloatArray, FloatArray, FloatArray,
+                                                                             NDArray[np.bool_], NDArray[np.int8]]:
         """Intersect each pixel's line of sight with a DEM: the first intersection from the sensor.
 
         A gridded DEM (:class:`~explorer.terrain_io.GeoDEM`, :class:`~explorer.terrain_io.EllipsoidalDEM`
