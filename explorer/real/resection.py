@@ -20,6 +20,7 @@ Conventions (pixels, time, frames, rotations): ``docs/conventions.md``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -540,7 +541,7 @@ def _minimise(problem: _ResectionProblem, x0: np.ndarray, name: str, *, method: 
     # Position, attitude and interior are strongly correlated (narrow field of view): the damped
     # iteration can stop in a long curved valley.  Restarting from the last solution (fresh
     # damping) continues down the valley; stop when the cost no longer drops.
-    x, cost, best = x0, np.inf, None
+    x, cost, best = x0, np.inf, None  # best: the last scipy OptimizeResult that did not raise the cost
     for _ in range(restarts + 1):
         sol = least_squares(fun, x, jac=jac, method=method, x_scale=1.0 / scale, xtol=1e-15, ftol=1e-15,
                             gtol=1e-15, **kwargs)
@@ -571,6 +572,7 @@ def _minimise(problem: _ResectionProblem, x0: np.ndarray, name: str, *, method: 
         steps += 1
         if gain < 1e-15:
             break
+    assert best is not None  # the first least_squares run is always taken (its cost is below inf)
     return _Run(name, x, 0.5 * ss, calls[0], int(best.status), str(best.message), steps)
 
 
@@ -712,8 +714,10 @@ def resect(
     n_par = 6 * (degree + 1) + int(estimate_focal) + column_terms
     if 2 * row.size < n_par:
         raise InputError(f"{row.size} control points give {2 * row.size} equations for {n_par} unknowns")
-    options = dict(method=method, max_nfev=max_nfev, restarts=restarts, prior_scale=prior_scale, polish=polish,
-                   staged=staged, random_starts=random_starts, start_spread_px=start_spread_px, seed=seed)
+    options: dict[str, Any] = dict(
+        method=method, max_nfev=max_nfev, restarts=restarts, prior_scale=prior_scale, polish=polish,
+        staged=staged, random_starts=random_starts, start_spread_px=start_spread_px, seed=seed,
+    )
     if column_terms and len(scene0.interior.column_polynomial) < column_terms and stage_columns:
         # staged: the exterior (and focal length) first, then release the spacing terms
         first, rep1 = resect(scene0, row, col, ground, degree=degree, estimate_focal=estimate_focal,
@@ -735,7 +739,7 @@ def resect(
     p0 = np.zeros(n_par)
     r0 = problem.residuals(p0)
     initial_rmse = float(np.sqrt(np.mean(r0[: row.size] ** 2 + r0[row.size : n_obs] ** 2)))
-    solve = dict(method=method, max_nfev=max_nfev, restarts=restarts, polish=polish)
+    solve: dict[str, Any] = dict(method=method, max_nfev=max_nfev, restarts=restarts, polish=polish)
 
     runs = [_minimise(problem, p0, "initial values", **solve)]
     if staged and degree >= 2:
