@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -117,7 +118,7 @@ def _fit(
     row_o, row_s = _normalisation(row)
     col_o, col_s = _normalisation(col)
     mono = rpc00b_monomials((lon - lon_o) / lon_s, (lat - lat_o) / lat_s, (h - h_o) / h_s)
-    kwargs = dict(rational=rational, regularization=regularization, n_reweight=n_reweight)
+    kwargs: dict[str, Any] = dict(rational=rational, regularization=regularization, n_reweight=n_reweight)
     row_num, row_den = _solve_rational(mono, (row - row_o) / row_s, n_terms, **kwargs)
     col_num, col_den = _solve_rational(mono, (col - col_o) / col_s, n_terms, **kwargs)
     return RationalFunctionModel(

@@ -282,14 +282,14 @@ class RationalFunctionModel:
                 k: np.asarray(getattr(self.inverse, k), dtype=np.float64).reshape(20)
                 for k in ("lon_num", "lon_den", "lat_num", "lat_den")
             }
-            for k, v in arrays.items():
+            for key, v in arrays.items():
                 if not np.isfinite(v).all():
-                    raise InputError(f"image-to-ground {k} has non-finite coefficients")
+                    raise InputError(f"image-to-ground {key} has non-finite coefficients")
             object.__setattr__(self, "inverse", InverseRFM(**arrays))
         if self.validity is not None:
-            for k, v in vars(self.validity).items():
-                if v is not None and not np.isfinite(v):
-                    raise InputError(f"validity domain {k} is not finite: {v}")
+            for key, bound in vars(self.validity).items():
+                if bound is not None and not np.isfinite(bound):
+                    raise InputError(f"validity domain {key} is not finite: {bound}")
         if self.image_size is not None and not (int(self.image_size[0]) > 0 and int(self.image_size[1]) > 0):
             raise InputError(f"image size {self.image_size} must be positive")
 
@@ -564,7 +564,8 @@ class RationalFunctionModel:
             self.lon_offset, self.lon_scale, self.lat_offset, self.lat_scale, self.height_offset,
             self.height_scale, self.row_offset, self.row_scale, self.col_offset, self.col_scale,
         )  # fmt: skip
-        row, col, nan_counts = _kernels.project(*flat, (self.row_num, self.row_den, self.col_num, self.col_den), norm)
+        row, col, nan_counts = _kernels.project(flat[0], flat[1], flat[2],
+                                                (self.row_num, self.row_den, self.col_num, self.col_den), norm)
         if any(nan_counts):  # the numpy path's error, naming the first argument with NaN
             for value, name in zip(arrays, ("lon", "lat", "h"), strict=True):
                 _as_float_array(value, name)
@@ -913,7 +914,7 @@ class RationalFunctionModel:
                                  f"row {row_f[0]:.1f}, col {col_f[0]:.1f})")
             out = (lon_k.reshape(shape), lat_k.reshape(shape), h_k.reshape(shape), (flags == OK).reshape(shape))
             return (*out, flags.reshape(shape)) if return_flags else out
-        height_fn = dem.height if hasattr(dem, "height") else dem
+        height_fn: Any = dem.height if hasattr(dem, "height") else dem  # a HeightSource or a callable
         if h_min is None or h_max is None:
             if hasattr(dem, "min") and hasattr(dem, "max"):
                 dem_min, dem_max = float(dem.min) - 1.0, float(dem.max) + 1.0
