@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from explorer.errors import InputError
 from explorer.geometry.rotations import rotation_from_opk
 
 ANGLE_NAMES = ("omega", "phi", "kappa")
@@ -38,6 +39,13 @@ class Jitter:
     def __post_init__(self) -> None:
         if self.angle not in ANGLE_NAMES:
             raise ValueError(f"jitter angle must be one of {ANGLE_NAMES}, got {self.angle!r}")
+        for name in ("amplitude_rad", "frequency_hz", "phase_rad"):  # numbers, finite (a scene file may hold anything)
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise InputError(f"jitter {name} must be a number, got {value!r}")
+            if not np.isfinite(float(value)):
+                raise InputError(f"jitter {name} must be finite, got {value!r}")
+            object.__setattr__(self, name, float(value))
 
 
 def polyval_ascending(coeffs: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import event, given
 from hypothesis import strategies as st
 
-from explorer.errors import ExplorerError, SceneFileError
+from explorer.errors import ExplorerError, InputError, SceneFileError
 from explorer.geometry.exterior import Jitter
 from explorer.presets import build_scene
 from explorer.real import load_scene
@@ -139,7 +139,11 @@ def test_mutated_scene_files_give_a_scene_or_the_packages_error(case):
 def test_non_finite_geometry_is_refused_by_the_writer_and_the_reader(tmp_path):
     """``simulate --jitter-scale inf`` wrote ``Infinity`` into the scene JSON; now neither side accepts it."""
     scene = build_scene("agile")
-    scene.exterior.jitter = [Jitter("phi", float("inf"), 1.0, 0.0)]
+    with pytest.raises(InputError, match="jitter amplitude_rad must be finite"):
+        Jitter("phi", float("inf"), 1.0, 0.0)
+    jitter = Jitter("phi", 1e-6, 1.0, 0.0)
+    object.__setattr__(jitter, "amplitude_rad", float("inf"))  # a scene corrupted in memory
+    scene.exterior.jitter = [jitter]
     with pytest.raises(SceneFileError, match=r"exterior.jitter\[0\].amplitude_rad \(inf\) is not finite"):
         scene.save(tmp_path / "bad.json")
     assert not (tmp_path / "bad.json").exists()
