@@ -102,7 +102,7 @@ def drag(source: str, key: str, values: list, debounce_s: float, methods: list[s
 
     sources = []
     if source == "dimap":
-        from explorer.app.sources import load_source
+        from explorer.sources import load_source
 
         sources = [load_source("dimap", str(DIMAP), dem=str(DEM))]
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)

@@ -524,7 +524,7 @@ def test_plotly_panels_have_no_share_to_cloud_button(server):
 
 
 def test_a_loaded_scene_is_named_and_the_preset_dropdown_still_switches(server, tmp_path):
-    from explorer.app.sources import load_source
+    from explorer.sources import load_source
     from explorer.presets import build_scene
 
     path = tmp_path / "my_sensor.json"

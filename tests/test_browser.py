@@ -164,7 +164,7 @@ RECORD_CLICKS = """() => {
 
 @pytest.fixture(scope="module")
 def real_explorer():
-    from explorer.app.sources import load_source
+    from explorer.sources import load_source
     from tests.real.conftest import DEM_DIR, PHR_2017
 
     src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"))

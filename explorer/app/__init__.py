@@ -6,7 +6,7 @@ The package splits the explorer in layers (``docs/explorer.md``; architecture:
 
 * :mod:`explorer.app.model` -- :class:`ExplorerModel` (state and computation, cached; no viser,
   no plotly) and :class:`Settings`;
-* :mod:`explorer.app.sources` -- the one source shown (preset, scene JSON, RPC, DIMAP, DG,
+* :mod:`explorer.sources` -- the one source shown (preset, scene JSON, RPC, DIMAP, DG,
   CSM ISD) resolved and validated before a server starts;
 * :mod:`explorer.app.export` -- ``summary.json``, ``residuals.csv``, ``panels.html``;
 * :mod:`explorer.app.jobs` -- :class:`FitPool`, the background training threads;

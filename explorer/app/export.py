@@ -145,7 +145,7 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
 
     Parameters
     ----------
-    source : explorer.app.sources.Source
+    source : explorer.sources.Source
     out_dir : str or Path
         Created if missing.
     methods : list of str, optional

@@ -72,7 +72,7 @@ class ExplorerApp(Views):
         Compute the accuracy-vs-density sweep (checkbox, can be changed in the GUI).
     fit_wait_s : float
         How long an update waits for a fit in background mode before showing it as pending.
-    sources : sequence of explorer.app.sources.Source, optional
+    sources : sequence of explorer.sources.Source, optional
         Loaded scenes (real sensors) offered in the scene dropdown before the presets.
     debounce_s : float
         Background mode: start computing once the controls have been still this long.

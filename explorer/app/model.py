@@ -1,7 +1,7 @@
 """The explorer's model: scenes, points, fits and evaluations with caches; no viser, no plotly.
 
 :class:`ExplorerModel` builds scenes (a preset with the GUI's relief / attitude / jitter
-controls, or a fixed scene loaded from a file by :mod:`explorer.app.sources`), SCOPs and SCPs,
+controls, or a fixed scene loaded from a file by :mod:`explorer.sources`), SCOPs and SCPs,
 fits and evaluates methods through ``explorer.methods.create`` /
 ``explorer.evaluate.evaluate_method``, and caches every result by what it depends on --
 scenes by (scene id, relief, attitude rates, jitter), SCOPs by (scene, density), SCPs by
@@ -257,7 +257,7 @@ class ExplorerModel:
     seed : int
         Seed of the SCOP / SCP heights and of every subsample.
     scenes : mapping of str to Scene, optional
-        Fixed scenes by id (real sensors loaded by :mod:`explorer.app.sources`); a
+        Fixed scenes by id (real sensors loaded by :mod:`explorer.sources`); a
         ``Settings.preset`` naming one of them selects it (the relief / attitude / jitter
         controls do not apply), any other id is built as a preset.
     """

@@ -181,7 +181,7 @@ def serve(preset: str | None = None, host: str = "127.0.0.1", port: int = 8080, 
         listens.
     stop_event : threading.Event, optional
         Stop when set (for running in a thread); Ctrl-C and SIGTERM stop the main thread.
-    sources : list of explorer.app.sources.Source, optional
+    sources : list of explorer.sources.Source, optional
         Loaded scenes offered first in the scene dropdown.
     **app_kwargs
         Passed to :class:`~explorer.app.gui.ExplorerApp`.
@@ -247,7 +247,7 @@ def run_explore(args: Any) -> int:
     ``seed``.  Every problem is raised as an :mod:`explorer.errors` error before a URL is
     printed.
     """
-    from explorer.app.sources import source_from_args
+    from explorer.sources import source_from_args
 
     methods = [m for m in args.methods.split(",") if m] if getattr(args, "methods", None) else None
     export = getattr(args, "export", None)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from explorer.bench_defaults import (
     DEFAULT_MAX_POINTS_SLOW,
@@ -52,25 +51,35 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
     return out
 
 
+#: The file sources of ``bench`` (as ``explore``'s, :data:`explorer.sources.SOURCE_KINDS` minus the preset).
+FILE_SOURCES = ("scene", "rpc", "dimap", "dg", "isd")
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from explorer.bench import format_table, run_bench
     from explorer.io_atomic import write_text_atomic
 
     params = parse_params(args.param)  # checked before the bench runs
-    if args.rpc:
-        from explorer.bench import bench_scene, parse_counts, resolve_methods
-        from explorer.real.from_rpc import scene_from_rpc
+    file_kinds = [k for k in FILE_SOURCES if getattr(args, k, None)]
+    if args.dem and not file_kinds:
+        from explorer.errors import InputError
 
-        scene, report = scene_from_rpc(args.rpc, dem=args.dem, n_gcps=args.gcps, degree=args.degree)
-        print(report.summary())
+        raise InputError("--dem goes with --rpc, --dimap or --dg")
+    if file_kinds:
+        from explorer.bench import bench_scene, parse_counts, resolve_methods
+        from explorer.sources import source_from_args
+
+        methods, counts = resolve_methods(args.methods), parse_counts(args.scops)
+        source = source_from_args(args, degree=args.degree, n_gcps=args.gcps)
+        print(f"scene: {source.label} ({source.scene.n_rows} x {source.scene.n_columns} pixels)")
         result = bench_scene(
-            scene, Path(args.rpc).stem, resolve_methods(args.methods), parse_counts(args.scops), args.scps,
+            source.scene, source.label, methods, counts, args.scps,
             seed=args.seed, max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
             method_params=params,
         )
     else:
         result = run_bench(
-            args.preset, args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,
+            args.preset or "WSU", args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,
             relief_seed=args.relief_seed, attitude_rate_scale=args.attitude_rate_scale,
             max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
             method_params=params, progress=not args.no_progress,
@@ -99,7 +108,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmark best-scanline methods on presets (the papers' protocol)")
-    p.add_argument("--preset", default="WSU", help="preset ids, comma-separated, or 'all' / 'paper' (default WSU)")
+    p.add_argument("--preset", default=None, help="preset ids, comma-separated, or 'all' / 'paper' (default WSU)")
     p.add_argument("--methods", default="all", help="method names, comma-separated, or 'all' (default all)")
     p.add_argument("--scops", default=",".join(map(str, DEFAULT_SCOPS)),
                    help="SCOP counts for learned methods (default 10,30,50,100)")
@@ -120,8 +129,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", default=None, metavar="OUT", type=output_file, help="write the runs as JSON")
     p.add_argument("--rpc", default=None, type=existing_file,
                    help="benchmark on the scene resected from this RPC file instead of a preset")
+    p.add_argument("--scene", default=None, type=existing_file,
+                   help="benchmark on a scene JSON (any `pushbroom scene` output) instead of a preset")
+    p.add_argument("--dimap", default=None, type=existing_file,
+                   help="benchmark on the MPC scene of a Pleiades DIMAP rigorous model")
+    p.add_argument("--dg", default=None, type=existing_file,
+                   help="benchmark on the MPC scene of a DigitalGlobe/Maxar XML rigorous model")
+    p.add_argument("--isd", default=None, type=existing_file,
+                   help="benchmark on the MPC scene of a USGS CSM line-scan ISD")
     p.add_argument("--dem", default=None, type=raster_file,
-                   help="with --rpc: DEM for the GCP heights (GeoTIFF or .hgt)")
+                   help="with --rpc/--dimap/--dg: DEM for the GCP heights and the terrain (GeoTIFF or .hgt)")
     p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
-    p.add_argument("--degree", type=non_negative_int, default=2, help="with --rpc: degree of the MPC polynomials")
+    p.add_argument("--degree", type=non_negative_int, default=3,
+                   help="with --rpc/--dimap/--dg: degree of the MPC polynomials (default 3, as explore; the papers: 2)")
     p.set_defaults(func=cmd_bench)

@@ -188,7 +188,7 @@ def test_scops_are_gold(api, scene):
 def test_real_dem_ground_mesh_follows_the_dem_and_is_decimated_for_the_browser():
     """The Pleiades 2017 DIMAP scene on its DEM (shareloc): the ground mesh vertices lie on the DEM
     terrain (bilinear heights of the resampled grid), at one node per DEM cell up to 129 per side."""
-    from explorer.app.sources import load_source
+    from explorer.sources import load_source
     from tests.real.conftest import DEM_DIR, PHR_2017
 
     scene = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif")).scene

@@ -1,6 +1,6 @@
-"""What the explorer shows: one source, resolved and validated before any server starts.
+"""The image a command works on: one source, resolved and validated before any work (or server) starts.
 
-``pushbroom explore`` takes exactly one of ``--preset ID``, ``--scene scene.json``,
+``pushbroom explore`` and ``pushbroom bench`` take exactly one of ``--preset ID``, ``--scene scene.json``,
 ``--rpc FILE [--dem DEM]``, ``--dimap FILE [--dem DEM]``, ``--dg FILE [--dem DEM]`` or
 ``--isd FILE``.  :func:`load_source` turns it into a :class:`Source` -- a preset id, or a
 :class:`~explorer.scene.Scene` built by the same library functions as the ``scene``
@@ -173,7 +173,9 @@ def _dimap_sensor(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------- loading
-def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
+def load_source(
+    kind: str, value: str, *, dem: str | None = None, degree: int = MPC_DEGREE, n_gcps: int = 100
+) -> Source:
     """Resolve and load one explorer source (see the module docstring).
 
     Parameters
@@ -184,6 +186,10 @@ def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
         The preset id or the file.
     dem : str, optional
         DEM (GeoTIFF, EGM96 heights, or SRTM ``.hgt``) for ``rpc`` / ``dimap`` / ``dg``.
+    degree : int
+        Degree of the MPC polynomials fitted to an RPC or a rigorous model (default 3).
+    n_gcps : int
+        About this many GCPs per height layer for the resection of an RPC (default 100).
 
     Raises
     ------
@@ -219,7 +225,7 @@ def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
         from explorer.real.from_rpc import scene_from_rpc
 
         try:
-            scene, report = scene_from_rpc(path, dem=dem, degree=MPC_DEGREE, n_check=400, seed=0)
+            scene, report = scene_from_rpc(path, dem=dem, degree=degree, n_gcps=n_gcps, n_check=400, seed=0)
         except ValueError as exc:
             if dem is None or isinstance(exc, (InputError, SceneFileError)) or type(exc).__name__ == "RPCFormatError":
                 raise
@@ -237,8 +243,8 @@ def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
 
             rigorous = rigorous_scene_from_dg(path)
             sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
-        scene, fit = rigorous.to_mpc_scene(degree=MPC_DEGREE)
-        info.update(sensor=sensor, model=f"MPC degree {MPC_DEGREE} fitted to the rigorous model",
+        scene, fit = rigorous.to_mpc_scene(degree=degree)
+        info.update(sensor=sensor, model=f"MPC degree {degree} fitted to the rigorous model",
                     mpc_fit=fit.to_dict())
     else:  # isd
         try:
@@ -258,7 +264,7 @@ def load_source(kind: str, value: str, *, dem: str | None = None) -> Source:
     return Source(kind, label, scene, str(path), dem, info)
 
 
-def source_from_args(args: Any) -> Source:
+def source_from_args(args: Any, **options: Any) -> Source:
     """The one source of parsed ``explore`` arguments (attributes named as :data:`SOURCE_KINDS`;
     none given: the default preset).
 
@@ -278,7 +284,7 @@ def source_from_args(args: Any) -> Source:
 
         return load_source("preset", default_preset_id())
     kind, value = given[0]
-    return load_source(kind, value, dem=dem)
+    return load_source(kind, value, dem=dem, **options)
 
 
 __all__ = ["DEM_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers", "load_source", "readable_file",
