@@ -529,7 +529,7 @@ def scene_from_rpc(
     _, _, alt = frame.enu_to_geodetic(s0)
     report.info.update({
         "rpc_file": src, "rpc_format": rpc.source_format, "image_rows": rows, "image_columns": cols,
-        "gcp_heights": "dem" if height_source is not None else f"{len(heights)} layer(s)",
+        "gcp_heights": "dem" if heights is None else f"{len(heights)} layer(s)",
         "gcp_height_min_m": float(np.min(g_h)), "gcp_height_max_m": float(np.max(g_h)),
         "altitude_at_centre_m": float(alt[0]), "line_period_s": scene.timing.line_period_s,
         "preset": preset or "", "initial_method": init_info["initial_method"],
