@@ -11,6 +11,7 @@ holding NaN/Infinity in its geometry is refused (``simulate --jitter-scale inf``
 least 1,000 deterministic cases.
 """
 
+import copy
 import json
 import tempfile
 from pathlib import Path
@@ -66,7 +67,7 @@ def mutated_scene(draw):
             path = paths[draw(st.integers(0, len(paths) - 1))]
             value = draw(st.one_of(st.sampled_from(VALUES), st.floats(allow_nan=True, allow_infinity=True)))
             try:
-                _set(d, path, value)
+                _set(d, path, copy.deepcopy(value))  # VALUES holds shared lists/objects: never alias them
             except (KeyError, IndexError, TypeError):
                 pass  # the path went away with an earlier replacement
         text = json.dumps(d)
