@@ -3,6 +3,8 @@ explicit capabilities.  RPC sensors: tests/rpc/test_rpc_sensor.py; rigorous mode
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -49,6 +51,6 @@ def test_scenes_implement_the_sensor_protocol_and_declare_capabilities():
 
 def test_scene_load_refuses_a_rigorous_file_with_a_pointer_to_load_scene(tmp_path):
     path = tmp_path / "rig.json"
-    path.write_text('{"format": "%s"}' % RIGOROUS_SCENE_FORMAT)
+    path.write_text(json.dumps({"format": RIGOROUS_SCENE_FORMAT}))
     with pytest.raises(SceneFileError, match="load_scene"):
         Scene.load(path)
