@@ -64,6 +64,8 @@ class Source:
         The files it came from.
     info : dict
         JSON-ready description (sensor, fit residuals, ...), written into the export.
+    report : object or None
+        The fit report of a file source (resection or MPC fit), with ``summary()`` for the terminal.
     """
 
     kind: str
@@ -72,6 +74,7 @@ class Source:
     path: str | None = None
     dem: str | None = None
     info: dict = field(default_factory=dict)
+    report: Any = None
 
     @property
     def preset(self) -> str | None:
@@ -210,6 +213,7 @@ def load_source(
     if dem is not None:
         readable_file(dem, "DEM")
     info: dict[str, Any] = {}
+    report: Any = None
     if kind == "scene":
         from explorer.real.linescan import load_scene
 
@@ -243,7 +247,8 @@ def load_source(
 
             rigorous = rigorous_scene_from_dg(path)
             sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
-        scene, fit = rigorous.to_mpc_scene(degree=degree)
+        scene, report = rigorous.to_mpc_scene(degree=degree)
+        fit = report
         info.update(sensor=sensor, model=f"MPC degree {degree} fitted to the rigorous model",
                     mpc_fit=fit.to_dict())
     else:  # isd
@@ -261,7 +266,7 @@ def load_source(
         check_dem_covers(scene, dem)
     label = f"{path.name} ({info['sensor']})"
     info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns))
-    return Source(kind, label, scene, str(path), dem, info)
+    return Source(kind, label, scene, str(path), dem, info, report)
 
 
 def source_from_args(args: Any, **options: Any) -> Source:

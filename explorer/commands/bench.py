@@ -72,6 +72,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         methods, counts = resolve_methods(args.methods), parse_counts(args.scops)
         source = source_from_args(args, degree=args.degree, n_gcps=args.gcps)
         print(f"scene: {source.label} ({source.scene.n_rows} x {source.scene.n_columns} pixels)")
+        if source.report is not None:
+            print(source.report.summary())
         result = bench_scene(
             source.scene, source.label, methods, counts, args.scps,
             seed=args.seed, max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
