@@ -135,7 +135,8 @@ def _quiet():
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
             yield
     finally:
-        console.file, console.is_jupyter = old_file, old_jupyter
+        console.file = old_file  # type: ignore[assignment]  # as it was (None: rich's default stream)
+        console.is_jupyter = old_jupyter
 
 
 def scene_view(
@@ -320,21 +321,28 @@ class ResidualPanel:
             self._cache[key] = make()
         return self._cache[key]
 
+    def _computed(self) -> tuple[Scene, PointSet, PointSet]:
+        """Scene, SCPs and SCOPs of the last :meth:`compute`; :class:`InputError` before the first."""
+        if self.scene is None or self.check is None or self.control is None:
+            raise InputError("nothing computed yet: call compute() first")
+        return self.scene, self.check, self.control
+
     def compute(self, s: PanelState) -> dict[str, Evaluation]:
         """Scene, SCPs, SCOPs and per-method evaluations for ``s`` (cached by what they depend on)."""
         skey = (s.preset, s.relief_m, s.attitude_rate_scale)
-        self.scene = self._cached(("scene", *skey), lambda: build_scene(
+        scene = self._cached(("scene", *skey), lambda: build_scene(
             s.preset, relief_m=s.relief_m, attitude_rate_scale=s.attitude_rate_scale))
-        self.check = self._cached(("scps", *skey, self.n_scps), lambda: simulate_points(
-            self.scene, self.n_scps, kind="scp", seed=self.seed))
-        self.control = self._cached(("scops", *skey, s.scop_density), lambda: simulate_points(
-            self.scene, s.scop_density, kind="scop", seed=self.seed))
+        check = self._cached(("scps", *skey, self.n_scps), lambda: simulate_points(
+            scene, self.n_scps, kind="scp", seed=self.seed))
+        control = self._cached(("scops", *skey, s.scop_density), lambda: simulate_points(
+            scene, s.scop_density, kind="scop", seed=self.seed))
+        self.scene, self.check, self.control = scene, check, control
         evs: dict[str, Evaluation] = {}
         self.errors = {}
         for name in s.methods:
             def make(name=name) -> Evaluation | str:
                 try:
-                    return evaluate_method(create(name, self.scene), self.check, self.control, seed=self.seed)
+                    return evaluate_method(create(name, scene), check, control, seed=self.seed)
                 except Exception as exc:  # shown in the status line; the other methods still draw
                     return f"{type(exc).__name__}: {exc}"
             fitted = registry()[name].needs_fit
@@ -353,10 +361,11 @@ class ResidualPanel:
         if not self.evaluations:
             return empty_figure("no method evaluated" + (": " + "; ".join(self.errors.values()) if self.errors else ""))
         fixed = s.colour_mode == "fixed"
-        fig = residual_maps(self.evaluations, self.check, control=self.control, shape=self.scene.shape,
+        scene, check, control = self._computed()
+        fig = residual_maps(self.evaluations, check, control=control, shape=scene.shape,
                             limit_px=s.limit_px if fixed else None, mode=s.colour_mode, max_points=self.max_points)
-        fig.update_layout(title={"text": f"{self.scene.name}: relief {s.relief_m:g} m, attitude rate x"
-                                         f"{s.attitude_rate_scale:g}, {len(self.control)} SCOPs",
+        fig.update_layout(title={"text": f"{scene.name}: relief {s.relief_m:g} m, attitude rate x"
+                                         f"{s.attitude_rate_scale:g}, {len(control)} SCOPs",
                                  "font": {"size": 12}, "y": 0.995},
                           margin={"t": 90})
         return fig
@@ -396,15 +405,16 @@ class ResidualPanel:
         if name not in self.evaluations:
             raise InputError(f"method {name!r} is not evaluated here; evaluated: {', '.join(self.evaluations)}")
         ev = self.evaluations[name]
-        residual = np.full(len(self.check), np.nan)
+        scene, check, control = self._computed()
+        residual = np.full(len(check), np.nan)
         residual[np.asarray(ev.evaluated_index)] = ev.residual_row
-        worst = int(np.nanargmax(np.abs(residual))) if np.isfinite(residual).any() else len(self.check) // 2
-        fitted = create(name, self.scene)
+        worst = int(np.nanargmax(np.abs(residual))) if np.isfinite(residual).any() else len(check) // 2
+        fitted = create(name, scene)
         if fitted.needs_fit:
-            fitted.fit(self.control)
+            fitted.fit(control)
         kwargs.setdefault("limit_px", self.state().limit_px)
-        return scene_view(self.scene, point=(float(self.check.row[worst]), float(self.check.col[worst])),
-                          method=fitted, check=self.check, residual_px=residual, control=self.control, **kwargs)
+        return scene_view(scene, point=(float(check.row[worst]), float(check.col[worst])),
+                          method=fitted, check=check, residual_px=residual, control=control, **kwargs)
 
     # --------------------------------------------------------------- display
     @property
