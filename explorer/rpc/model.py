@@ -701,11 +701,17 @@ class RationalFunctionModel:
         from explorer.terrain_io import height_grid_of
 
         grid = height_grid_of(dem)
+        inverse = None
         if grid is not None:
-            from explorer.geometry.dem_intersection import OK, OUTSIDE_DEM
             from explorer.rpc.inverse import RPCInverse
 
-            inverse = RPCInverse.for_model(self, grid.z_min - 1.0, grid.z_max + 1.0)
+            try:
+                inverse = RPCInverse.for_model(self, grid.z_min - 1.0, grid.z_max + 1.0)
+            except InputError:  # no inverse can be fitted (image and normalisation box apart): sampled search
+                inverse = None
+        if grid is not None and inverse is not None:
+            from explorer.geometry.dem_intersection import OK, OUTSIDE_DEM
+
             lon_k, lat_k, h_k, flags = inverse.on_dem(row_f, col_f, grid)
             if flags.size and np.all(flags == OUTSIDE_DEM):
                 source = getattr(dem, "source_path", None) or getattr(getattr(dem, "dem", None), "source_path", "")
