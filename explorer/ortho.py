@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import dask
 import dask.array as da
@@ -115,7 +115,7 @@ class SceneProjector:
         """Local ENU ground points (N, 3) on the terrain at (lon, lat) (N,) degrees."""
         frame = self.scene.frame
         if self.height is not None or self.dem is not None:
-            h = np.full(lon.shape, float(self.height)) if self.dem is None else self.dem.height(lon, lat)
+            h = np.full(lon.shape, float(cast(float, self.height))) if self.dem is None else self.dem.height(lon, lat)
             return frame.geodetic_to_enu(lon, lat, h)
         terrain = self.scene.terrain
         # the terrain is a surface in ENU: find the point with this lon/lat whose up equals the DEM height
@@ -156,7 +156,7 @@ class RPCProjector:
 
     def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.dem is None:
-            h = np.full(lon.shape, float(self.height))
+            h = np.full(lon.shape, float(cast(float, self.height)))  # a height is given when there is no DEM
         elif self._grid is not None:  # the compiled bilinear lookup of the DEM kernel
             h = heights_at(self._grid, lon, lat).reshape(np.shape(lon))
         else:
@@ -294,6 +294,7 @@ def ortho_dask_array(projector: Projector, source: SourceImage, grid: OrthoGrid,
     """The orthoimage as a lazy dask array (float32) over output chunks of ``chunk`` x ``chunk``."""
 
     def block(block_info: dict | None = None) -> np.ndarray:
+        assert block_info is not None  # dask passes it to map_blocks functions that accept it
         (r0, r1), (c0, c1) = block_info[None]["array-location"]
         return render_block(projector, source, grid, slice(r0, r1), slice(c0, c1))
 

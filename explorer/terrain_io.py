@@ -357,7 +357,7 @@ def require_coverage(grid: HeightGrid, lon: ArrayLike, lat: ArrayLike, what: str
         Accept a DEM that covers part of the points (the rest is flagged point by point); raise only when
         it covers none of them.
     """
-    u, v = grid.to_grid(lon, lat)
+    u, v = grid.to_grid(np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64))
     ny, nx = grid.heights.shape
     inside = (u >= 0) & (u <= nx - 1) & (v >= 0) & (v <= ny - 1)
     if not (np.any(inside) if partial else np.all(inside)):

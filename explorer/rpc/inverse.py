@@ -85,8 +85,8 @@ def fit_inverse_polynomial(
     def grid(n_p: int, n_h: int, shift: float) -> tuple[np.ndarray, ...]:
         t = np.linspace(-1.0, 1.0, n_p) + shift
         zs = (np.linspace(h_min, h_max, n_h) - rpc.height_offset) / rpc.height_scale
-        x, y, z = np.meshgrid(t, t, zs, indexing="ij")
-        x, y, z = x.ravel(), y.ravel(), z.ravel()
+        xg, yg, zg = np.meshgrid(t, t, zs, indexing="ij")
+        x, y, z = xg.ravel(), yg.ravel(), zg.ravel()
         rn, cn = rpc.normalized_projection(x, y, z)
         ok = np.isfinite(rn) & np.isfinite(cn) & (np.abs(rn) < 1.5) & (np.abs(cn) < 1.5)
         return x[ok], y[ok], z[ok], rn[ok], cn[ok]
@@ -605,9 +605,8 @@ class RPCInverse:
             c_lo, c_hi = c_ends.min() - 0.02 * np.ptp(c_ends), c_ends.max() + 0.02 * np.ptp(c_ends)
             z_lo, z_hi = ((np.array([h_min, h_max]) - rpc.height_offset) / rpc.height_scale)
             z_lo, z_hi = min(z_lo, z_hi), max(z_lo, z_hi)
-            grid = (c_lo, r_lo, z_lo, (c_hi - c_lo) / (n_grid - 1), (r_hi - r_lo) / (n_grid - 1),
-                    (z_hi - z_lo) / (n_z - 1))
-            grid = tuple(float(v) for v in grid)
+            steps = ((c_hi - c_lo) / (n_grid - 1), (r_hi - r_lo) / (n_grid - 1), (z_hi - z_lo) / (n_z - 1))
+            grid = tuple(float(v) for v in (c_lo, r_lo, z_lo, *steps))
             first = cls(_tuples(forward), _tuples(coefficients), tuple(float(v) for v in norm), h_min, h_max, error,
                         np.zeros((n_grid - 1, n_grid - 1, 16)), grid)
             zz, rr, cc = np.meshgrid(np.linspace(z_lo, z_hi, n_z), np.linspace(r_lo, r_hi, n_grid),
