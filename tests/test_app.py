@@ -524,8 +524,8 @@ def test_plotly_panels_have_no_share_to_cloud_button(server):
 
 
 def test_a_loaded_scene_is_named_and_the_preset_dropdown_still_switches(server, tmp_path):
-    from explorer.sources import load_source
     from explorer.presets import build_scene
+    from explorer.sources import load_source
 
     path = tmp_path / "my_sensor.json"
     build_scene("ISB", relief_m=500.0).save(path)

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from explorer.app.server import check_listen_address
-from explorer.sources import check_dem_covers, load_source, resolve_preset, source_from_args
 from explorer.errors import ExplorerError, InputError, SceneFileError
 from explorer.presets import build_scene, preset_ids
+from explorer.sources import check_dem_covers, load_source, resolve_preset, source_from_args
 from tests.real.conftest import DEM_DIR, PHR_2017, PHR_2018, RPC_DIR
 
 DEM_2017 = DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"

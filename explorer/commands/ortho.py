@@ -88,7 +88,7 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         else:
             raise InputError("--rpc with --synthetic needs --rpc-shape ROWSxCOLS (the source image size)")
         height = args.height if args.height is not None else (None if dem is not None else rpc.height_offset)
-        projector = RPCProjector(rpc, shape, height=height, dem=dem)
+        projector: RPCProjector | SceneProjector = RPCProjector(rpc, shape, height=height, dem=dem)
         r = np.array([0, 0, shape[0] - 1, shape[0] - 1, shape[0] / 2], float)
         c = np.array([0, shape[1] - 1, shape[1] - 1, 0, shape[1] / 2], float)
         h0 = rpc.height_offset if height is None else height
@@ -105,7 +105,9 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
 
         # corners and centre at one height: a DEM that misses them all is the wrong DEM; one that misses
         # a corner by metres is not (the pixels it does not cover are no-data in the output)
-        require_coverage(height_grid_of(dem), lon, lat, "the image footprint", str(args.dem), partial=True)
+        dem_grid = height_grid_of(dem)
+        if dem_grid is not None:
+            require_coverage(dem_grid, lon, lat, "the image footprint", str(args.dem), partial=True)
     from explorer.geometry.frames import LocalFrame
 
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()

@@ -55,12 +55,11 @@ def _read_csv(path: str, columns: Sequence[str]) -> tuple[list[dict[str, str]], 
         texts = [record[c] for record in rows]
         try:
             values = np.asarray(texts, dtype=np.float64)
-            bad = np.flatnonzero(~np.isfinite(values))
+            bad: list[int] = np.flatnonzero(~np.isfinite(values)).tolist()
         except (TypeError, ValueError):
-            values = None
             bad = [next(i for i, t in enumerate(texts) if not _is_number(t))]
-        if len(bad):
-            i = int(bad[0])
+        if bad:
+            i = bad[0]
             raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i]!r} is not a finite number")
         arrays[c] = values
     return rows, arrays
@@ -92,7 +91,7 @@ def _write_csv(
         writer.writerows(rows)
 
 
-def _fmt(value: float) -> str:
+def _fmt(value: Any) -> str:
     return repr(float(value))
 
 
