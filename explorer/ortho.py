@@ -213,6 +213,18 @@ class SourceImage:
         c0 = int(np.floor(c.min()))
         r1 = min(int(np.floor(r.max())) + 2, nr)
         c1 = min(int(np.floor(c.max())) + 2, nc)
+        if self.path.endswith(".npy") and (r1 - r0) * (c1 - c0) > 4 * r.size and nr > 1 and nc > 1:
+            # an output much coarser than the source: gather the 4 neighbours of each point instead of
+            # reading the whole window (memory in the points, not in the window's area)
+            src = np.load(self.path, mmap_mode="r")
+            i = np.minimum(np.floor(r).astype(np.int64), nr - 2)
+            j = np.minimum(np.floor(c).astype(np.int64), nc - 2)
+            fr = r - i
+            fc = c - j
+            out[valid] = (src[i, j] * (1 - fr) * (1 - fc) + src[i, j + 1] * (1 - fr) * fc
+                          + src[i + 1, j] * fr * (1 - fc) + src[i + 1, j + 1] * fr * fc)
+            del src
+            return out
         win = self.window(r0, r1, c0, c1)
         i = np.minimum(np.floor(r).astype(np.int64), nr - 2) - r0
         j = np.minimum(np.floor(c).astype(np.int64), nc - 2) - c0

@@ -142,3 +142,18 @@ def test_compiled_dem_lookup_matches_numpy_bilinear():
     ref = dem.height(lon, lat)
     assert np.array_equal(np.isnan(ours), np.isnan(ref)) and np.isnan(ref).any()
     np.testing.assert_allclose(ours[np.isfinite(ref)], ref[np.isfinite(ref)], atol=1e-9)
+
+
+def test_sparse_sampling_of_a_large_source_matches_scipy(tmp_path):
+    from scipy.ndimage import map_coordinates
+
+    from explorer.ortho import SourceImage
+
+    image = np.random.default_rng(0).normal(size=(300, 400)).astype(np.float32)
+    np.save(tmp_path / "src.npy", image)
+    source = SourceImage(tmp_path / "src.npy")
+    rng = np.random.default_rng(1)
+    row, col = rng.uniform(0, 299, 50), rng.uniform(0, 399, 50)  # few points over a large window: gathered
+    values = source.sample_bilinear(row, col, np.ones(50, bool))
+    truth = map_coordinates(image.astype(np.float64), [row, col], order=1)
+    np.testing.assert_allclose(values, truth, atol=1e-12)
