@@ -94,8 +94,9 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
             gdal_cpu.append(time.process_time() - c0)
         g_lon, g_lat = np.asarray(g_lon), np.asarray(g_lat)
         t_lon, t_lat = (np.asarray(v) for v in tight.xy(row, col, zeros, offset="center"))
-    d = metres(g_lon, g_lat, lon, lat)[ok]
-    d_tight = metres(t_lon, t_lat, lon, lat)[ok]
+    both = ok & np.isfinite(g_lon) & np.isfinite(g_lat) & np.isfinite(t_lon) & np.isfinite(t_lat)
+    d = metres(g_lon, g_lat, lon, lat)[both]
+    d_tight = metres(t_lon, t_lat, lon, lat)[both]
     r2, c2 = rpc.projection(lon[ok], lat[ok], h[ok], backend="numpy")
     surface = np.abs(dem.height(lon[ok], lat[ok]) - h[ok])
     ours, gdal = statistics.median(ours_t), statistics.median(gdal_t)
@@ -110,6 +111,9 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
         "gdal_default_max_m": float(np.nanmax(d)), "gdal_default_p99_m": float(np.nanpercentile(d, 99)),
         "gdal_tight_max_m": float(np.nanmax(d_tight)),
         "gdal_finite_fraction": float(np.isfinite(g_lon).mean()),
+        "compared_fraction": float(both.mean()),
+        "ours_ok_gdal_not": int((ok & ~np.isfinite(g_lon)).sum()),
+        "gdal_finite_ours_not": int((~ok & np.isfinite(g_lon)).sum()),
         "round_trip_max_px": float(np.max(np.hypot(r2 - row[ok], c2 - col[ok]))),
         "on_surface_max_m": float(np.max(surface)),
     })
