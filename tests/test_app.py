@@ -584,7 +584,7 @@ def test_model_layer_imports_neither_viser_nor_plotly():
     import subprocess
     import sys
 
-    code = ("import sys; import explorer.app; from explorer.app import model, sources, export, jobs; "
+    code = ("import sys; import explorer.app, explorer.sources; from explorer.app import model, export, jobs; "
             "print(sorted(m for m in ('viser', 'plotly') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
