@@ -198,6 +198,22 @@ class SourceImage:
         with rasterio.open(self.path) as ds:
             return ds.read(1, window=Window(c0, r0, c1 - c0, r1 - r0)).astype(np.float64)
 
+    def _read_rows(self, rows: np.ndarray, c0: int, c1: int) -> np.ndarray:
+        """Rows ``rows`` (sorted), columns [c0, c1) of a C-order ``.npy`` source as float64, by plain reads."""
+        with open(self.path, "rb") as f:
+            major, _minor = np.lib.format.read_magic(f)
+            read_header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = read_header(f)
+            if fortran:
+                return np.asarray(np.load(self.path, mmap_mode="r")[rows, c0:c1], dtype=np.float64)
+            offset = f.tell()
+            width = c1 - c0
+            buf = np.empty((rows.size, width), dtype=dtype)
+            for k, row in enumerate(rows):
+                f.seek(offset + (int(row) * shape[1] + c0) * dtype.itemsize)
+                f.readinto(memoryview(buf[k]).cast("B"))
+        return buf.astype(np.float64)
+
     def sample_bilinear(self, row: np.ndarray, col: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Bilinear values at (row, col) (pixel centres at integers); NaN where not ``valid``.
 
@@ -216,14 +232,16 @@ class SourceImage:
         if self.path.endswith(".npy") and (r1 - r0) * (c1 - c0) > 4 * r.size and nr > 1 and nc > 1:
             # an output much coarser than the source: gather the 4 neighbours of each point instead of
             # reading the whole window (memory in the points, not in the window's area)
-            src = np.load(self.path, mmap_mode="r")
             i = np.minimum(np.floor(r).astype(np.int64), nr - 2)
             j = np.minimum(np.floor(c).astype(np.int64), nc - 2)
             fr = r - i
             fc = c - j
-            out[valid] = (src[i, j] * (1 - fr) * (1 - fc) + src[i, j + 1] * (1 - fr) * fc
-                          + src[i + 1, j] * fr * (1 - fc) + src[i + 1, j + 1] * fr * fc)
-            del src
+            rows_needed = np.unique(np.concatenate([i, i + 1]))
+            buf = self._read_rows(rows_needed, c0, c1)  # plain reads: no mapped pages in the resident set
+            k = np.searchsorted(rows_needed, i)
+            jj = j - c0
+            out[valid] = (buf[k, jj] * (1 - fr) * (1 - fc) + buf[k, jj + 1] * (1 - fr) * fc
+                          + buf[k + 1, jj] * fr * (1 - fc) + buf[k + 1, jj + 1] * fr * fc)
             return out
         win = self.window(r0, r1, c0, c1)
         i = np.minimum(np.floor(r).astype(np.int64), nr - 2) - r0
