@@ -60,7 +60,8 @@ job="${1:-explore}"; shift || true
 case "$job" in
   test)
     system_packages; python_packages
-    exec "$VENV/bin/pytest" -q -n 2 "$@" ;;
+    # everything, the slow tests included (pyproject's default `-m 'not slow'` is the quick developer run)
+    exec "$VENV/bin/pytest" -q -n 2 -m "slow or not slow" "$@" ;;
   explore)
     python_packages
     exec "$VENV/bin/pushbroom" explore "$@" ;;
