@@ -37,3 +37,23 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 
 __all__ = ["NUMBA_AVAILABLE", "njit", "numba", "overload", "prange"]
+
+
+def serial_twin(fn: Any) -> Any:
+    """A copy of the Python function ``fn`` under its own name, to compile a second (serial) variant.
+
+    numba's on-disk cache is keyed by the function's module, qualified name and first line, not by the
+    compile options: ``njit(parallel=True, cache=True)(f)`` and ``njit(parallel=False, cache=True)(f)`` share
+    one cache index, and whichever variant was compiled first is what the other one loads from then on (a
+    "parallel" loop that runs on one thread). The twin has its own cache entry.
+    """
+    import types
+
+    twin = types.FunctionType(fn.__code__, fn.__globals__, f"{fn.__name__}_serial", fn.__defaults__, fn.__closure__)
+    twin.__qualname__ = f"{fn.__qualname__}_serial"
+    twin.__module__ = fn.__module__
+    twin.__doc__ = fn.__doc__
+    return twin
+
+
+__all__ += ["serial_twin"]

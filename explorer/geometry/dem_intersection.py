@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit, prange
+from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
 from explorer.errors import InputError
 
 __all__ = [
@@ -434,7 +434,8 @@ if NUMBA_AVAILABLE:
     bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
     _segments_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_segments_loop_py)
     _rays_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
-    _rays_loop_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
+    _rays_loop_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
+        serial_twin(_rays_loop_py))
 else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
     _cell_hit = _cell_hit_py
     _first_hit = _first_hit_py

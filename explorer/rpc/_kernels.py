@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit, prange
+from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
 
 
 def horner_rpc00b(c, x, y, z):
@@ -82,7 +82,8 @@ if NUMBA_AVAILABLE:
     # Coefficients (4 x 20) and norm (lon_off, lon_scale, lat_off, lat_scale, h_off, h_scale, row_off,
     # row_scale, col_off, col_scale) are tuples of floats: constants in registers, LLVM vectorises the loop.
     _project_parallel = njit(parallel=True, fastmath=False, cache=True, error_model="numpy")(_project_loop_py)
-    _project_serial = njit(parallel=False, fastmath=False, cache=True, error_model="numpy")(_project_loop_py)
+    _project_serial = njit(parallel=False, fastmath=False, cache=True, error_model="numpy")(
+        serial_twin(_project_loop_py))
 
 
 def project(

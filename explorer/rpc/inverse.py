@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit, prange
+from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
 from explorer.geometry.dem_intersection import NODATA, NOT_CONVERGED, OK, HeightGrid
@@ -513,8 +513,9 @@ if NUMBA_AVAILABLE:
     _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
     # the same loops without threads, for small calls (waking the second thread costs more than they take)
     _localize_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
-        _localize_blocks_py)
-    _dem_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
+        serial_twin(_localize_blocks_py))
+    _dem_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
+        serial_twin(_dem_blocks_py))
 else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _horner = horner_rpc00b
     _poly_grad = _poly_grad_py
