@@ -195,21 +195,10 @@ def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.nda
 
 
 def _grid_on_plane(scene: Scene, rows: np.ndarray, cols: np.ndarray, height: float) -> np.ndarray:
-    """Fast path for a regular grid on a plane: orientation once per grid row, broadcast over columns."""
-    t = scene.scanline_time(rows)
-    centres = scene.exterior.position(t)  # (gr, 3)
-    rot = scene.exterior.rotation(t)  # (gr, 3, 3)
-    xd, yd = scene.interior.detector_focal_plane(cols)
-    x, y = scene.interior.undistort(xd, yd)
-    v = np.stack([x, y, np.full_like(x, -scene.interior.focal_length_m)], axis=-1)  # (gc, 3)
-    out = np.empty((rows.size, cols.size, 3))
-    for k in range(3):  # direction component k for all (row, col): (gr, gc)
-        dk = rot[:, k, :] @ v.T
-        out[:, :, k] = dk
-    lam = (height - centres[:, None, 2]) / out[:, :, 2]
-    out *= lam[:, :, None]
-    out += centres[:, None, :]
-    return out.reshape(-1, 3)
+    """Fast path for a regular grid on a plane: the grid's lines of sight cut at ``Z = height`` (N, 3)."""
+    origin, direction = _grid_rays(scene, rows, cols)
+    lam = (height - origin[:, 2]) / direction[:, 2]
+    return origin + lam[:, None] * direction
 
 
 def simulate_points(
