@@ -136,6 +136,23 @@ class HeightGrid:
 
 
 # --------------------------------------------------------------------------------------------- kernel
+def _patch_quadratic_py(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz):
+    """``(c0, c1, c2)`` of f(s) = z(s) - h(s) = c0 + c1 s + c2 s^2 along a segment over cell (i, j).
+
+    The segment starts at grid coordinates (ua, va) and height za and moves by (du, dv, dz) per unit of s;
+    h is the bilinear patch through the cell's corner heights h00 (i, j), h01 (i, j+1), h10, h11.
+    """
+    a0 = ua - j
+    b0 = va - i
+    p = h01 - h00
+    q = h10 - h00
+    r = h00 - h01 - h10 + h11
+    c0 = za - (h00 + p * a0 + q * b0 + r * a0 * b0)
+    c1 = dz - (p * du + q * dv + r * (a0 * dv + b0 * du))
+    c2 = -r * du * dv
+    return c0, c1, c2
+
+
 def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     """Smallest s in [sa, sb] where the segment meets the bilinear patch of cell (i, j); -1 if none.
 
@@ -150,15 +167,7 @@ def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     z_low = za + dz * sb if dz < 0.0 else za + dz * sa
     if z_low > max(max(h00, h01), max(h10, h11)):
         return -1.0
-    a0 = ua - j
-    b0 = va - i
-    p = h01 - h00
-    q = h10 - h00
-    r = h00 - h01 - h10 + h11
-    # f(s) = z(s) - h(s) = c0 + c1 s + c2 s^2
-    c0 = za - (h00 + p * a0 + q * b0 + r * a0 * b0)
-    c1 = dz - (p * du + q * dv + r * (a0 * dv + b0 * du))
-    c2 = -r * du * dv
+    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz)
     fa = c0 + sa * (c1 + sa * c2)
     if fa <= 0.0:
         return sa
@@ -429,6 +438,8 @@ def _bilinear_py(h, u, v):
 
 
 if NUMBA_AVAILABLE:
+    _patch_quadratic = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(
+        _patch_quadratic_py)
     _cell_hit = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_hit_py)
     _first_hit = njit(cache=True, fastmath=False, error_model="numpy")(_first_hit_py)
     bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
@@ -437,6 +448,7 @@ if NUMBA_AVAILABLE:
     _rays_loop_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
         serial_twin(_rays_loop_py))
 else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
+    _patch_quadratic = _patch_quadratic_py
     _cell_hit = _cell_hit_py
     _first_hit = _first_hit_py
     bilinear = _bilinear_py
@@ -445,6 +457,7 @@ else:  # pragma: no cover - numba missing: the same code, interpreted (slow, sam
 
 first_hit = _first_hit
 cell_hit = _cell_hit
+patch_quadratic = _patch_quadratic
 
 
 def _heights_loop_py(h, x0, y0, dx, dy, x, y, out):

@@ -307,14 +307,7 @@ def _one_cell_start_py(h, i, j, ua, va, za, du, dv, dz):
     h11 = h[i + 1, j + 1]
     if math.isnan(h00) or math.isnan(h01) or math.isnan(h10) or math.isnan(h11):
         return 0.0, NODATA
-    a0 = ua - j
-    b0 = va - i
-    p = h01 - h00
-    q = h10 - h00
-    r = h00 - h01 - h10 + h11
-    c0 = za - (h00 + p * a0 + q * b0 + r * a0 * b0)
-    c1 = dz - (p * du + q * dv + r * (a0 * dv + b0 * du))
-    c2 = -r * du * dv
+    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz)
     fb = c0 + c1 + c2
     if not (c0 > 0.0 and fb <= 0.0):
         return 0.0, -1
@@ -532,6 +525,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
 _first_hit = _dem.first_hit
 _bilinear = _dem.bilinear
 _cell_hit = _dem.cell_hit
+_patch_quadratic = _dem.patch_quadratic
 
 
 def _tuples(array: np.ndarray) -> tuple[tuple[float, ...], ...]:
