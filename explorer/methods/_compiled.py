@@ -146,19 +146,8 @@ def _exp_block(x, m, biased):  # pragma: no cover - compiled
         n = np.floor(v * _LOG2E + 0.5)
         r = (v - n * _LN2_HI) - n * _LN2_LO
         p = c[13]
-        p = p * r + c[12]
-        p = p * r + c[11]
-        p = p * r + c[10]
-        p = p * r + c[9]
-        p = p * r + c[8]
-        p = p * r + c[7]
-        p = p * r + c[6]
-        p = p * r + c[5]
-        p = p * r + c[4]
-        p = p * r + c[3]
-        p = p * r + c[2]
-        p = p * r + c[1]
-        p = p * r + c[0]
+        for j in range(12, -1, -1):  # Horner; constant trip count, unrolled by LLVM
+            p = p * r + c[j]
         x[k] = p
         biased[k] = n + _EXP_BIAS  # the integer n + 1023 sits in the low mantissa bits
     ints = biased.view(np.int64)
