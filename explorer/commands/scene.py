@@ -140,6 +140,14 @@ def _rigorous_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", type=output_file, help="write the numbers as JSON")
 
 
+def _light_path_arguments(p: argparse.ArgumentParser, *, default: bool, aberration_note: str,
+                          refraction_note: str) -> None:
+    """``--aberration`` / ``--refraction``: the line-of-sight corrections of a rigorous model, on or off."""
+    for flag, what, note in (("--aberration", "the aberration of light", aberration_note),
+                             ("--refraction", "atmospheric refraction", refraction_note)):
+        p.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=f"model {what} ({note})")
+
+
 def register(subparsers: Any) -> None:
     """Add the ``scene`` command group (``from-rpc``, ``from-dimap``, ``from-dg``, ``from-isd``)."""
     scene = subparsers.add_parser("scene", help="build scenes from real image metadata (RPC, DIMAP, DG XML)")
@@ -176,19 +184,15 @@ def register(subparsers: Any) -> None:
                    help="degree of the look-angle polynomials calibrated on the RPC (default 3)")
     p.add_argument("--attitude-smoothing", type=int_in_range(-1, 9, "--attitude-smoothing"), default=3,
                    help="degree of the polynomial replacing the attitude samples (perfect sensor; -1: raw)")
-    p.add_argument("--aberration", action=argparse.BooleanOptionalAction, default=False,
-                   help="model the aberration of light (default off for Pleiades)")
-    p.add_argument("--refraction", action=argparse.BooleanOptionalAction, default=False,
-                   help="model atmospheric refraction (default off for Pleiades)")
+    _light_path_arguments(p, default=False, aberration_note="default off for Pleiades",
+                          refraction_note="default off for Pleiades")
     p.set_defaults(func=cmd_from_dimap)
 
     p = sub.add_parser("from-dg",
                        help="rigorous WorldView/QuickBird model from a DigitalGlobe XML (EPH, ATT, GEO, IMD)")
     _rigorous_arguments(p)
-    p.add_argument("--aberration", action=argparse.BooleanOptionalAction, default=True,
-                   help="model the aberration of light (default on: 25 px without it on WV1)")
-    p.add_argument("--refraction", action=argparse.BooleanOptionalAction, default=True,
-                   help="model atmospheric refraction (default on: 2 px across track without it on WV1)")
+    _light_path_arguments(p, default=True, aberration_note="default on: 25 px without it on WV1",
+                          refraction_note="default on: 2 px across track without it on WV1")
     p.set_defaults(func=cmd_from_dg)
 
     p = sub.add_parser("from-isd",
