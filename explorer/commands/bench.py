@@ -51,8 +51,16 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
     return out
 
 
-#: The file sources of ``bench`` (as ``explore``'s, :data:`explorer.sources.SOURCE_KINDS` minus the preset).
-FILE_SOURCES = ("scene", "rpc", "dimap", "dg", "isd")
+#: The file sources of ``bench`` (as ``explore``'s, :data:`explorer.sources.SOURCE_KINDS` minus the preset): the
+#: option ``--<kind>`` of each and what it benchmarks on, in the order ``--help`` lists them.
+FILE_SOURCE_HELP = {
+    "rpc": "the scene resected from this RPC file instead of a preset",
+    "scene": "a scene JSON (any `pushbroom scene` output) instead of a preset",
+    "dimap": "the MPC scene of a Pleiades DIMAP rigorous model",
+    "dg": "the MPC scene of a DigitalGlobe/Maxar XML rigorous model",
+    "isd": "the MPC scene of a USGS CSM line-scan ISD",
+}
+FILE_SOURCES = tuple(FILE_SOURCE_HELP)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -129,16 +137,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="constructor parameter of a method (JSON value), repeatable")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", default=None, metavar="OUT", type=output_file, help="write the runs as JSON")
-    p.add_argument("--rpc", default=None, type=existing_file,
-                   help="benchmark on the scene resected from this RPC file instead of a preset")
-    p.add_argument("--scene", default=None, type=existing_file,
-                   help="benchmark on a scene JSON (any `pushbroom scene` output) instead of a preset")
-    p.add_argument("--dimap", default=None, type=existing_file,
-                   help="benchmark on the MPC scene of a Pleiades DIMAP rigorous model")
-    p.add_argument("--dg", default=None, type=existing_file,
-                   help="benchmark on the MPC scene of a DigitalGlobe/Maxar XML rigorous model")
-    p.add_argument("--isd", default=None, type=existing_file,
-                   help="benchmark on the MPC scene of a USGS CSM line-scan ISD")
+    for kind, what in FILE_SOURCE_HELP.items():
+        p.add_argument(f"--{kind}", default=None, type=existing_file, help=f"benchmark on {what}")
     p.add_argument("--dem", default=None, type=raster_file,
                    help="with --rpc/--dimap/--dg: DEM for the GCP heights and the terrain (GeoTIFF or .hgt)")
     p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
