@@ -207,24 +207,16 @@ def _distortion(isd: _Isd) -> tuple[str, int, np.ndarray]:
             raise isd.fail("optical_distortion.radial.coefficients", f"has {c.size} terms; usgscsm reads 3")
         coef = np.zeros(3)
         coef[: c.size] = c
-    elif name == "transverse":
-        cx = isd.array(*key, "x", shape=(None,))
-        cy = isd.array(*key, "y", shape=(None,))
-        if cx.size > 10 or cy.size > 10:
-            raise isd.fail("optical_distortion.transverse", "x and y take at most 10 coefficients each")
-        coef = np.zeros(20)
-        coef[: cx.size] = cx
-        coef[10: 10 + cy.size] = cy
-    elif name == "kaguyalism":
-        cx = isd.array(*key, "x", shape=(None,))
-        cy = isd.array(*key, "y", shape=(None,))
-        if cx.size > 4 or cy.size > 4:
-            raise isd.fail("optical_distortion.kaguyalism", "x and y take at most 4 coefficients each")
-        coef = np.zeros(10)
-        coef[0] = isd.number(*key, "boresight_x")
-        coef[5] = isd.number(*key, "boresight_y")
-        coef[1: 1 + cx.size] = cx
-        coef[6: 6 + cy.size] = cy
+    elif name in ("transverse", "kaguyalism"):  # x terms then y terms; kaguyalism: each after its boresight
+        limit, first = (10, 0) if name == "transverse" else (4, 1)
+        cx, cy = (isd.array(*key, axis, shape=(None,)) for axis in ("x", "y"))
+        if cx.size > limit or cy.size > limit:
+            raise isd.fail(f"optical_distortion.{name}", f"x and y take at most {limit} coefficients each")
+        coef = np.zeros(2 * (first + limit))
+        for start, axis, c in ((0, "x", cx), (first + limit, "y", cy)):
+            if first:
+                coef[start] = isd.number(*key, f"boresight_{axis}")
+            coef[start + first: start + first + c.size] = c
     else:  # dawnfc, lrolrocnac: one coefficient
         c = isd.array(*key, "coefficients", shape=(None,))
         if c.size != 1:
