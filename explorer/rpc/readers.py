@@ -135,11 +135,25 @@ def _read_text(path: str | Path) -> str:
         raise _fail(path, f"cannot be read ({exc.strerror})") from exc
 
 
-def _parse_xml(path: str | Path) -> ElementTree.Element:
+def _parse_xml(path: str | Path, root_tag: str, kind: str = "") -> ElementTree.Element:
+    """The root element of an XML file, which must be ``<root_tag>`` (``kind`` names the format in the error)."""
     try:
-        return ElementTree.parse(path).getroot()
+        root = ElementTree.parse(path).getroot()
     except (ElementTree.ParseError, LookupError, ValueError) as exc:  # LookupError: a bad encoding name
         raise _fail(path, f"is not well-formed XML ({exc})") from None
+    if root.tag != root_tag:
+        raise _fail(path, f"root element <{root.tag}> is not {kind + ' ' if kind else ''}<{root_tag}>")
+    return root
+
+
+def _xml_node(
+    path: str | Path, parent: ElementTree.Element, xpath: str, what: str | None = None
+) -> ElementTree.Element:
+    """The element at ``xpath`` below ``parent``; the error says ``missing <what>`` (default the path)."""
+    node = parent.find(xpath)
+    if node is None:
+        raise _fail(path, f"missing {what or xpath}")
+    return node
 
 
 # --------------------------------------------------------------------------- text formats
@@ -276,16 +290,10 @@ def _dimap_v2_from_root(path: str | Path, root: ElementTree.Element) -> Rational
     version = (fmt.get("version") if fmt is not None else None) or "2"
     if float(version.split(".")[0]) >= 3:
         raise _fail(path, f"DIMAP v{version} RPC is not supported (only v2)")
-    rfm = root.find("Rational_Function_Model/Global_RFM")
-    if rfm is None:
-        raise _fail(path, "missing Rational_Function_Model/Global_RFM")
+    rfm = _xml_node(path, root, "Rational_Function_Model/Global_RFM")
     direct = rfm.find("Direct_Model")  # image -> ground
-    inverse = rfm.find("Inverse_Model")  # ground -> image
-    validity = rfm.find("RFM_Validity")
-    if inverse is None:
-        raise _fail(path, "missing Inverse_Model (ground-to-image coefficients)")
-    if validity is None:
-        raise _fail(path, "missing RFM_Validity (offsets and scales)")
+    inverse = _xml_node(path, rfm, "Inverse_Model", "Inverse_Model (ground-to-image coefficients)")
+    validity = _xml_node(path, rfm, "RFM_Validity", "RFM_Validity (offsets and scales)")
     values: dict[str, Any] = {k: _xml_text(path, validity, k) for k in _SCALAR_KEYS}
     for key in _COEFF_KEYS:
         values[key] = _xml_coeffs(path, inverse, key)
@@ -339,10 +347,7 @@ def read_dimap_v2(path: str | Path) -> RationalFunctionModel:
     (kept as :class:`~explorer.rpc.model.InverseRFM`). DIMAP is 1-based: 1 is subtracted from
     ``LINE_OFF``/``SAMP_OFF`` and from the ``FIRST/LAST_ROW/COL`` validity bounds.
     """
-    root = _parse_xml(path)
-    if root.tag != "Dimap_Document":
-        raise _fail(path, f"root element <{root.tag}> is not a DIMAP v2 <Dimap_Document>")
-    return _dimap_v2_from_root(path, root)
+    return _dimap_v2_from_root(path, _parse_xml(path, "Dimap_Document", "a DIMAP v2"))
 
 
 def read_dimap_v1(path: str | Path) -> RationalFunctionModel:
@@ -352,12 +357,8 @@ def read_dimap_v1(path: str | Path) -> RationalFunctionModel:
     ``F_LON``/``F_LAT`` the image-to-ground ones; ``RFM_Validity/<Axis>/A`` is the scale and
     ``B`` the offset. 1-based like DIMAP v2: 1 is subtracted from the row/col offsets.
     """
-    root = _parse_xml(path)
-    if root.tag != "PHR_Dimap_Document":
-        raise _fail(path, f"root element <{root.tag}> is not <PHR_Dimap_Document>")
-    rfm = root.find(".//Rational_Sensor_Model/Global_RFM")
-    if rfm is None:
-        raise _fail(path, "missing Rational_Sensor_Model/Global_RFM")
+    root = _parse_xml(path, "PHR_Dimap_Document")
+    rfm = _xml_node(path, root, ".//Rational_Sensor_Model/Global_RFM", "Rational_Sensor_Model/Global_RFM")
 
     def forty(tag: str, model: str) -> tuple[np.ndarray, np.ndarray]:
         text = _xml_text(path, rfm.find(model), tag)
@@ -371,9 +372,7 @@ def read_dimap_v1(path: str | Path) -> RationalFunctionModel:
     col_num, col_den = forty("F_COL", "Inverse_Model")
     lon_num, lon_den = forty("F_LON", "Direct_Model")
     lat_num, lat_den = forty("F_LAT", "Direct_Model")
-    validity = rfm.find("RFM_Validity")
-    if validity is None:
-        raise _fail(path, "missing RFM_Validity")
+    validity = _xml_node(path, rfm, "RFM_Validity")
     ab = {}
     for axis in ("Lon", "Lat", "Alt", "Col", "Row"):
         node = validity.find(axis)
@@ -408,12 +407,8 @@ _DG_XML_NAMES = {
 
 def read_dg_xml(path: str | Path) -> RationalFunctionModel:
     """DigitalGlobe/Maxar ``.XML`` (``<isd>``): the ``RPB/IMAGE`` block. 0-based pixel centre."""
-    root = _parse_xml(path)
-    if root.tag != "isd":
-        raise _fail(path, f"root element <{root.tag}> is not a DigitalGlobe <isd>")
-    image = root.find("RPB/IMAGE")
-    if image is None:
-        raise _fail(path, "missing RPB/IMAGE block")
+    root = _parse_xml(path, "isd", "a DigitalGlobe")
+    image = _xml_node(path, root, "RPB/IMAGE", "RPB/IMAGE block")
     values: dict[str, Any] = {k: _xml_text(path, image, tag) for tag, k in _DG_XML_NAMES.items()}
     for tag, key in (("LINENUMCOEF", "LINE_NUM_COEFF"), ("LINEDENCOEF", "LINE_DEN_COEFF"),
                      ("SAMPNUMCOEF", "SAMP_NUM_COEFF"), ("SAMPDENCOEF", "SAMP_DEN_COEFF")):
@@ -434,9 +429,7 @@ def read_gdal_vrt(path: str | Path) -> RationalFunctionModel:
     0-based pixel-centre convention (RPC00B): taken as is. The VRT's raster size is stored in
     ``metadata["raster_size"]`` (it may be a crop of the image the RPC describes).
     """
-    root = _parse_xml(path)
-    if root.tag != "VRTDataset":
-        raise _fail(path, f"root element <{root.tag}> is not <VRTDataset>")
+    root = _parse_xml(path, "VRTDataset")
     domain = next((m for m in root.iter("Metadata") if m.get("domain") == "RPC"), None)
     if domain is None:
         raise _fail(path, 'no <Metadata domain="RPC"> block')
