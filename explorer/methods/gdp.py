@@ -34,7 +34,7 @@ import numpy as np
 from explorer.errors import InputError
 from explorer.methods._common import residual_px
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
-from explorer.methods.hybrid import interpolate_in_widened_windows
+from explorer.methods.hybrid import LineWindows, interpolate_in_widened_windows
 from explorer.scene import Scene
 
 
@@ -148,14 +148,9 @@ class GeneralDistancePrediction(BestScanlineMethod):
                 if path is not None:
                     current[idx] = partner
                     path.append(current.copy())
-                up = partner > l0
-                lo = np.where(up, l0, partner)
-                hi = np.where(up, partner, l0)
-                f_lo = np.where(up, f0, f1)
-                f_hi = np.where(up, f1, f0)
                 interpolate_in_widened_windows(
-                    sc, g, lo, hi, f_lo, f_hi, ce_sub, idx, (row, converged, ce), max_steps=self.max_widen,
-                    line_min=line_min, line_max=line_max, current=current, trace=path,
+                    sc, g, LineWindows.between(l0, partner, f0, f1), ce_sub, idx, (row, converged, ce),
+                    max_steps=self.max_widen, line_min=line_min, line_max=line_max, current=current, trace=path,
                 )
         if path is not None:
             path.append(row.copy())

@@ -32,6 +32,8 @@ Conventions (pixel centre, row <-> time, the residual): ``docs/conventions.md``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from explorer.errors import InputError
@@ -40,13 +42,27 @@ from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.scene import Scene
 
 
+@dataclass
+class LineWindows:
+    """One-line windows ``[lo, hi]`` (integer lines, ``hi = lo + 1``) of M points and the residuals
+    (px) on their two lines, all shape (M,).  :func:`widen_to_sign_change` updates them in place."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    f_lo: np.ndarray
+    f_hi: np.ndarray
+
+    @classmethod
+    def between(cls, a: np.ndarray, b: np.ndarray, f_a: np.ndarray, f_b: np.ndarray) -> LineWindows:
+        """The windows of neighbouring lines ``a`` and ``b`` (either order) with residuals ``f_a``, ``f_b``."""
+        up = b > a
+        return cls(np.where(up, a, b), np.where(up, b, a), np.where(up, f_a, f_b), np.where(up, f_b, f_a))
+
+
 def widen_to_sign_change(
     scene: Scene,
     ground: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    f_lo: np.ndarray,
-    f_hi: np.ndarray,
+    windows: LineWindows,
     ce: np.ndarray,
     *,
     max_steps: int,
@@ -65,11 +81,9 @@ def widen_to_sign_change(
     ----------
     scene : Scene
     ground : ndarray, shape (M, 3)
-        Points of the window arrays (already subset).
-    lo, hi : ndarray, shape (M,)
-        Integer lines, ``hi = lo + 1``.
-    f_lo, f_hi : ndarray, shape (M,)
-        Residuals (px) on ``lo`` and ``hi``.
+        Points of the windows (already subset).
+    windows : LineWindows
+        The windows and their residuals, updated in place.
     ce : ndarray of int, shape (M,)
         CE counters, incremented in place.
     max_steps : int
@@ -85,6 +99,7 @@ def widen_to_sign_change(
     ndarray of bool, shape (M,)
         True where a sign change was found.
     """
+    lo, hi, f_lo, f_hi = windows.lo, windows.hi, windows.f_lo, windows.f_hi
     found = changes_sign(f_lo, f_hi)
     alive = ~found & np.isfinite(f_lo) & np.isfinite(f_hi)
     for _ in range(max_steps):
@@ -117,10 +132,7 @@ def widen_to_sign_change(
 def interpolate_in_widened_windows(
     scene: Scene,
     ground: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    f_lo: np.ndarray,
-    f_hi: np.ndarray,
+    windows: LineWindows,
     ce_sub: np.ndarray,
     idx: np.ndarray,
     out: tuple[np.ndarray, np.ndarray, np.ndarray],
@@ -131,8 +143,9 @@ def interpolate_in_widened_windows(
     found.  Writes ``row``, ``converged`` and ``ce`` of ``out = (row, converged, ce)`` at ``idx``;
     ``widen`` are the keyword arguments of :func:`widen_to_sign_change` (``index=idx`` is added)."""
     row, converged, ce = out
-    found = widen_to_sign_change(scene, ground, lo, hi, f_lo, f_hi, ce_sub, index=idx, **widen)
-    row[idx[found]] = weighted_mean_row(lo[found], hi[found], f_lo[found], f_hi[found])
+    found = widen_to_sign_change(scene, ground, windows, ce_sub, index=idx, **widen)
+    row[idx[found]] = weighted_mean_row(windows.lo[found], windows.hi[found], windows.f_lo[found],
+                                        windows.f_hi[found])
     converged[idx[found]] = True
     ce[idx] = ce_sub
 
@@ -257,8 +270,7 @@ class HybridObjectSpace(BestScanlineMethod):
             g = ground[idx]
             lo = np.clip(np.floor(r0[idx]), line_min, line_max - 1.0)
             hi = lo + 1.0
-            f_lo = residual_px(sc, g, lo)
-            f_hi = residual_px(sc, g, hi)
+            windows = LineWindows(lo, hi, residual_px(sc, g, lo), residual_px(sc, g, hi))
             m = idx.size
             ce_sub = np.full(m, 2, dtype=np.int64)
             if path is not None:
@@ -267,7 +279,7 @@ class HybridObjectSpace(BestScanlineMethod):
                 current[idx] = hi
                 path.append(current.copy())
             interpolate_in_widened_windows(
-                sc, g, lo, hi, f_lo, f_hi, ce_sub, idx, (row, converged, ce), max_steps=self.max_widen,
+                sc, g, windows, ce_sub, idx, (row, converged, ce), max_steps=self.max_widen,
                 line_min=line_min, line_max=line_max, current=current, trace=path,
             )
         if path is not None:
