@@ -190,6 +190,35 @@ def dense_layers(theta: torch.Tensor, shapes: Sequence[tuple[int, int]]) -> list
     return layers
 
 
+def layer_shapes(sizes: Sequence[int]) -> list[tuple[int, int]]:
+    """``(out, in)`` of each dense layer of a network of layer widths ``sizes`` (inputs, hidden..., outputs)."""
+    return [(sizes[k + 1], sizes[k]) for k in range(len(sizes) - 1)]
+
+
+def n_parameters(shapes: Sequence[tuple[int, int]]) -> int:
+    """Weights and biases of the dense layers ``shapes``: the length of their flat parameter vector."""
+    return sum(o * i + o for o, i in shapes)
+
+
+def dense_forward(
+    theta: torch.Tensor,
+    shapes: Sequence[tuple[int, int]],
+    x: torch.Tensor,
+    activation: Callable[[torch.Tensor], torch.Tensor],
+    *,
+    linear_output: bool = True,
+) -> torch.Tensor:
+    """Outputs (N, out) of the dense layers ``shapes`` (parameters ``theta``, :func:`dense_layers`) on
+    inputs ``x`` (N, in): ``activation`` after every layer, except the last when ``linear_output``."""
+    h = x
+    last = len(shapes) - 1
+    for k, (w, b) in enumerate(dense_layers(theta, shapes)):
+        h = h @ w.T + b
+        if k < last or not linear_output:
+            h = activation(h)
+    return h
+
+
 class SigmoidMLP:
     """Fully connected network: logistic-sigmoid hidden layers, one linear output.
 
@@ -208,9 +237,8 @@ class SigmoidMLP:
             raise ValueError(f"invalid network shape: {n_inputs} inputs, hidden {list(hidden)}")
         self.n_inputs = int(n_inputs)
         self.hidden = tuple(int(h) for h in hidden)
-        sizes = (self.n_inputs, *self.hidden, 1)
-        self.shapes = [(sizes[k + 1], sizes[k]) for k in range(len(sizes) - 1)]
-        self.n_params = sum(o * i + o for o, i in self.shapes)
+        self.shapes = layer_shapes((self.n_inputs, *self.hidden, 1))
+        self.n_params = n_parameters(self.shapes)
 
     def init_params(self, generator: torch.Generator) -> torch.Tensor:
         """Nguyen-Widrow initial weights (seeded), flat float64 vector (P,).
@@ -235,13 +263,7 @@ class SigmoidMLP:
 
     def forward(self, theta: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """Network output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)."""
-        h = x
-        last = len(self.shapes) - 1
-        for k, (w, b) in enumerate(dense_layers(theta, self.shapes)):
-            h = h @ w.T + b
-            if k < last:
-                h = torch.sigmoid(h)
-        return h[:, 0]
+        return dense_forward(theta, self.shapes, x, torch.sigmoid)[:, 0]
 
 
 # ----------------------------------------------------------- Levenberg-Marquardt

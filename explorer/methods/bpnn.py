@@ -40,7 +40,15 @@ import numpy as np
 
 from explorer import _log
 from explorer.errors import InputError, NotFittedError, check_finite
-from explorer.methods._lm import dense_layers, lm_minimise, torch, torch_threads
+from explorer.methods._lm import (
+    dense_forward,
+    dense_layers,
+    layer_shapes,
+    lm_minimise,
+    n_parameters,
+    torch,
+    torch_threads,
+)
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -147,9 +155,8 @@ class MLPRegressor:
         self.fit_info: dict = {}
 
     def _set_sizes(self, n_in: int, n_out: int) -> None:
-        sizes = (n_in, *self.hidden, n_out)
-        self._shapes = [(sizes[k + 1], sizes[k]) for k in range(len(sizes) - 1)]
-        self.n_parameters = sum(o * i + o for o, i in self._shapes)
+        self._shapes = layer_shapes((n_in, *self.hidden, n_out))
+        self.n_parameters = n_parameters(self._shapes)
 
     # ------------------------------------------------------------ network
     def _act(self, z: torch.Tensor) -> torch.Tensor:
@@ -157,13 +164,7 @@ class MLPRegressor:
 
     def _forward(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Normalised inputs (N, d_in) -> normalised outputs (N, d_out) for a flat parameter vector."""
-        h = u
-        last = len(self._shapes) - 1
-        for layer, (w, b) in enumerate(dense_layers(theta, self._shapes)):
-            h = h @ w.T + b
-            if layer < last:
-                h = self._act(h)
-        return h
+        return dense_forward(theta, self._shapes, u, self._act)
 
     def _jacobian(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """d(outputs)/d(theta), shape (2 N, P), rows ordered like ``outputs.reshape(-1)``.
@@ -208,10 +209,8 @@ class MLPRegressor:
         linear least-squares solution; starting there instead of at random saves most of the
         early Levenberg-Marquardt iterations.
         """
-        h = u
-        for w, b in dense_layers(theta, self._shapes[:-1]):
-            h = self._act(h @ w.T + b)
-        k = sum(o * i + o for o, i in self._shapes[:-1])  # where the output layer starts
+        h = dense_forward(theta, self._shapes[:-1], u, self._act, linear_output=False)  # hidden activations
+        k = n_parameters(self._shapes[:-1])  # where the output layer starts
         design = torch.cat([h, torch.ones((h.shape[0], 1), dtype=torch.float64)], dim=1)
         sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1, 2)
         o, i = self._shapes[-1]
