@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -488,15 +488,9 @@ def levenberg_marquardt(
     x_val: np.ndarray,
     y_val: np.ndarray,
     *,
-    max_epochs: int = 1000,
-    mu: float = 1e-3,
-    mu_dec: float = 0.1,
-    mu_inc: float = 10.0,
-    mu_max: float = 1e10,
     min_grad: float = 1e-12,
-    goal: float = 0.0,
-    max_fail: int = 6,
     device: str | torch.device = "cpu",
+    **options: Any,
 ) -> LMResult:
     """Train a :class:`SigmoidMLP` by :func:`lm_minimise` (mean squared error) with early stopping on
     the validation set.
@@ -514,10 +508,13 @@ def levenberg_marquardt(
         Normalised training inputs and targets.
     x_val, y_val : ndarray (M, D), (M,)
         Normalised validation inputs and targets (M may be 0: no early stopping).
-    max_epochs, mu, mu_dec, mu_inc, mu_max, min_grad, goal, max_fail
-        As :func:`lm_minimise`.
+    min_grad : float
+        As :func:`lm_minimise`, whose default (0: no gradient test) this replaces by 1e-12.
     device : str or torch.device
         Where the tensors live ("cpu" is enough for these small problems).
+    **options
+        Other options of :func:`lm_minimise` (``max_epochs``, ``mu``, ``mu_dec``, ``mu_inc``, ``mu_max``,
+        ``goal``, ``max_fail``), with its defaults (MATLAB's ``trainlm``).
 
     Returns
     -------
@@ -538,8 +535,7 @@ def levenberg_marquardt(
         lambda theta: per_sample(theta, xt),
         theta0.detach().clone().to(device=dev, dtype=torch.float64),
         validation_error=(lambda theta: float(torch.mean((yv - net.forward(theta, xv)) ** 2))) if xv.shape[0] else None,
-        max_epochs=max_epochs, mu=mu, mu_dec=mu_dec, mu_inc=mu_inc, mu_max=mu_max, min_grad=min_grad, goal=goal,
-        max_fail=max_fail,
+        min_grad=min_grad, **options,
     )
 
 
