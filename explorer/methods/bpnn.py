@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -46,6 +47,7 @@ from explorer.methods._lm import (
     layer_shapes,
     lm_minimise,
     n_parameters,
+    take_params,
     torch,
     torch_threads,
 )
@@ -556,29 +558,18 @@ class BPNNMethod(BestScanlineMethod):
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too
 
-    def __init__(
-        self,
-        scene: Scene,
-        hidden: int | tuple[int, ...] = 6,
-        activation: str = "sigmoid",
-        max_iter: int = 2000,
-        n_restarts: int = 1,
-        validation_fraction: float = 0.0,
-        weight_decay: float = 0.0,
-        tol_px: float = 1e-7,
-        max_newton: int = 30,
-        domain_margin: float = 0.05,
-        seed: int = 0,
-    ) -> None:
-        super().__init__(scene, hidden=hidden, activation=activation, max_iter=max_iter, n_restarts=n_restarts,
-                         validation_fraction=validation_fraction, weight_decay=weight_decay, tol_px=tol_px,
-                         max_newton=max_newton, domain_margin=domain_margin, seed=seed)
-        self.network = BPNetworkGeometryModel(hidden, activation=activation, max_iter=max_iter,
-                                              n_restarts=n_restarts, validation_fraction=validation_fraction,
-                                              weight_decay=weight_decay, seed=seed, name=self.name)
-        self.tol_px = float(tol_px)
-        self.max_newton = int(max_newton)
-        self.domain_margin = float(domain_margin)
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        "hidden": 6, "activation": "sigmoid", "max_iter": 2000, "n_restarts": 1, "validation_fraction": 0.0,
+        "weight_decay": 0.0, "tol_px": 1e-7, "max_newton": 30, "domain_margin": 0.05, "seed": 0,
+    }
+
+    def __init__(self, scene: Scene, **params: Any) -> None:
+        p = take_params(self.name, params, self.DEFAULTS)
+        super().__init__(scene, **p)
+        self.tol_px = float(p.pop("tol_px"))
+        self.max_newton = int(p.pop("max_newton"))
+        self.domain_margin = float(p.pop("domain_margin"))
+        self.network = BPNetworkGeometryModel(**p, name=self.name)  # the training options
 
     def _fit(self, control: PointSet) -> None:
         g = control.ground

@@ -40,12 +40,14 @@ evaluation: CE = 0).  Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
+import inspect
 import warnings
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from explorer import _log
+from explorer.methods._lm import take_params
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.methods.bpnn import BPNetworkGeometryModel, MLPRegressor
 from explorer.methods.rfm import rfm_domain_mask, rfm_ground_errors
@@ -185,6 +187,12 @@ def fit_nn_rfm(
     return fit.model, net, info
 
 
+#: The options of :func:`fit_nn_rfm` (its keyword-only parameters) and their defaults; :func:`compare_nn_rfm`
+#: and the ``nn-rfm`` method take the same.
+FIT_OPTIONS: dict[str, Any] = {name: p.default for name, p in inspect.signature(fit_nn_rfm).parameters.items()
+                               if p.kind is p.KEYWORD_ONLY}
+
+
 def _xy_stats(dx: np.ndarray, dy: np.ndarray) -> dict:
     """Habib et al. Table 2 statistics in metres: per-point errors, mean and RMS of x and y.
 
@@ -209,15 +217,7 @@ def compare_nn_rfm(
     noise_px: float = 0.5,
     noise_m: float = 0.3,
     seed: int = 0,
-    *,
-    synthetic: str = "layers",
-    hidden: tuple[int, ...] = (7,),
-    activation: str = "sigmoid",
-    grid: tuple[int, int, int] | None = None,
-    validation_fraction: float = 0.15,
-    max_iter: int = 1000,
-    n_restarts: int = 1,
-    rfm_regularization: float = 1e-5,
+    **options: Any,
 ) -> dict:
     """Habib et al.'s Table 2 on a simulated scene: direct RFM vs NN + RFM on irregular noisy GCPs.
 
@@ -235,8 +235,10 @@ def compare_nn_rfm(
         (metres, X, Y and Z).  Check points are exact (the paper's GPS points).
     seed : int
         Seeds the control points, the noise, the check points and the network.
-    synthetic, hidden, activation, grid, validation_fraction, max_iter, n_restarts, rfm_regularization :
-        See :func:`fit_nn_rfm`.
+    **options
+        The other options of :func:`fit_nn_rfm` (:data:`FIT_OPTIONS`: ``synthetic``, ``hidden``,
+        ``activation``, ``grid``, ``validation_fraction``, ``max_iter``, ``n_restarts``,
+        ``rfm_regularization``, the last also for the direct RFM), with its defaults.
 
     Returns
     -------
@@ -260,6 +262,7 @@ def compare_nn_rfm(
     0.10-0.13 m): its failures are local (poles), which 9 random points rarely hit, so the
     hybrid's advantage is robustness, visible over many check points, not typical-point accuracy.
     """
+    options = take_params("compare_nn_rfm", {**options, "seed": seed}, FIT_OPTIONS)
     exact_gcps, gcps = irregular_gcps(scene, n_gcps, noise_px=noise_px, noise_m=noise_m, seed=seed)
     rng = np.random.default_rng(seed + 7919)
     cr = rng.uniform(0.0, scene.n_rows - 1.0, n_checks)
@@ -270,13 +273,10 @@ def compare_nn_rfm(
 
     g = gcps.ground
     direct = fit_rfm_from_gcps(g[:, 0], g[:, 1], g[:, 2], gcps.row, gcps.col, order=3, rational=True,
-                               regularization=rfm_regularization).model
+                               regularization=options["rfm_regularization"]).model
     with warnings.catch_warnings(record=True) as caught, _log.collect_warnings() as logged:
         warnings.simplefilter("always")
-        hybrid, net, info = fit_nn_rfm(gcps, scene.shape, synthetic=synthetic, hidden=hidden,
-                                       activation=activation, grid=grid,
-                                       validation_fraction=validation_fraction, max_iter=max_iter,
-                                       n_restarts=n_restarts, rfm_regularization=rfm_regularization, seed=seed)
+        hybrid, net, info = fit_nn_rfm(gcps, scene.shape, **options)
 
     def rfm_block(model: RationalFunctionModel) -> dict:
         dx, dy, conv = rfm_ground_errors(model, cr, cc, cg)
@@ -298,7 +298,7 @@ def compare_nn_rfm(
         "n_gcps": len(gcps), "n_checks": int(cr.size), "noise_px": noise_px, "noise_m": noise_m,
         "gcp_height_range_m": [float(exact_gcps.ground[:, 2].min()), float(exact_gcps.ground[:, 2].max())],
         "rfm": rfm_block(direct), "nn_rfm": rfm_block(hybrid), "nn": _xy_stats(xn - cg[:, 0], yn - cg[:, 1]),
-        "network": info["network"], "n_synthetic": info["n_synthetic"], "synthetic": synthetic,
+        "network": info["network"], "n_synthetic": info["n_synthetic"], "synthetic": info["synthetic"],
         "synthetic_heights_m": info["synthetic_heights_m"], "rfm_synthetic_grid_rms_px": info["rfm_grid_rms_px"],
         "warnings": [str(w.message) for w in caught] + list(logged),
         "paper": {"rfm": {"rms_x": 1.223, "rms_y": 0.949}, "nn_rfm": {"rms_x": 0.851, "rms_y": 0.685},
@@ -341,29 +341,15 @@ class NNRFMMethod(BestScanlineMethod):
     needs_fit = True
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too
+    DEFAULTS: ClassVar[dict[str, Any]] = {**FIT_OPTIONS, "domain_margin": 0.05}
 
-    def __init__(
-        self,
-        scene: Scene,
-        synthetic: str = "layers",
-        hidden: tuple[int, ...] = (7,),
-        activation: str = "sigmoid",
-        grid: tuple[int, int, int] | None = None,
-        validation_fraction: float = 0.15,
-        max_iter: int = 1000,
-        n_restarts: int = 1,
-        rfm_regularization: float = 1e-5,
-        domain_margin: float = 0.05,
-        seed: int = 0,
-    ) -> None:
-        super().__init__(scene, synthetic=synthetic, hidden=hidden, activation=activation, grid=grid,
-                         validation_fraction=validation_fraction, max_iter=max_iter, n_restarts=n_restarts,
-                         rfm_regularization=rfm_regularization, domain_margin=domain_margin, seed=seed)
-        self._options: dict[str, Any] = dict(synthetic=synthetic, hidden=tuple(hidden), activation=activation,
-                             grid=None if grid is None else tuple(grid), validation_fraction=validation_fraction,
-                             max_iter=max_iter, n_restarts=n_restarts, rfm_regularization=rfm_regularization,
-                             seed=seed)
-        self.domain_margin = float(domain_margin)
+    def __init__(self, scene: Scene, **params: Any) -> None:
+        p = take_params(self.name, params, self.DEFAULTS)
+        super().__init__(scene, **p)
+        self.domain_margin = float(p.pop("domain_margin"))
+        grid = p["grid"]
+        self._options: dict[str, Any] = {**p, "hidden": tuple(p["hidden"]),
+                                         "grid": None if grid is None else tuple(grid)}
         self.model: RationalFunctionModel | None = None
         self.network: MLPRegressor | None = None
 
