@@ -151,36 +151,52 @@ def _inverse_guess_py(iv0, iv1, cn, rn, zn):
     return x, y, x_r, x_c, y_r, y_c, x_z, y_z
 
 
-def _correction_py(corr, cg, cn, rn, zn):
-    """Residual of the fitted polynomial, interpolated in its grid: bilinear in (col_n, row_n), linear in z.
+def _correction_cell_py(corr, cg, cn, rn, zn):
+    """Cell of the polynomial's residual grid and the interpolation weights: ``(cell, a, b, w)``.
 
-    ``corr`` has shape (n_r - 1, n_c - 1, 16): per cell, for the longitude then the latitude, for the lower then
-    the upper height, the corners (0, 0), (0, 1), (1, 0), (1, 1) -- contiguous, so one cell is two cache
-    lines.  ``cg`` = (c0, r0, z0, dc, dr, dz).  Outside the grid the nearest cell is used (clamped).
+    ``cell`` is the flat index ``i * n_c + j`` of the cell of (col_n, row_n) (clamped: outside the grid the
+    nearest cell is used), ``a``, ``b`` the fractions within it, ``w`` the fraction of the height between the
+    grid's two layers.  No memory access, so that a loop over points vectorises.
     """
     n_r = corr.shape[0]
     n_c = corr.shape[1]
     fu = (cn - cg[0]) / cg[3]
     fv = (rn - cg[1]) / cg[4]
-    w = (zn - cg[2]) / cg[5]
     fu = fu if fu >= 0.0 else 0.0
     fu = fu if fu <= n_c else float(n_c)
     fv = fv if fv >= 0.0 else 0.0
     fv = fv if fv <= n_r else float(n_r)
     j = min(int(fu), n_c - 1)
     i = min(int(fv), n_r - 1)
-    a = fu - j
-    b = fv - i
+    return i * n_c + j, fu - j, fv - i, (zn - cg[2]) / cg[5]
+
+
+def _correction_at_py(cells, cell, a, b, w):
+    """Residual of the fitted polynomial: bilinear in (col_n, row_n) over ``cells[cell]``, linear in height.
+
+    ``cells`` has shape (n_cells, 16): per cell, for the longitude then the latitude, for the lower then the
+    upper height, the corners (0, 0), (0, 1), (1, 0), (1, 1) -- contiguous, so one cell is two cache lines.
+    """
+    c = cells[cell]
     w00 = (1.0 - a) * (1.0 - b)
     w01 = a * (1.0 - b)
     w10 = (1.0 - a) * b
     w11 = a * b
-    c = corr[i, j]
     lon_lo = w00 * c[0] + w01 * c[1] + w10 * c[2] + w11 * c[3]
     lon_hi = w00 * c[4] + w01 * c[5] + w10 * c[6] + w11 * c[7]
     lat_lo = w00 * c[8] + w01 * c[9] + w10 * c[10] + w11 * c[11]
     lat_hi = w00 * c[12] + w01 * c[13] + w10 * c[14] + w11 * c[15]
     return lon_lo + w * (lon_hi - lon_lo), lat_lo + w * (lat_hi - lat_lo)
+
+
+def _correction_py(corr, cg, cn, rn, zn):
+    """Residual of the fitted polynomial at (col_n, row_n, z_n), interpolated in its grid.
+
+    ``corr`` has shape (n_r - 1, n_c - 1, 16) (see :func:`_correction_at_py`); ``cg`` = (c0, r0, z0, dc, dr,
+    dz).  The compiled loops split this into a vectorised pass (:func:`_correction_cell_py`) and the gathers.
+    """
+    cell, a, b, w = _correction_cell(corr, cg, cn, rn, zn)
+    return _correction_at(corr.reshape(corr.shape[0] * corr.shape[1], 16), cell, a, b, w)
 
 
 def _correction_cells(residual: np.ndarray) -> np.ndarray:
@@ -205,24 +221,35 @@ BLOCK = 512
 #: Nodes per side of the correction grid of the fitted polynomial.
 CORRECTION_NODES = 65
 
-#: Branch-free refinement passes before the verification pass.
-PASSES = 1
+#: At most this many vectorised passes (forward RPC, verification, a chord step for the points not yet
+#: converged); the passes stop as soon as at most an eighth of a block is left, which the scalar loop finishes.
+MAX_PASSES = 4
 
 
-def _solve_point_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, rn, cn, zn, tol_px, max_iter):
-    """Scalar fallback for one point at a fixed normalised height: ``(x, y, converged)``."""
-    row_sc = norm[7]
-    col_sc = norm[9]
-    x, y, m_xr, m_xc, m_yr, m_yc, _xz, _yz = _inverse_guess(iv0, iv1, cn, rn, zn)
+def _start_py(iv0, iv1, corr, cg, cn, rn, zn):
+    """Polynomial guess plus its interpolated residual: ``x, y, dx_dr, dx_dc, dy_dr, dy_dc, dx_dz, dy_dz``."""
+    x, y, m_xr, m_xc, m_yr, m_yc, x_z, y_z = _inverse_guess(iv0, iv1, cn, rn, zn)
     cx, cy = _correction(corr, cg, cn, rn, zn)
-    x += cx
-    y += cy
+    return x + cx, y + cy, m_xr, m_xc, m_yr, m_yc, x_z, y_z
+
+
+def _pixel_residual_py(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, row_sc, col_sc):
+    """Normalised residual (row, col) of ground (x, y, zn) against pixel (rn, cn), and its size in pixels."""
+    rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
+    er = rn - rr
+    ec = cn - cc
+    return er, ec, math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
+
+
+def _refine_at_height_py(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x, y, m_xr, m_xc, m_yr, m_yc, tol_px, max_iter):
+    """Scalar refinement of one point at a fixed normalised height from (x, y): ``(x, y, converged)``.
+
+    Chord steps with the given inverse Jacobian; when a step does not shrink the residual fourfold, the exact
+    inverse Jacobian of the forward RPC (Newton).
+    """
     prev = math.inf
     for _it in range(max_iter):
-        rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
-        er = rn - rr
-        ec = cn - cc
-        err = math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
+        er, ec, err = _pixel_residual(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, norm[7], norm[9])
         if not (err < 1e300):
             return x, y, False
         if err <= tol_px:
@@ -238,85 +265,89 @@ def _solve_point_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, rn, cn, zn, to
 def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
                         flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
+    tol2 = tol_px * tol_px
+    cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in prange(n_blocks):
         i0 = b * BLOCK
         i1 = min(n, i0 + BLOCK)
         m = i1 - i0
-        scratch = np.empty((4, m))
+        sc = np.empty((7, m))
+        cell = np.empty(m, np.int64)
         x = lon_out[i0:i1]
         y = lat_out[i0:i1]
-        for k in range(m):  # guess (vectorised)
+        for k in range(m):  # the polynomial's guess, inverse Jacobian and residual cell (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
             zn = (h[i0 + k] - h_off) / h_sc
             xg, yg, a, bb, c, d, _e, _f = _inverse_guess(iv0, iv1, cn, rn, zn)
-            cx, cy = _correction(corr, cg, cn, rn, zn)
-            x[k] = xg + cx
-            y[k] = yg + cy
-            scratch[0, k] = a
-            scratch[1, k] = bb
-            scratch[2, k] = c
-            scratch[3, k] = d
-        for _p in range(PASSES):  # chord Newton passes (vectorised)
-            for k in range(m):
+            x[k] = xg
+            y[k] = yg
+            sc[0, k] = a
+            sc[1, k] = bb
+            sc[2, k] = c
+            sc[3, k] = d
+            cell[k], sc[4, k], sc[5, k], sc[6, k] = _correction_cell(corr, cg, cn, rn, zn)
+        for k in range(m):  # the polynomial's residual (gathers: a loop of its own)
+            cx, cy = _correction_at(cells, cell[k], sc[4, k], sc[5, k], sc[6, k])
+            x[k] += cx
+            y[k] += cy
+        for _p in range(MAX_PASSES):  # measure, keep the converged, a chord step for the others
+            n_open = 0
+            for k in range(m):  # the forward RPC and the verification (vectorised; an integer count)
+                rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], (h[i0 + k] - h_off) / h_sc)
+                er = (row[i0 + k] - row_off) / row_sc - rr
+                ec = (col[i0 + k] - col_off) / col_sc - cc
+                good = (er * row_sc) ** 2 + (ec * col_sc) ** 2 <= tol2
+                sc[4, k] = 0.0 if good else 1.0
+                sc[5, k] = er
+                sc[6, k] = ec
+                n_open += 0 if good else 1
+            if 8 * n_open <= m:
+                break
+            for k in range(m):  # the chord step (vectorised)
+                step = sc[4, k] != 0.0
+                x[k] += sc[0, k] * sc[5, k] + sc[1, k] * sc[6, k] if step else 0.0
+                y[k] += sc[2, k] * sc[5, k] + sc[3, k] * sc[6, k] if step else 0.0
+        for k in range(m):  # scalar loop for the points the passes left, then degrees
+            flag_out[i0 + k] = OK
+            if sc[4, k] != 0.0:
                 rn = (row[i0 + k] - row_off) / row_sc
                 cn = (col[i0 + k] - col_off) / col_sc
                 zn = (h[i0 + k] - h_off) / h_sc
-                rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], zn)
-                er = rn - rr
-                ec = cn - cc
-                x[k] += scratch[0, k] * er + scratch[1, k] * ec
-                y[k] += scratch[2, k] * er + scratch[3, k] * ec
-        for k in range(m):  # verification (measured residual)
-            rn = (row[i0 + k] - row_off) / row_sc
-            cn = (col[i0 + k] - col_off) / col_sc
-            zn = (h[i0 + k] - h_off) / h_sc
-            rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], zn)
-            err = math.sqrt(((rn - rr) * row_sc) ** 2 + ((cn - cc) * col_sc) ** 2)
-            flag_out[i0 + k] = OK if err <= tol_px else NOT_CONVERGED
-        for k in range(m):  # scalar fallback, then degrees
-            if flag_out[i0 + k] != OK:
-                rn = (row[i0 + k] - row_off) / row_sc
-                cn = (col[i0 + k] - col_off) / col_sc
-                zn = (h[i0 + k] - h_off) / h_sc
-                xs, ys, conv = _solve_point(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, rn, cn, zn, tol_px, max_iter)
-                if conv:
-                    x[k] = xs
-                    y[k] = ys
-                    flag_out[i0 + k] = OK
-                else:
-                    x[k] = math.nan
-                    y[k] = math.nan
+                xs, ys, conv = _refine_at_height(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x[k], y[k], sc[0, k],
+                                                 sc[1, k], sc[2, k], sc[3, k], tol_px, max_iter)
+                if not conv and not (math.isfinite(x[k]) and math.isfinite(y[k])):  # lost: again from the guess
+                    xg, yg, a, bb, c, d, _e, _f = _start(iv0, iv1, corr, cg, cn, rn, zn)
+                    xs, ys, conv = _refine_at_height(fw0, fw1, fw2, fw3, norm, rn, cn, zn, xg, yg, a, bb, c, d,
+                                                     tol_px, max_iter)
+                x[k] = xs if conv else math.nan
+                y[k] = ys if conv else math.nan
+                flag_out[i0 + k] = OK if conv else NOT_CONVERGED
             x[k] = x[k] * lon_sc + lon_off
             y[k] = y[k] * lat_sc + lat_off
 
 
-def _one_cell_start_py(h, i, j, ua, va, za, du, dv, dz):
-    """Start of the refinement for a segment that stays in cell (i, j): ``(s, flag)`` (flag -1: walk instead).
+def _one_cell_root_py(h00, h01, h10, h11, a0, b0, za, du, dv, dz):
+    """Start of the refinement for a segment that stays in one cell: ``(s, flag)`` (flag -1: walk instead).
 
-    The bilinear patch along the segment is a quadratic f(s) = z(s) - h(s) with f(0) > 0 >= f(1) when the
-    segment enters above the surface and ends below it (it ends below the DEM's lowest height): exactly one
-    root, approached by the secant and one Newton step (no square root; the refinement that follows is exact).
-    Anything else (a no-data corner, f(0) <= 0, a dip below and back up) returns -1: the exact walk decides.
+    The segment starts at (a0, b0) in the cell (fractions of a cell from corner h00) at height ``za`` and
+    moves by (du, dv, dz) per unit of s.  The bilinear patch along it is a quadratic f(s) = z(s) - h(s) with
+    f(0) > 0 >= f(1) when the segment enters above the surface and ends below it (it ends below the DEM's
+    lowest height): exactly one root, approached by the secant and one Newton step (no square root; the
+    refinement that follows is exact).  Anything else (f(0) <= 0, a dip below and back up) returns -1: the
+    exact walk decides; a no-data corner returns NODATA.  Branch-free, so that a loop over points vectorises.
     """
-    h00 = h[i, j]
-    h01 = h[i, j + 1]
-    h10 = h[i + 1, j]
-    h11 = h[i + 1, j + 1]
-    if math.isnan(h00) or math.isnan(h01) or math.isnan(h10) or math.isnan(h11):
-        return 0.0, NODATA
-    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz)
+    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, 0, 0, a0, b0, za, du, dv, dz)
     fb = c0 + c1 + c2
-    if not (c0 > 0.0 and fb <= 0.0):
-        return 0.0, -1
     s = c0 / (c0 - fb)
     ds = c1 + 2.0 * c2 * s
-    if ds < 0.0:
-        s2 = s - (c0 + s * (c1 + s * c2)) / ds
-        s = s2 if 0.0 <= s2 <= 1.0 else s
-    return s, OK
+    s2 = s - (c0 + s * (c1 + s * c2)) / ds
+    s = s2 if (ds < 0.0) & (s2 >= 0.0) & (s2 <= 1.0) else s
+    hole = math.isnan(h00) | math.isnan(h01) | math.isnan(h10) | math.isnan(h11)
+    flag = NODATA if hole else (OK if (c0 > 0.0) & (fb <= 0.0) else -1)
+    return s, flag
 
 
 def _clamp_index_py(u, top):
@@ -326,23 +357,18 @@ def _clamp_index_py(u, top):
     return int(uc)
 
 
-def _dem_refine_point_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, ux, u0, vy, v0, rn, cn, zn, tol_px, tol_m,
-                         max_iter):
-    """Scalar refinement of one point from a height on its line of sight: ``(x, y, zn, flag)``."""
+def _refine_on_dem_py(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x, y, zn, m_xr, m_xc, m_yr, m_yc, x_z,
+                      y_z, tol_px, tol_m, max_iter):
+    """Scalar refinement of one point on the line of sight and the DEM from (x, y, zn): ``(x, y, zn, flag)``.
+
+    Each iteration: the pixel step of :func:`_refine_at_height_py` and a Newton step on the height along the
+    line of sight (slopes ``x_z``, ``y_z``) against the bilinear DEM.
+    """
     h_off = norm[4]
     h_sc = norm[5]
-    row_sc = norm[7]
-    col_sc = norm[9]
-    x, y, m_xr, m_xc, m_yr, m_yc, x_z, y_z = _inverse_guess(iv0, iv1, cn, rn, zn)
-    cx, cy = _correction(corr, cg, cn, rn, zn)
-    x += cx
-    y += cy
     prev = math.inf
     for _it in range(max_iter):
-        rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
-        er = rn - rr
-        ec = cn - cc
-        err = math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
+        er, ec, err = _pixel_residual(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, norm[7], norm[9])
         hd, hu, hv, fl = _bilinear(hgt, ux * x + u0, vy * y + v0)
         if fl != OK:
             return x, y, zn, fl
@@ -381,16 +407,17 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
     v0 = (lat_off - gy0) / gdy
     top_j = hgt.shape[1] - 2.0
     top_i = hgt.shape[0] - 2.0
-    n_cj = hgt.shape[1] - 2
-    n_ci = hgt.shape[0] - 2
     zn_mid = 0.5 * (zn_top + zn_bot)
+    tol2 = tol_px * tol_px
+    cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in prange(n_blocks):
         i0 = b * BLOCK
         i1 = min(n, i0 + BLOCK)
         m = i1 - i0
-        sc = np.empty((14, m))
+        sc = np.empty((16, m))
+        cell = np.empty(m, np.int64)
         x = lon_out[i0:i1]
         y = lat_out[i0:i1]
         zn = h_out[i0:i1]
@@ -401,30 +428,41 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
             sc[11, k] = vy * _horner(iv1, cn, rn, zn_top) + v0
             sc[12, k] = ux * _horner(iv0, cn, rn, zn_bot) + u0
             sc[13, k] = vy * _horner(iv1, cn, rn, zn_bot) + v0
-        for k in range(m):  # the walk (scalar; one cell without the traversal when the chord stays in it)
+        for k in range(m):  # the cell of a chord that stays in one (gathers; -1: the walk decides)
             ua = sc[10, k]
             va = sc[11, k]
             ub = sc[12, k]
             vb = sc[13, k]
-            fl = -1
-            s = 0.0
-            if ua >= 0.0 and va >= 0.0 and ub >= 0.0 and vb >= 0.0 and ua <= top_j + 1.0 and ub <= top_j + 1.0 \
-                    and va <= top_i + 1.0 and vb <= top_i + 1.0:
-                j = min(int(ua), n_cj)
-                i = min(int(va), n_ci)
-                if j == min(int(ub), n_cj) and i == min(int(vb), n_ci):
-                    s, fl = _one_cell_start(hgt, i, j, ua, va, z_top, ub - ua, vb - va, z_bot - z_top)
+            j = _clamp_index(ua, top_j)
+            i = _clamp_index(va, top_i)
+            one = (ua >= 0.0) & (va >= 0.0) & (ub >= 0.0) & (vb >= 0.0) & (ua <= top_j + 1.0) \
+                & (ub <= top_j + 1.0) & (va <= top_i + 1.0) & (vb <= top_i + 1.0) \
+                & (j == _clamp_index(ub, top_j)) & (i == _clamp_index(vb, top_i))
+            sc[0, k] = hgt[i, j]
+            sc[1, k] = hgt[i, j + 1]
+            sc[2, k] = hgt[i + 1, j]
+            sc[3, k] = hgt[i + 1, j + 1]
+            sc[4, k] = ua - j
+            sc[5, k] = va - i
+            sc[6, k] = 1.0 if one else 0.0
+        for k in range(m):  # the root in that cell (vectorised)
+            s, fl = _one_cell_root(sc[0, k], sc[1, k], sc[2, k], sc[3, k], sc[4, k], sc[5, k], z_top,
+                                   sc[12, k] - sc[10, k], sc[13, k] - sc[11, k], z_bot - z_top)
+            sc[7, k] = s
+            flag_out[i0 + k] = fl if sc[6, k] != 0.0 else -1
+        for k in range(m):  # the walk for the others (scalar), then the hit's height
+            fl = flag_out[i0 + k]
+            s = sc[7, k]
             if fl == -1:
-                s, fl = _first_hit(hgt, tile_max, ua, va, z_top, ub, vb, z_bot)
-            flag_out[i0 + k] = fl
+                s, fl = _first_hit(hgt, tile_max, sc[10, k], sc[11, k], z_top, sc[12, k], sc[13, k], z_bot)
+                flag_out[i0 + k] = fl
             zn[k] = zn_top + s * (zn_bot - zn_top) if fl == OK else zn_mid
         for k in range(m):  # start on the line of sight at the hit height (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
             xg, yg, a, bb, c, d, e, f = _inverse_guess(iv0, iv1, cn, rn, zn[k])
-            cx, cy = _correction(corr, cg, cn, rn, zn[k])
-            x[k] = xg + cx
-            y[k] = yg + cy
+            x[k] = xg
+            y[k] = yg
             sc[0, k] = a
             sc[1, k] = bb
             sc[2, k] = c
@@ -432,50 +470,71 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
             sc[4, k] = e
             sc[5, k] = f
             sc[6, k] = zn[k]
-        for _p in range(PASSES + 1):  # pixel + height Newton passes, then the verification
-            last = _p == PASSES
+            cell[k], sc[8, k], sc[9, k], sc[10, k] = _correction_cell(corr, cg, cn, rn, zn[k])
+        for k in range(m):  # the polynomial's residual (gathers: a loop of its own)
+            cx, cy = _correction_at(cells, cell[k], sc[8, k], sc[9, k], sc[10, k])
+            x[k] += cx
+            y[k] += cy
+        for _p in range(MAX_PASSES):  # measure, keep the converged, a pixel + height step for the others
             for k in range(m):  # the forward RPC alone (vectorised; no gathers in this loop)
                 rr, cc = _forward(fw0, fw1, fw2, fw3, x[k], y[k], zn[k])
                 sc[8, k] = (row[i0 + k] - row_off) / row_sc - rr
                 sc[9, k] = (col[i0 + k] - col_off) / col_sc - cc
-            for k in range(m):  # the DEM under the point and the update
-                er = sc[8, k]
-                ec = sc[9, k]
+            for k in range(m):  # the DEM cell under the point (gathers): its corner height and bilinear terms
                 u = ux * x[k] + u0
                 v = vy * y[k] + v0
                 j = _clamp_index(u, top_j)
                 i = _clamp_index(v, top_i)
-                a = u - j
-                bb = v - i
                 h00 = hgt[i, j]
-                h01 = hgt[i, j + 1]
-                h10 = hgt[i + 1, j]
-                h11 = hgt[i + 1, j + 1]
-                p = h01 - h00
-                q = h10 - h00
-                r = h00 - h01 - h10 + h11
-                g = zn[k] * h_sc + h_off - (h00 + p * a + q * bb + r * a * bb)
-                if last:
-                    err2 = (er * row_sc) ** 2 + (ec * col_sc) ** 2
-                    inside = (u >= 0.0) & (u <= top_j + 1.0) & (v >= 0.0) & (v <= top_i + 1.0)
-                    good = (err2 <= tol_px * tol_px) & (abs(g) <= tol_m) & inside
-                    sc[7, k] = 1.0 if good else 0.0
-                else:
-                    hu = p + r * bb
-                    hv = q + r * a
-                    dx = sc[0, k] * er + sc[1, k] * ec
-                    dy = sc[2, k] * er + sc[3, k] * ec
-                    g -= hu * ux * dx + hv * vy * dy
-                    dz = -g / (h_sc - (hu * ux * sc[4, k] + hv * vy * sc[5, k]))
-                    x[k] += dx + sc[4, k] * dz
-                    y[k] += dy + sc[5, k] * dz
-                    zn[k] += dz
-        for k in range(m):  # scalar fallback for the points the passes did not settle, then units
-            if flag_out[i0 + k] == OK and sc[7, k] == 0.0:
+                sc[10, k] = h00
+                sc[11, k] = hgt[i, j + 1] - h00
+                sc[12, k] = hgt[i + 1, j] - h00
+                sc[13, k] = hgt[i + 1, j + 1] - hgt[i + 1, j] - sc[11, k]
+                sc[14, k] = u - j
+                sc[15, k] = v - i
+            n_open = 0
+            for k in range(m):  # verification (vectorised; an integer count, which LLVM may reorder)
+                a = sc[14, k]
+                bb = sc[15, k]
+                g = zn[k] * h_sc + h_off - (sc[10, k] + sc[11, k] * a + sc[12, k] * bb + sc[13, k] * a * bb)
+                u = ux * x[k] + u0
+                v = vy * y[k] + v0
+                inside = (u >= 0.0) & (u <= top_j + 1.0) & (v >= 0.0) & (v <= top_i + 1.0)
+                good = ((sc[8, k] * row_sc) ** 2 + (sc[9, k] * col_sc) ** 2 <= tol2) & (abs(g) <= tol_m) & inside
+                sc[7, k] = 0.0 if good else 1.0
+                n_open += 1 if (not good) & (flag_out[i0 + k] == OK) else 0
+            if 8 * n_open <= m:
+                break
+            for k in range(m):  # a pixel + height step for the points not yet converged (vectorised)
+                er = sc[8, k]
+                ec = sc[9, k]
+                a = sc[14, k]
+                bb = sc[15, k]
+                p = sc[11, k]
+                q = sc[12, k]
+                r = sc[13, k]
+                g = zn[k] * h_sc + h_off - (sc[10, k] + p * a + q * bb + r * a * bb)
+                hu = p + r * bb
+                hv = q + r * a
+                dx = sc[0, k] * er + sc[1, k] * ec
+                dy = sc[2, k] * er + sc[3, k] * ec
+                g -= hu * ux * dx + hv * vy * dy
+                dz = -g / (h_sc - (hu * ux * sc[4, k] + hv * vy * sc[5, k]))
+                step = sc[7, k] != 0.0
+                x[k] += dx + sc[4, k] * dz if step else 0.0
+                y[k] += dy + sc[5, k] * dz if step else 0.0
+                zn[k] += dz if step else 0.0
+        for k in range(m):  # scalar loop for the points the passes left, then units
+            if flag_out[i0 + k] == OK and sc[7, k] != 0.0:
                 rn = (row[i0 + k] - row_off) / row_sc
                 cn = (col[i0 + k] - col_off) / col_sc
-                xs, ys, zs, fl = _dem_refine_point(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, ux, u0, vy, v0,
-                                                   rn, cn, sc[6, k], tol_px, tol_m, max_iter)
+                xs, ys, zs, fl = _refine_on_dem(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x[k], y[k],
+                                                zn[k], sc[0, k], sc[1, k], sc[2, k], sc[3, k], sc[4, k], sc[5, k],
+                                                tol_px, tol_m, max_iter)
+                if fl != OK:  # again from the polynomial at the walk's height
+                    xg, yg, a, bb, c, d, e, f = _start(iv0, iv1, corr, cg, cn, rn, sc[6, k])
+                    xs, ys, zs, fl = _refine_on_dem(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, xg, yg,
+                                                    sc[6, k], a, bb, c, d, e, f, tol_px, tol_m, max_iter)
                 x[k] = xs
                 y[k] = ys
                 zn[k] = zs
@@ -497,11 +556,15 @@ if NUMBA_AVAILABLE:
     _forward = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_forward_py)
     _exact_inverse_jacobian = njit(cache=True, fastmath=False, error_model="numpy")(_exact_inverse_jacobian_py)
     _inverse_guess = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_inverse_guess_py)
+    _correction_cell = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_cell_py)
+    _correction_at = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_at_py)
     _correction = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_py)
-    _solve_point = njit(cache=True, fastmath=False, error_model="numpy")(_solve_point_py)
+    _start = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_start_py)
+    _pixel_residual = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_pixel_residual_py)
+    _refine_at_height = njit(cache=True, fastmath=False, error_model="numpy")(_refine_at_height_py)
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
-    _one_cell_start = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_one_cell_start_py)
-    _dem_refine_point = njit(cache=True, fastmath=False, error_model="numpy")(_dem_refine_point_py)
+    _one_cell_root = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_one_cell_root_py)
+    _refine_on_dem = njit(cache=True, fastmath=False, error_model="numpy")(_refine_on_dem_py)
     _localize_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
     _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
     # the same loops without threads, for small calls (waking the second thread costs more than they take)
@@ -515,11 +578,15 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _forward = _forward_py
     _exact_inverse_jacobian = _exact_inverse_jacobian_py
     _inverse_guess = _inverse_guess_py
+    _correction_cell = _correction_cell_py
+    _correction_at = _correction_at_py
     _correction = _correction_py
-    _solve_point = _solve_point_py
+    _start = _start_py
+    _pixel_residual = _pixel_residual_py
+    _refine_at_height = _refine_at_height_py
     _clamp_index = _clamp_index_py
-    _one_cell_start = _one_cell_start_py
-    _dem_refine_point = _dem_refine_point_py
+    _one_cell_root = _one_cell_root_py
+    _refine_on_dem = _refine_on_dem_py
     _localize_blocks = _localize_blocks_serial = _localize_blocks_py
     _dem_blocks = _dem_blocks_serial = _dem_blocks_py
 _first_hit = _dem.first_hit
