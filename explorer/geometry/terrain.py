@@ -27,13 +27,7 @@ class FlatTerrain:
     def min_height(self) -> float:
         return self.height_m
 
-    @property
-    def max_height(self) -> float:
-        return self.height_m
-
-    @property
-    def mean_height(self) -> float:
-        return self.height_m
+    max_height = mean_height = min_height  # a plane: one height
 
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Height (N,) at (x, y) (N,), metres."""
