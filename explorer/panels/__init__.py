@@ -23,17 +23,16 @@ import numpy as np
 
 Stops = list[tuple[float, tuple[int, int, int]]]
 
-DIVERGING: Stops = [
-    (0.0, (59, 76, 192)),
-    (0.125, (98, 130, 234)),
-    (0.25, (141, 176, 254)),
-    (0.375, (184, 208, 249)),
-    (0.5, (221, 221, 221)),
-    (0.625, (245, 196, 173)),
-    (0.75, (244, 154, 123)),
-    (0.875, (222, 96, 77)),
-    (1.0, (180, 4, 38)),
-]
+
+def _evenly_spaced(*colours: tuple[int, int, int]) -> Stops:
+    """A scale of ``colours`` at equal steps from position 0 to 1."""
+    return [(k / (len(colours) - 1), rgb) for k, rgb in enumerate(colours)]
+
+
+DIVERGING: Stops = _evenly_spaced(
+    (59, 76, 192), (98, 130, 234), (141, 176, 254), (184, 208, 249), (221, 221, 221),
+    (245, 196, 173), (244, 154, 123), (222, 96, 77), (180, 4, 38),
+)
 """Signed residual scale: index 0 is the blue (negative) end, index -1 the red (positive) end."""
 
 HEIGHT: Stops = [
@@ -45,11 +44,7 @@ HEIGHT: Stops = [
 ]
 """Terrain height ramp from the lowest (index 0) to the highest (index -1) height."""
 
-ITERATION: Stops = [
-    (0.0, (253, 231, 37)),
-    (0.5, (33, 145, 140)),
-    (1.0, (68, 1, 84)),
-]
+ITERATION: Stops = _evenly_spaced((253, 231, 37), (33, 145, 140), (68, 1, 84))
 """First (index 0) to last (index -1) iteration of a search."""
 
 FLAT_GROUND_RGB = (150, 162, 140)
@@ -104,13 +99,7 @@ def diverging_rgb(residual_px: np.ndarray, limit_px: float) -> np.ndarray:
 
 ROBUST_PERCENTILE = 99.0
 """Percentile of |residual| that sets an automatic colour limit (outliers saturate)."""
-LOG_MAGNITUDE: Stops = [
-    (0.0, (13, 8, 135)),
-    (0.25, (126, 3, 168)),
-    (0.5, (204, 71, 120)),
-    (0.75, (248, 149, 64)),
-    (1.0, (240, 249, 33)),
-]
+LOG_MAGNITUDE: Stops = _evenly_spaced((13, 8, 135), (126, 3, 168), (204, 71, 120), (248, 149, 64), (240, 249, 33))
 """Sequential scale (plasma) of log10 |residual|: small (index 0) to large (index -1)."""
 
 
