@@ -32,6 +32,12 @@ NODATA = np.float32(-9999.0)
 #: Source pixels per block when rendering a synthetic source (bounds the temporaries to a few hundred MB).
 BLOCK_PIXELS = 1 << 21
 
+#: Source pixels the sampler reads at once per point it samples (:meth:`SourceImage.sample_bilinear`).
+SAMPLER_PIXELS_PER_POINT = 4
+
+#: Source pixels the sampler may always read at once, however few the points.
+SAMPLER_MIN_PIXELS = 1 << 16
+
 
 # ----------------------------------------------------------------------------- output grid
 @dataclass(frozen=True)
@@ -199,25 +205,38 @@ class SourceImage:
             return ds.read(1, window=Window(c0, r0, c1 - c0, r1 - r0)).astype(np.float64)
 
     def _read_rows(self, rows: np.ndarray, c0: int, c1: int) -> np.ndarray:
-        """Rows ``rows`` (sorted), columns [c0, c1) of a C-order ``.npy`` source as float64, by plain reads."""
+        """Rows ``rows`` (sorted), columns [c0, c1) of a C-order ``.npy`` source in its own dtype, by plain reads."""
         with open(self.path, "rb") as f:
             major, _minor = np.lib.format.read_magic(f)
             read_header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
             shape, fortran, dtype = read_header(f)
             if fortran:
-                return np.asarray(np.load(self.path, mmap_mode="r")[rows, c0:c1], dtype=np.float64)
+                return np.array(np.load(self.path, mmap_mode="r")[rows, c0:c1])
             offset = f.tell()
             width = c1 - c0
             buf = np.empty((rows.size, width), dtype=dtype)
             for k, row in enumerate(rows):
                 f.seek(offset + (int(row) * shape[1] + c0) * dtype.itemsize)
                 f.readinto(memoryview(buf[k]).cast("B"))
-        return buf.astype(np.float64)
+        return buf
+
+    def _read_strip(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Pixels [r0, r1) x [c0, c1) in the source's own dtype (plain reads for ``.npy``: no mapped pages)."""
+        if self.path.endswith(".npy"):
+            return self._read_rows(np.arange(r0, r1), c0, c1)
+        import rasterio
+        from rasterio.windows import Window
+
+        with rasterio.open(self.path) as ds:
+            return ds.read(1, window=Window(c0, r0, c1 - c0, r1 - r0))
 
     def sample_bilinear(self, row: np.ndarray, col: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Bilinear values at (row, col) (pixel centres at integers); NaN where not ``valid``.
 
-        Only the window covering the valid points is read from disk.
+        The source is read in strips of rows holding at most :data:`SAMPLER_PIXELS_PER_POINT` source pixels
+        per valid point (and at least :data:`SAMPLER_MIN_PIXELS`), each strip's points sampled from it: the
+        memory is bounded by the number of points, not by the source area they cover (at an output GSD 8
+        times the source's, a 2048 x 2048 block covers 16,000 x 16,000 source pixels: 3 GB read at once).
         """
         out = np.full(row.shape, np.nan)
         if not valid.any():
@@ -225,34 +244,48 @@ class SourceImage:
         nr, nc = self.shape
         r = np.clip(row[valid], 0.0, nr - 1.0)
         c = np.clip(col[valid], 0.0, nc - 1.0)
-        r0 = int(np.floor(r.min()))
-        c0 = int(np.floor(c.min()))
-        r1 = min(int(np.floor(r.max())) + 2, nr)
-        c1 = min(int(np.floor(c.max())) + 2, nc)
-        if self.path.endswith(".npy") and (r1 - r0) * (c1 - c0) > 4 * r.size and nr > 1 and nc > 1:
-            # an output much coarser than the source: gather the 4 neighbours of each point instead of
-            # reading the whole window (memory in the points, not in the window's area)
-            i = np.minimum(np.floor(r).astype(np.int64), nr - 2)
-            j = np.minimum(np.floor(c).astype(np.int64), nc - 2)
-            fr = r - i
-            fc = c - j
-            rows_needed = np.unique(np.concatenate([i, i + 1]))
-            buf = self._read_rows(rows_needed, c0, c1)  # plain reads: no mapped pages in the resident set
-            k = np.searchsorted(rows_needed, i)
-            jj = j - c0
-            out[valid] = (buf[k, jj] * (1 - fr) * (1 - fc) + buf[k, jj + 1] * (1 - fr) * fc
-                          + buf[k + 1, jj] * fr * (1 - fc) + buf[k + 1, jj + 1] * fr * fc)
+        if nr < 2 or nc < 2:  # a single row or column: the whole (thin) window
+            r0, c0 = int(np.floor(r.min())), int(np.floor(c.min()))
+            r1, c1 = min(int(np.floor(r.max())) + 2, nr), min(int(np.floor(c.max())) + 2, nc)
+            win = self.window(r0, r1, c0, c1)
+            i = np.minimum(np.floor(r).astype(np.int64), nr - 2) - r0
+            j = np.minimum(np.floor(c).astype(np.int64), nc - 2) - c0
+            i = np.clip(i, 0, win.shape[0] - 2) if win.shape[0] > 1 else i
+            j = np.clip(j, 0, win.shape[1] - 2) if win.shape[1] > 1 else j
+            fr = r - (i + r0)
+            fc = c - (j + c0)
+            out[valid] = (win[i, j] * (1 - fr) * (1 - fc) + win[i, j + 1] * (1 - fr) * fc
+                          + win[i + 1, j] * fr * (1 - fc) + win[i + 1, j + 1] * fr * fc)
             return out
-        win = self.window(r0, r1, c0, c1)
-        i = np.minimum(np.floor(r).astype(np.int64), nr - 2) - r0
-        j = np.minimum(np.floor(c).astype(np.int64), nc - 2) - c0
-        i = np.clip(i, 0, win.shape[0] - 2) if win.shape[0] > 1 else i
-        j = np.clip(j, 0, win.shape[1] - 2) if win.shape[1] > 1 else j
-        fr = r - (i + r0)
-        fc = c - (j + c0)
-        v = (win[i, j] * (1 - fr) * (1 - fc) + win[i, j + 1] * (1 - fr) * fc
-             + win[i + 1, j] * fr * (1 - fc) + win[i + 1, j + 1] * fr * fc)
-        out[valid] = v
+        i = np.minimum(np.floor(r).astype(np.int64), nr - 2)  # upper-left neighbour of each point
+        j = np.minimum(np.floor(c).astype(np.int64), nc - 2)
+        fr = r - i
+        fc = c - j
+        i_min, i_max = int(i.min()), int(i.max())
+        width = int(j.max()) - int(j.min()) + 2
+        budget = max(SAMPLER_PIXELS_PER_POINT * r.size, SAMPLER_MIN_PIXELS)
+        strip_rows = max(1, budget // width - 1)  # a strip reads strip_rows + 1 source rows
+        n_strips = (i_max - i_min) // strip_rows + 1
+        values = np.empty(r.size)
+        if n_strips == 1:
+            groups: list[np.ndarray | slice] = [slice(None)]
+        else:  # points grouped by strip (a stable radix sort of small integers)
+            strip = (i - i_min) // strip_rows
+            order = np.argsort(strip.astype(np.uint16 if n_strips < 1 << 16 else np.int64), kind="stable")
+            edges = np.concatenate([[0], np.cumsum(np.bincount(strip, minlength=n_strips))])
+            groups = [order[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+        for sel in groups:
+            ii, jj = i[sel], j[sel]
+            s0, c0 = int(ii.min()), int(jj.min())
+            buf = self._read_strip(s0, int(ii.max()) + 2, c0, int(jj.max()) + 2)
+            ii = ii - s0
+            jj = jj - c0
+            a, b = fr[sel], fc[sel]
+            values[sel] = (buf[ii, jj].astype(np.float64) * (1 - a) * (1 - b)
+                           + buf[ii, jj + 1].astype(np.float64) * (1 - a) * b
+                           + buf[ii + 1, jj].astype(np.float64) * a * (1 - b)
+                           + buf[ii + 1, jj + 1].astype(np.float64) * a * b)
+        out[valid] = values
         return out
 
 
@@ -542,13 +575,24 @@ def scene_image_to_lonlat(scene: Scene) -> Callable[[np.ndarray, np.ndarray], tu
     return fn
 
 
+def _image_rows(image: Any, i0: int, n: int, width: int) -> np.ndarray:
+    """Rows [i0, i0 + n) of an array or of band 1 of an open rasterio dataset (read as a window)."""
+    if isinstance(image, np.ndarray):
+        return image[i0:i0 + n]
+    from rasterio.windows import Window
+
+    return image.read(1, window=Window(0, i0, width, n))
+
+
 def measure_geolocation(
-    ortho: np.ndarray, grid: OrthoGrid, pattern: GroundPattern, *, block: int = 64, reference: np.ndarray | None = None
+    ortho: Any, grid: OrthoGrid, pattern: GroundPattern, *, block: int = 64, reference: Any = None
 ) -> dict:
     """Geolocation error of an orthoimage of ``pattern`` by least-squares matching.
 
     With ``reference`` (another orthoimage of the same pattern on the same grid) the shift
-    between the two images is measured instead of the shift against the pattern.
+    between the two images is measured instead of the shift against the pattern.  ``ortho`` and
+    ``reference`` are arrays (grid.height, grid.width) or open rasterio datasets; a dataset is read
+    ``block`` rows at a time (memory in a strip of tiles, not in the image).
 
     In each ``block`` x ``block`` tile the shift d (metres) minimising
     ``|ortho(p) - pattern(p - d)|`` is solved from the linearised model
@@ -560,11 +604,13 @@ def measure_geolocation(
     """
     shifts = []
     for i0 in range(0, grid.height - block + 1, block):
+        strip = _image_rows(ortho, i0, block, grid.width)
+        ref_strip = None if reference is None else _image_rows(reference, i0, block, grid.width)
         for j0 in range(0, grid.width - block + 1, block):
-            o = ortho[i0:i0 + block, j0:j0 + block].astype(np.float64)
+            o = strip[:, j0:j0 + block].astype(np.float64)
             ok = o != NODATA
-            if reference is not None:
-                ref = reference[i0:i0 + block, j0:j0 + block].astype(np.float64)
+            if ref_strip is not None:
+                ref = ref_strip[:, j0:j0 + block].astype(np.float64)
                 ok &= ref != NODATA
             if ok.mean() < 0.99:
                 continue
