@@ -43,6 +43,11 @@ class Evaluation:
         return d
 
 
+def _rms(values: np.ndarray) -> float:
+    """Root mean square of ``values`` (N,); NaN when there is none."""
+    return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
+
+
 def scanline_errors(result: ScanlineResult, check: PointSet) -> tuple[np.ndarray, np.ndarray]:
     """Signed row and column residuals (estimated - exact), each (N,), pixels; NaN where invalid."""
     dr = np.where(result.valid, result.row - check.row, np.nan)
@@ -92,17 +97,14 @@ def evaluate_method(
     locate_s = time.perf_counter() - t0
     dr, dc = scanline_errors(res, sub)
     ok = np.isfinite(dr)
-    rmse = float(np.sqrt(np.mean(dr[ok] ** 2))) if ok.any() else float("nan")
-    drmax = float(np.max(np.abs(dr[ok]))) if ok.any() else float("nan")
-    col_rmse = float(np.sqrt(np.mean(dc[ok] ** 2))) if ok.any() else float("nan")
     return Evaluation(
         method=method.name,
         n_scops=len(control) if (control is not None and method.needs_fit) else 0,
         n_scps=len(check),
         n_evaluated=len(sub),
-        rmse_px=rmse,
-        dr_max_px=drmax,
-        col_rmse_px=col_rmse,
+        rmse_px=_rms(dr[ok]),
+        dr_max_px=float(np.max(np.abs(dr[ok]))) if ok.any() else float("nan"),
+        col_rmse_px=_rms(dc[ok]),
         fit_s=fit_s,
         locate_s=locate_s,
         ce_evals_per_point=float(res.ce_evaluations.mean()) if len(res) else 0.0,
