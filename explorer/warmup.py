@@ -7,8 +7,10 @@ load it instead of compiling.  :func:`warm_up` runs the real entry points on tin
 scene -- every preset (flat) with the compiled search methods, one paper preset with every registered
 method, the ``agile`` preset with relief (DEM kernel, relief paths of the methods), a rational function
 model at a height and on a DEM (serial and parallel projection loops, the inverse, the DEM walk) -- so
-numba compiles each kernel for the argument types the commands use.  ``pushbroom warmup`` runs it; the
-set-up script calls it once.
+numba compiles each kernel for the argument types the commands use; a last step compiles directly what
+:mod:`explorer.kernel_manifest` lists and is still missing (:mod:`explorer.kernel_cache`, which also shows
+the progress line of a command that has to compile).  ``pushbroom warmup`` runs it; the set-up script
+calls it once.
 
 A numba kernel is compiled per argument-type signature: the inputs here have the commands' types
 (float64 arrays, tuples of floats), so one warm-up covers every scene size.
@@ -16,12 +18,16 @@ A numba kernel is compiled per argument-type signature: the inputs here have the
 
 from __future__ import annotations
 
+import importlib
+import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-__all__ = ["warm_up"]
+__all__ = ["kernel_units", "record_unit", "steps", "warm_up", "write_manifest"]
 
 #: Methods with compiled kernels, warmed on every preset (the others, learned or numpy, on one preset).
 COMPILED_SEARCH_METHODS = ("exact", "nr", "csm-secant")
@@ -127,7 +133,68 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
             out.append((f"{pid}: compiled methods",
                         lambda pid=pid: _warm_methods(build_scene(pid), COMPILED_SEARCH_METHODS)))
     out.append(("orthorectification block", _warm_ortho))
+    out.append(("every other kernel of the manifest (explorer.kernel_cache)", _warm_manifest))
     return out
+
+
+def _warm_manifest() -> None:
+    """Compile the kernels of :mod:`explorer.kernel_manifest` the steps above left out of the cache (each for
+    its recorded argument types), so that :func:`explorer.kernel_cache.uncached` finds nothing missing."""
+    from explorer.kernel_cache import compile_kernels, manifest, uncached
+
+    failures = compile_kernels(uncached(list(manifest())))
+    if failures:
+        raise RuntimeError("; ".join(failures))
+
+
+def _warm_scene(scene) -> None:
+    """What showing a scene computes besides the methods: its check points and an image-to-ground."""
+    from explorer.points import simulate_points
+
+    simulate_points(scene, 30, kind="scop")
+    simulate_points(scene, 25_000, kind="scp")  # above the parallel thresholds
+    centre = np.array([(scene.n_rows - 1) / 2.0]), np.array([(scene.n_columns - 1) / 2.0])
+    scene.image_to_ground(*centre)
+
+
+def kernel_units() -> dict[str, Callable[[], None]]:
+    """Units of work whose kernels :mod:`explorer.kernel_cache` records, by name.
+
+    ``scene`` / ``scene:relief``: every preset flat / ``agile`` with 500 m relief, its points and an
+    image-to-ground; ``method:NAME``: the method fitted and run on every preset (compiled search methods;
+    a kernel's argument types can differ between presets) or on the paper preset (the others);
+    ``method:NAME:relief``: the same on ``agile`` with relief; ``rpc``; ``ortho``.  A command needs the union
+    of some units (:func:`explorer.kernel_cache.needed_units`).
+    """
+    from explorer.methods import available
+    from explorer.presets import build_scene, preset_ids
+
+    ids = preset_ids()
+    paper = "WSU" if "WSU" in ids else ids[0]
+
+    def every_preset(fn: Callable) -> Callable[[], None]:
+        def run() -> None:
+            for pid in ids:
+                fn(build_scene(pid))
+        return run
+
+    def relief() -> object:
+        return build_scene("agile", relief_m=500.0)
+
+    units: dict[str, Callable[[], None]] = {
+        "scene": every_preset(_warm_scene),
+        "scene:relief": lambda: _warm_scene(relief()),
+        "rpc": _warm_rpc,
+        "ortho": _warm_ortho,
+    }
+    for name in available():
+        if name in COMPILED_SEARCH_METHODS:
+            units[f"method:{name}"] = every_preset(lambda scene, name=name: _warm_methods(scene, [name], n_scps=25_000))
+        else:
+            units[f"method:{name}"] = lambda name=name: _warm_methods(build_scene(paper), [name], n_scops=60,
+                                                                      n_scps=25_000)
+        units[f"method:{name}:relief"] = lambda name=name: _warm_methods(relief(), [name], n_scps=25_000)
+    return units
 
 
 def warm_up(progress: Callable[[str], None] | None = None) -> dict[str, float]:
@@ -158,3 +225,113 @@ def warm_up(progress: Callable[[str], None] | None = None) -> dict[str, float]:
             if progress is not None:
                 progress(f"    failed: {type(exc).__name__}: {exc}")
     return timings
+
+
+# ------------------------------------------------------------------------------ recording the manifest
+def _package_dispatchers() -> dict[Any, tuple[str, str]]:
+    """Every numba dispatcher defined at module level in the package: dispatcher -> (module, name)."""
+    import os
+    import pkgutil
+
+    out: dict[Any, tuple[str, str]] = {}
+    for info in pkgutil.walk_packages([os.path.dirname(os.path.abspath(__file__))], "explorer."):
+        if info.name.startswith(("explorer.app", "explorer.notebook", "explorer.commands", "explorer.__main__")):
+            continue
+        try:
+            module = importlib.import_module(info.name)
+        except Exception:  # an optional dependency missing: its kernels are not needed either
+            continue
+        for name, obj in vars(module).items():
+            if hasattr(obj, "overloads") and hasattr(obj, "py_func") and getattr(obj, "__module__", None) == \
+                    module.__name__:
+                out.setdefault(obj, (module.__name__, name))
+    return out
+
+
+def record_unit(unit: str) -> list[tuple[str, str, str]]:
+    """Run ``unit`` (:func:`explorer.warmup.kernel_units`) and return the kernels it calls from Python:
+    ``(module, name, signature)``, loaded from the cache or compiled (kernels compiled only inside another
+    kernel are left out: a cached caller needs neither their cache entry nor their compilation)."""
+    from numba.core import event
+
+    fn = kernel_units()[unit]
+    nested: set[tuple[Any, tuple]] = set()
+    depth = threading.local()
+
+    class _Nesting(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            n = getattr(depth, "n", 0)
+            depth.n = n + 1
+            if n and str(getattr(ev.data["dispatcher"].py_func, "__module__", "")).startswith("explorer."):
+                nested.add((ev.data["dispatcher"], tuple(ev.data["args"])))
+
+        def on_end(self, ev: Any) -> None:
+            depth.n = getattr(depth, "n", 1) - 1
+
+    disps = _package_dispatchers()
+    before = {d: set(d.overloads) for d in disps}
+    listener = _Nesting()
+    event.register("numba:compile", listener)
+    try:
+        fn()
+    finally:
+        event.unregister("numba:compile", listener)
+    out = []
+    for d, (module, name) in _package_dispatchers().items():
+        for sig in d.overloads:
+            if sig not in before.get(d, set()) and (d, tuple(sig)) not in nested:
+                out.append((module, name, repr(tuple(sig))))
+    return sorted(out)
+
+
+def write_manifest(path: str, units: Sequence[str] | None = None) -> dict[str, list]:
+    """Record every unit (:func:`record_unit`), each in a fresh process, and write the manifest module."""
+    import json
+    import subprocess
+
+    from explorer.kernel_cache import manifest
+
+    names = list(units) if units is not None else list(kernel_units())
+    # recording some units keeps the others' entries
+    table: dict[str, list] = {} if units is None else {
+        u: [[k.module, k.name, k.signature] for k in ks] for u, ks in manifest().items()}
+    for unit in names:
+        code = ("import json, sys; from explorer.warmup import record_unit; "
+                f"sys.stdout.write('\\n@@' + json.dumps(record_unit({unit!r})))")
+        run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        table[unit] = [list(e) for e in json.loads(run.stdout.rsplit("\n@@", 1)[1])]
+        print(f"{unit}: {len(table[unit])} kernels", file=sys.stderr, flush=True)
+    write_manifest_module(path, table)
+    return table
+
+
+def write_manifest_module(path: str, table: dict[str, list]) -> None:
+    """Write ``{unit: [(module, name, signature), ...]}`` as the manifest module (each kernel listed once)."""
+    index: dict[tuple, int] = {}
+    for entries in table.values():
+        for e in entries:
+            index.setdefault(tuple(e), len(index))
+    lines = ["# ruff: noqa: E501",
+             '"""Kernels each unit of :func:`explorer.warmup.kernel_units` calls from Python: ``KERNELS`` lists',
+             "(module, name, argument types), ``UNITS`` the indices of each unit's kernels.  Generated by",
+             "``python -m explorer.warmup --record`` (after adding a kernel or changing its arguments); do not",
+             'edit."""', "", "KERNELS = ["]
+    lines += [f"    {e!r},  # {k}" for e, k in index.items()]
+    lines += ["]", "", "UNITS = {"]
+    lines += [f"    {unit!r}: {[index[tuple(e)] for e in entries]!r}," for unit, entries in table.items()]
+    lines.append("}")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":  # pragma: no cover - developer tool
+    import argparse
+    import os
+
+    parser = argparse.ArgumentParser(description="record which kernels each warm-up unit calls")
+    parser.add_argument("--record", action="store_true", help="rewrite explorer/kernel_manifest.py")
+    parser.add_argument("--units", default=None, help="comma-separated units (default all)")
+    a = parser.parse_args()
+    if a.record:
+        write_manifest(os.path.join(os.path.dirname(__file__), "kernel_manifest.py"),
+                       a.units.split(",") if a.units else None)

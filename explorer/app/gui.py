@@ -76,6 +76,10 @@ class ExplorerApp(Views):
         Loaded scenes (real sensors) offered in the scene dropdown before the presets.
     debounce_s : float
         Background mode: start computing once the controls have been still this long.
+    compile_progress : explorer.kernel_cache.CompileProgress, optional
+        Follows numba compiling the package's kernels (installed by the caller); while anything compiles,
+        the panel shows a line "Compiling kernels for first use k/n" and a progress bar above the status
+        line, removed when the compilations of an update are over (``compile_log`` keeps the texts shown).
     """
 
     def __init__(
@@ -94,6 +98,7 @@ class ExplorerApp(Views):
         fit_wait_s: float = 0.5,
         sources: Sequence[Any] = (),
         debounce_s: float = DEBOUNCE_S,
+        compile_progress: Any = None,
     ) -> None:
         import viser  # noqa: F401  (the GUI layer; the model never needs it)
 
@@ -146,6 +151,9 @@ class ExplorerApp(Views):
         self._changed_cb: Any = None
         self.trimmer: Any = None
         """Set by :func:`explorer.app.server.serve`: hands freed memory back after browsers leave."""
+        self.compile_progress = compile_progress
+        self.compile_log: list[str] = []
+        """Every text the compiling line showed, in order ("" when it was removed)."""
 
         self.method_names: list[str] = []
         self.methods_ready = threading.Event()
@@ -156,6 +164,8 @@ class ExplorerApp(Views):
         first = preset or (labels[0] if labels else default_preset_id())
         build_controls(self, scene_ids=scene_ids, scene_id=first, scp_count=scp_count,
                        scop_density=scop_density, sweep=sweep)
+        if compile_progress is not None:
+            compile_progress.observers.append(self._show_compiling)
         self.server.scene.set_up_direction("+z")
         self.server.initial_camera.near = 0.001
         self.server.initial_camera.far = 5000.0
@@ -359,17 +369,64 @@ class ExplorerApp(Views):
         with self._lock:
             self._busy = True
         try:
-            self.update(self.settings(), gen)
+            s = self.settings()
+            self._expect_compiles(s)
+            self.update(s, gen)
         except Superseded:
             pass
         except Exception as exc:  # show, never die
             self.errors.append(traceback.format_exc())
             self._status(f"error: {type(exc).__name__}: {exc}", 0.0)
         finally:
+            if self.compile_progress is not None:
+                self.compile_progress.finish()  # what this update compiled is over
             with self._lock:
                 self._busy = False
                 self._done_gen = max(self._done_gen, gen)
                 self._lock.notify_all()
+
+    # ------------------------------------------------------------ compiling
+    def _expect_compiles(self, s: Settings) -> None:
+        """Before an update: how many kernels its settings need that numba's cache does not hold (the n of
+        "k/n"; :func:`explorer.kernel_cache.uncached`).  Only counted at the start of a burst."""
+        progress = self.compile_progress
+        if progress is None or progress.started:
+            return
+        from explorer.kernel_cache import needed_units, uncached
+
+        scene = self.model.fixed_scenes.get(s.preset)
+        kind = next((src.kind for src in self.sources if src.label == s.preset), "preset")
+        relief = s.relief_m > 0 or (scene is not None and type(scene.terrain).__name__ != "FlatTerrain")
+        try:
+            missing = uncached(needed_units("explore", source=kind, methods=s.methods, relief=relief))
+        except Exception:  # only the count shown depends on it
+            return
+        progress.expected = len({(k.module, k.name) for k in missing})
+
+    def _show_compiling(self, progress: Any, finished: bool) -> None:
+        """Observer of :class:`explorer.kernel_cache.CompileProgress`: the compiling line and its bar."""
+        h, gui = self.handles, self.server.gui
+        if finished or (progress.current is None and progress.done >= progress.total):
+            if "compile_note" in h:
+                for key in ("compile_note", "compile_bar"):
+                    with contextlib.suppress(Exception):
+                        h.pop(key).remove()
+                self.compile_log.append("")
+            return
+        if progress.current is None:
+            return
+        text = (f"**Compiling kernels for first use** {progress.done + 1}/{progress.total}: "
+                f"`{progress.current}` ({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them "
+                "once ahead)")
+        value = 100.0 * progress.done / max(progress.total, 1)
+        if "compile_note" not in h:
+            order = float(h["status"].order) - 0.5
+            h["compile_note"] = gui.add_markdown(text, order=order)
+            h["compile_bar"] = gui.add_progress_bar(value, animated=True, order=order + 0.25)
+        else:
+            h["compile_note"].content = text
+            h["compile_bar"].value = value
+        self.compile_log.append(text)
 
     def _check(self, gen: int | None) -> None:
         if gen is not None and (self._gen != gen or self._closing):

@@ -247,33 +247,45 @@ def run_explore(args: Any) -> int:
     ``seed``.  Every problem is raised as an :mod:`explorer.errors` error before a URL is
     printed.
     """
-    from explorer.sources import source_from_args
+    from explorer.app.model import DEFAULT_METHODS
+    from explorer.kernel_cache import CompileProgress, TerminalLine, needed_units, uncached
+    from explorer.sources import SOURCE_KINDS, source_from_args
 
     methods = [m for m in args.methods.split(",") if m] if getattr(args, "methods", None) else None
     export = getattr(args, "export", None)
     if export is None:
         check_listen_address(args.host, args.port)  # fail before the (slow) source is loaded
-    source = source_from_args(args)
-    scops = getattr(args, "scops", None) or 100
-    scps = getattr(args, "scps", None) or 50_000
-    seed = getattr(args, "seed", None) or 0
-    if export is not None:
-        from explorer.app.export import run_export
+    # a progress line on stderr while numba compiles kernels (loading a real source may compile some too);
+    # its total: what the source kind and the methods need and numba's cache lacks
+    kind = next((k for k in SOURCE_KINDS if k != "preset" and getattr(args, k, None)), "preset")
+    units = needed_units("explore", source=kind, methods=methods if methods is not None else DEFAULT_METHODS,
+                         dem=bool(getattr(args, "dem", None)))
+    progress = CompileProgress(len({(k.module, k.name) for k in uncached(units)}), [TerminalLine()]).install()
+    try:
+        source = source_from_args(args)
+        scops = getattr(args, "scops", None) or 100
+        scps = getattr(args, "scps", None) or 50_000
+        seed = getattr(args, "seed", None) or 0
+        if export is not None:
+            from explorer.app.export import run_export
 
-        run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed)
-        return 0
-    if methods is not None:
-        from explorer.methods import available
+            run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed)
+            return 0
+        if methods is not None:
+            from explorer.methods import available
 
-        names = available()
-        unknown = [m for m in methods if m not in names]
-        if unknown:
-            raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(names)}")
-    from explorer.app.model import ExplorerModel
+            names = available()
+            unknown = [m for m in methods if m not in names]
+            if unknown:
+                raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(names)}")
+        from explorer.app.model import ExplorerModel
 
-    return serve(source.label, host=args.host, port=args.port, methods=methods,
-                 sources=[source] if source.scene is not None else [],
-                 model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops)
-
+        # the GUI shows its own line (ExplorerApp; each update counts what it needs, _expect_compiles)
+        return serve(source.label, host=args.host, port=args.port, methods=methods,
+                     sources=[source] if source.scene is not None else [],
+                     model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops, compile_progress=progress)
+    finally:
+        progress.uninstall()
+        progress.finish()
 
 __all__ = ["check_listen_address", "limit_malloc_arenas", "release_freed_memory", "run_explore", "serve"]

@@ -28,6 +28,7 @@ from explorer.commands._args import (
     positive_int,
     raster_file,
 )
+from explorer.commands._progress import with_compile_progress
 
 
 def parse_params(items: list[str] | None) -> dict[str, dict]:
@@ -144,4 +145,4 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
     p.add_argument("--degree", type=non_negative_int, default=3,
                    help="with --rpc/--dimap/--dg: degree of the MPC polynomials (default 3, as explore; the papers: 2)")
-    p.set_defaults(func=cmd_bench)
+    p.set_defaults(func=with_compile_progress("bench", cmd_bench))  # a progress line while kernels compile

@@ -1,0 +1,374 @@
+"""Which compiled kernels are not in numba's on-disk cache yet, and a progress line while numba compiles them.
+
+Every numba kernel of the package is compiled with ``cache=True`` (:mod:`explorer.warmup`): numba keeps one
+index file per kernel (``<module>.<function>-<line>.py311.nbi`` in ``__pycache__`` next to the module, or under
+``$NUMBA_CACHE_DIR``) mapping ``(argument types, CPU name and features, hash of the function's bytecode)`` to
+the machine code, stamped with numba's version and the source file's hash.  :func:`is_cached` asks exactly the
+question numba asks before it compiles -- is that key in a valid index? -- without loading or compiling
+anything (a pickle read per kernel, a few milliseconds for all of them).
+
+What a command needs is a union of *units* (:func:`explorer.warmup.kernel_units`: the scene and point
+simulation on every preset, each method, relief, the RPC model, orthorectification); the manifest
+:mod:`explorer.kernel_manifest` lists, per unit, the kernels called from Python and their argument types,
+recorded by running the unit (``python -m explorer.warmup --record``).  :func:`needed_units` maps a
+command's options to units and :func:`uncached` lists what of them is missing: a new installation, another
+numba version, another CPU, an edited source file, or a cache directory numba cannot write to.
+
+:class:`CompileProgress` follows numba's ``numba:compile`` events (fired only when numba really compiles, never
+for a cache hit) and tells its observers -- the terminal line of :class:`TerminalLine`, the explorer's GUI --
+which kernel is compiling and how many of the expected ones are done, so nothing is shown when nothing
+compiles and something is shown whenever something does, whatever the manifest predicted.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, TextIO
+
+__all__ = ["CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "is_cached", "kernels", "manifest",
+           "needed_units", "reporting_compiles", "uncached"]
+
+WARMUP_HINT = "run `pushbroom warmup` once to skip this"
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """One compiled kernel called from Python with one signature.
+
+    Attributes
+    ----------
+    module : str
+        Module that defines it, e.g. ``"explorer.rpc.inverse"``.
+    name : str
+        Its name in that module (a numba dispatcher).
+    signature : str
+        ``repr`` of the tuple of numba argument types, e.g. ``"(Array(float64, 1, 'C', False, aligned=True),)"``.
+    """
+
+    module: str
+    name: str
+    signature: str
+
+    @property
+    def label(self) -> str:
+        """Short name for progress lines, e.g. ``"rpc.inverse._dem_blocks"``."""
+        return f"{self.module.removeprefix('explorer.')}.{self.name}"
+
+
+def manifest() -> dict[str, tuple[Kernel, ...]]:
+    """The recorded kernels per unit (:mod:`explorer.kernel_manifest`); empty if it is missing."""
+    try:
+        from explorer.kernel_manifest import KERNELS, UNITS
+    except ImportError:  # pragma: no cover - a build without the manifest: nothing is predicted
+        return {}
+    table = [Kernel(*entry) for entry in KERNELS]
+    return {unit: tuple(table[i] for i in indices) for unit, indices in UNITS.items()}
+
+
+def kernels(units: Iterable[str]) -> list[Kernel]:
+    """The kernels of ``units`` (unknown units contribute nothing), each once, in manifest order."""
+    table = manifest()
+    seen: dict[Kernel, None] = {}
+    for unit in units:
+        for k in table.get(unit, ()):
+            seen.setdefault(k, None)
+    return list(seen)
+
+
+def needed_units(command: str, *, source: str = "preset", methods: Sequence[str] = (), relief: bool = False,
+                 dem: bool = False) -> list[str]:
+    """Units a command runs.
+
+    Parameters
+    ----------
+    command : {"explore", "bench", "ortho"}
+    source : str
+        Source kind (:data:`explorer.sources.SOURCE_KINDS`, or ``"rpc"`` / ``"preset"`` for ortho).
+    methods : sequence of str
+        Best-scanline methods it evaluates (explore, bench; ortho's ``--method``).
+    relief : bool
+        Terrain with relief (a preset's relief, or any DEM).
+    dem : bool
+        A DEM is given (``--dem``).
+    """
+    relief = relief or dem
+    units: list[str] = []
+    if command == "ortho":
+        units.append("ortho")
+        if source == "rpc":
+            units.append("rpc")
+        else:
+            units.append("scene:relief" if relief else "scene")
+            units += [f"method:{m}" for m in methods]
+        return units
+    units.append("scene:relief" if relief else "scene")
+    if source == "rpc":
+        units.append("rpc")
+    for m in methods:
+        units.append(f"method:{m}")
+        if relief:
+            units.append(f"method:{m}:relief")
+    return units
+
+
+# ------------------------------------------------------------------------------------------- the cache
+def _types_namespace() -> dict[str, Any]:
+    from numba.core import types
+
+    ns = dict(vars(types))
+    ns["bool"] = types.boolean  # repr(types.boolean) is "bool"
+    return ns
+
+
+def _signature(kernel: Kernel) -> tuple | None:
+    """The argument types of ``kernel`` (None if the recorded text no longer parses)."""
+    try:
+        sig = eval(kernel.signature, {"__builtins__": {}}, _types_namespace())  # noqa: S307 - numba type reprs only
+    except Exception:
+        return None
+    return tuple(sig) if isinstance(sig, tuple) else None
+
+
+def _dispatcher(kernel: Kernel) -> Any:
+    """The numba dispatcher of ``kernel``, or None (numba off, the kernel renamed or removed)."""
+    from explorer._numba import NUMBA_AVAILABLE
+
+    if not NUMBA_AVAILABLE:
+        return None
+    try:
+        module = importlib.import_module(kernel.module)
+    except Exception:
+        return None
+    disp = getattr(module, kernel.name, None)
+    return disp if hasattr(disp, "overloads") and hasattr(disp, "py_func") else None
+
+
+def _index(disp: Any) -> dict | None:
+    """The valid entries of ``disp``'s cache index (numba's own reader: empty if the index is missing, of
+    another numba version or of another source file); None if the kernel cannot be cached at all."""
+    cache = getattr(disp, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is None:  # numba's NullCache: no writable cache location, it compiles in every process
+        return None
+    return cache_file._load_index()
+
+
+def is_cached(kernel: Kernel) -> bool:
+    """True if calling ``kernel`` with its signature compiles nothing: it is in memory already, or numba's
+    on-disk cache holds it for this CPU, this numba and the current source (also True when numba is off or the
+    kernel no longer exists: nothing to compile).  Loads and compiles nothing."""
+    disp = _dispatcher(kernel)
+    if disp is None:
+        return True
+    sig = _signature(kernel)
+    if sig is not None and sig in disp.overloads:
+        return True
+    try:
+        index = _index(disp)
+        if not index:
+            return False
+        codegen = disp.targetctx.codegen()
+        if sig is not None:
+            return disp._cache._index_key(sig, codegen) in index
+        # a signature that no longer parses: cached if any entry is for this CPU and this bytecode
+        _, magic, hashes = disp._cache._index_key((), codegen)
+        return any(key[1] == magic and key[2] == hashes for key in index)
+    except Exception:  # numba's private cache API changed: say it may compile (only a count is affected)
+        return False
+
+
+def uncached(units_or_kernels: Iterable[str] | Iterable[Kernel]) -> list[Kernel]:
+    """The kernels of the given units (or the given kernels) that would be compiled, in manifest order."""
+    items: list[Any] = list(units_or_kernels)
+    ks: list[Kernel] = kernels(items) if items and isinstance(items[0], str) else items
+    return [k for k in ks if not is_cached(k)]
+
+
+def compile_kernels(ks: Iterable[Kernel]) -> list[str]:
+    """Compile (or load from the cache) each kernel for its recorded argument types, without running it.
+
+    Returns the failures as ``"label: error"`` (a kernel whose recorded types no longer fit it)."""
+    failures = []
+    for k in ks:
+        disp, sig = _dispatcher(k), _signature(k)
+        if disp is None:
+            continue
+        if sig is None:
+            failures.append(f"{k.label}: argument types {k.signature} do not parse")
+            continue
+        try:
+            disp.compile(sig)
+        except Exception as exc:  # reported; the kernel then compiles on first use
+            failures.append(f"{k.label}: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+    return failures
+
+
+# ---------------------------------------------------------------------------------------- progress
+def _is_package_kernel(disp: Any) -> bool:
+    fn = getattr(disp, "py_func", None)
+    return bool(fn is not None and str(getattr(fn, "__module__", "")).startswith("explorer."))
+
+
+def _label(disp: Any) -> str:
+    fn = disp.py_func
+    return f"{fn.__module__.removeprefix('explorer.')}.{fn.__qualname__}"
+
+
+class CompileProgress:
+    """Follows numba's compilations of the package's kernels and tells observers.
+
+    ``expected`` is the number of kernels predicted to compile (:func:`uncached`); ``done`` counts the
+    kernels compiled from Python (a kernel compiled inside another one is part of that one), ``current`` is
+    the one compiling.  An observer ``f(progress, finished)`` is called when a kernel starts and ends
+    (``finished`` False), and once with ``finished`` True from :meth:`finish` if anything compiled.
+
+    Parameters
+    ----------
+    expected : int
+        Kernels predicted to compile (the total shown; raised if more compile).
+    observers : sequence of callable(CompileProgress, bool)
+    """
+
+    def __init__(self, expected: int = 0, observers: Sequence[Callable[[CompileProgress, bool], None]] = ()) -> None:
+        self.expected = int(expected)
+        self.done = 0
+        self.started = 0
+        self.current: str | None = None
+        self.t_first: float | None = None
+        self.seconds = 0.0
+        self.observers = list(observers)
+        self._lock = threading.RLock()
+        self._depth = threading.local()
+        self._listener: Any = None
+
+    @property
+    def total(self) -> int:
+        """The expected count, raised to what has started."""
+        return max(self.expected, self.started)
+
+    @property
+    def compiling(self) -> bool:
+        return self.current is not None
+
+    def _notify(self, finished: bool) -> None:
+        for f in list(self.observers):
+            with contextlib.suppress(Exception):  # a failing observer must not break a compilation
+                f(self, finished)
+
+    def kernel_started(self, label: str) -> None:
+        depth = getattr(self._depth, "n", 0)
+        self._depth.n = depth + 1
+        if depth:
+            return
+        with self._lock:
+            if self.t_first is None:
+                self.t_first = time.perf_counter()
+            self.started += 1
+            self.current = label
+            self._notify(False)
+
+    def kernel_finished(self, label: str) -> None:
+        self._depth.n = max(getattr(self._depth, "n", 1) - 1, 0)
+        if self._depth.n:
+            return
+        with self._lock:
+            self.done += 1
+            self.current = None
+            if self.t_first is not None:
+                self.seconds = time.perf_counter() - self.t_first
+            self._notify(False)
+
+    def finish(self) -> None:
+        """Report the end (if anything compiled) and start counting afresh (nothing expected)."""
+        with self._lock:
+            if self.started and not self.compiling:
+                self._notify(True)
+                self.started = self.done = self.expected = 0
+                self.t_first = None
+
+    # numba's event API
+    def install(self) -> CompileProgress:
+        """Listen to numba's ``numba:compile`` events (every thread) until :meth:`uninstall`."""
+        from explorer._numba import NUMBA_AVAILABLE
+
+        if not NUMBA_AVAILABLE or self._listener is not None:
+            return self
+        from numba.core import event
+
+        progress = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev: Any) -> None:
+                disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+                if disp is not None and _is_package_kernel(disp):
+                    progress.kernel_started(_label(disp))
+
+            def on_end(self, ev: Any) -> None:
+                disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+                if disp is not None and _is_package_kernel(disp):
+                    progress.kernel_finished(_label(disp))
+
+        self._listener = _Listener()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def uninstall(self) -> None:
+        if self._listener is None:
+            return
+        from numba.core import event
+
+        with contextlib.suppress(Exception):
+            event.unregister("numba:compile", self._listener)
+        self._listener = None
+
+
+class TerminalLine:
+    """The terminal's progress line (an observer of :class:`CompileProgress`).
+
+    On a terminal one line is rewritten in place; otherwise one plain line per kernel, e.g.
+    ``compiling kernels for first use: 3/11 (rpc.inverse._dem_blocks) ...`` and at the end
+    ``compiling kernels for first use: done, 11 kernels in 41 s; run `pushbroom warmup` once to skip this``.
+    """
+
+    def __init__(self, stream: TextIO | None = None, tty: bool | None = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)()) if tty is None else tty
+        self._open = False
+
+    def __call__(self, progress: CompileProgress, finished: bool) -> None:
+        if finished:
+            text = (f"compiling kernels for first use: done, {progress.done} kernel{'s' * (progress.done != 1)} in "
+                    f"{progress.seconds:.0f} s; {WARMUP_HINT}")
+            self._write(text, end=True)
+            return
+        if progress.current is None:  # a kernel ended: the next start rewrites the line
+            return
+        self._write(f"compiling kernels for first use: {progress.done + 1}/{progress.total} ({progress.current}) ...",
+                    end=False)
+
+    def _write(self, text: str, end: bool) -> None:
+        if self.tty:
+            self.stream.write("\r\x1b[K" + text + ("\n" if end else ""))
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+
+@contextlib.contextmanager
+def reporting_compiles(units: Sequence[str], stream: TextIO | None = None) -> Iterator[CompileProgress]:
+    """Show a progress line on ``stream`` (stderr) while the block compiles any of the package's kernels.
+
+    The total is what :func:`uncached` predicts for ``units``; nothing is printed if nothing compiles.
+    """
+    progress = CompileProgress(len(uncached(units)) if units else 0, [TerminalLine(stream)]).install()
+    try:
+        yield progress
+    finally:
+        progress.uninstall()
+        progress.finish()
