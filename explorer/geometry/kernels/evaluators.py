@@ -4,6 +4,7 @@ written for scalars (compiled by numba) and numpy arrays alike."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -12,19 +13,43 @@ from explorer._numba import NUMBA_AVAILABLE, njit, overload
 from explorer.geometry.kernels.params import _C2, _C4, _C6, _C8, _C10, _S3, _S5, _S7, _S9, SMALL_ANGLE
 
 
-def _sincos_near(a0, s0, c0, d):
-    """``sin(a0 + d), cos(a0 + d)`` from ``s0 = sin a0, c0 = cos a0`` and a small increment ``d``.
+def _inlined_when_compiled(fn: Callable[..., Any] | None = None, *, inline: str = "always") -> Any:
+    """Make the plain Python function ``fn`` callable from compiled kernels, where numba inlines it.
+
+    ``fn`` stays the Python function (numpy arrays, and torch tensors in :mod:`explorer.geometry.torch_solver`);
+    compiled callers get the same code (numba's ``register_jitable``, under the callers' own
+    ``fastmath=False``), so one function serves every evaluator.  ``inline="always"`` inlines it in numba's
+    IR; ``"never"`` compiles it on its own and leaves the inlining to LLVM (for loops whose variables numba's
+    IR inliner mis-scopes when the caller re-assigns the results).
+    """
+    if fn is None:
+        return lambda f: _inlined_when_compiled(f, inline=inline)
+    if NUMBA_AVAILABLE:
+        overload(fn, jit_options={"fastmath": False}, inline=inline, strict=False)(lambda *args: fn)
+    return fn
+
+
+@_inlined_when_compiled
+def _sincos_increment(s0, c0, d):
+    """``sin(a0 + d), cos(a0 + d)`` from ``s0 = sin a0, c0 = cos a0`` and a small increment ``d`` (rad).
 
     The addition theorem with Taylor series of ``sin d`` and ``cos d - 1`` (exact to round-off for
-    ``|d| <= SMALL_ANGLE``); larger increments fall back to ``sin``/``cos`` of ``a0 + d``.  Numpy
-    version (arrays); numba compiles the scalar overload below, which takes the same decisions and
-    performs the same operations.
+    ``|d| <= SMALL_ANGLE``): no ``sin``/``cos`` call, so that compiled loops vectorise.
     """
     d2 = d * d
     sd = d + d * (d2 * (_S3 + d2 * (_S5 + d2 * (_S7 + d2 * _S9))))
     cm1 = d2 * (_C2 + d2 * (_C4 + d2 * (_C6 + d2 * (_C8 + d2 * _C10))))
-    s = s0 + (s0 * cm1 + c0 * sd)
-    c = c0 + (c0 * cm1 - s0 * sd)
+    return s0 + (s0 * cm1 + c0 * sd), c0 + (c0 * cm1 - s0 * sd)
+
+
+def _sincos_near(a0, s0, c0, d):
+    """``sin(a0 + d), cos(a0 + d)`` from ``s0 = sin a0, c0 = cos a0`` and a small increment ``d``.
+
+    :func:`_sincos_increment` for ``|d| <= SMALL_ANGLE``; larger increments fall back to ``sin``/``cos``
+    of ``a0 + d``.  Numpy version (arrays); numba compiles the scalar overload below, which takes the
+    same decisions and performs the same operations.
+    """
+    s, c = _sincos_increment(s0, c0, d)
     big = np.abs(d) > SMALL_ANGLE
     if np.any(big):
         a = a0 + d
@@ -46,10 +71,7 @@ if NUMBA_AVAILABLE:
             if abs(d) > SMALL_ANGLE:
                 a = a0 + d
                 return np.sin(a), np.cos(a)
-            d2 = d * d
-            sd = d + d * (d2 * (_S3 + d2 * (_S5 + d2 * (_S7 + d2 * _S9))))
-            cm1 = d2 * (_C2 + d2 * (_C4 + d2 * (_C6 + d2 * (_C8 + d2 * _C10))))
-            return s0 + (s0 * cm1 + c0 * sd), c0 + (c0 * cm1 - s0 * sd)
+            return _sincos_increment(s0, c0, d)
 
         return impl
 
@@ -59,6 +81,126 @@ if NUMBA_AVAILABLE:
             return min(max(int(np.floor(x)), 0), last)
 
         return impl
+
+
+@_inlined_when_compiled
+def _focal_plane_and_rate(dx, dy, dz, vx_s, vy_s, vz_s, so, co, sp, cp, sk, ck, om_t, ph_t, ka_t, focal, one_division):
+    """Ideal focal-plane coordinates of a point and their time derivatives, from the attitude's sines and cosines.
+
+    Parameters
+    ----------
+    dx, dy, dz : float or ndarray (N,)
+        ``P - S``: ground point minus perspective centre, local ENU metres.
+    vx_s, vy_s, vz_s : float or ndarray (N,)
+        ``dS/dt``, the perspective centre's velocity, m/s.
+    so, co, sp, cp, sk, ck : float or ndarray (N,)
+        Sines and cosines of omega, phi, kappa (``R = Rx(omega) Ry(phi) Rz(kappa)``, as
+        :func:`explorer.geometry.rotations.rotation_from_opk`).
+    om_t, ph_t, ka_t : float or ndarray (N,)
+        Angle rates, rad/s.
+    focal : float
+        Principal distance, metres.
+    one_division : bool
+        True: one division (``1 / v_z``, then products: the fast evaluators); False: the divisions of
+        ``ideal_focal_plane`` (the bitwise reference).
+
+    Returns
+    -------
+    x, y : ideal focal-plane coordinates, metres
+    x_t, y_t : their time derivatives, m/s
+    vz : sensor-frame z of the point, metres (negative in front of the camera)
+    """
+    r00 = cp * ck
+    r01 = -cp * sk
+    r02 = sp
+    r10 = co * sk + so * sp * ck
+    r11 = co * ck - so * sp * sk
+    r12 = -so * cp
+    r20 = so * sk - co * sp * ck
+    r21 = so * ck + co * sp * sk
+    r22 = co * cp
+    # dR/dt = dR/domega omega' + dR/dphi phi' + dR/dkappa kappa'
+    # dR/domega: row 0 -> 0, row 1 -> -row 2, row 2 -> row 1
+    # dR/dphi: Rx(omega) dRy(phi) Rz(kappa)
+    # dR/dkappa: R @ [[0,-1,0],[1,0,0],[0,0,0]] -> column 0 -> column 1, column 1 -> -column 0
+    spck = sp * ck
+    spsk = sp * sk
+    q00 = -spck * ph_t + r01 * ka_t
+    q01 = spsk * ph_t - r00 * ka_t
+    q02 = cp * ph_t
+    q10 = -r20 * om_t + so * cp * ck * ph_t + r11 * ka_t
+    q11 = -r21 * om_t - so * cp * sk * ph_t - r10 * ka_t
+    q12 = -r22 * om_t + so * sp * ph_t
+    q20 = r10 * om_t - co * cp * ck * ph_t + r21 * ka_t
+    q21 = r11 * om_t + co * cp * sk * ph_t - r20 * ka_t
+    q22 = r12 * om_t - co * sp * ph_t
+    # v = R^T (P - S)  (sum over the first index, in order, as the numpy einsum)
+    vx = r00 * dx + r10 * dy + r20 * dz
+    vy = r01 * dx + r11 * dy + r21 * dz
+    vz = r02 * dx + r12 * dy + r22 * dz
+    # dv/dt = Rdot^T (P - S) - R^T dS/dt
+    vx_t = (q00 * dx + q10 * dy + q20 * dz) - (r00 * vx_s + r10 * vy_s + r20 * vz_s)
+    vy_t = (q01 * dx + q11 * dy + q21 * dz) - (r01 * vx_s + r11 * vy_s + r21 * vz_s)
+    vz_t = (q02 * dx + q12 * dy + q22 * dz) - (r02 * vx_s + r12 * vy_s + r22 * vz_s)
+    if one_division:
+        inv_vz = 1.0 / vz
+        scale = -focal * inv_vz
+        ratio = vz_t * inv_vz
+    else:  # as ideal_focal_plane
+        scale = -focal / vz
+        ratio = vz_t / vz
+    x = vx * scale
+    y = vy * scale
+    return x, y, scale * (vx_t - vx * ratio), scale * (vy_t - vy * ratio), vz
+
+
+@_inlined_when_compiled(inline="never")
+def _power_series(start, u, coef, n_terms):
+    """``start + c1 u + c2 u^2 + ...`` and its derivative ``c1 + 2 c2 u + ...`` (the first ``n_terms`` of ``coef``).
+
+    The terms are added to ``start`` one by one, in order: the radial distortion factor (``u = r^2``,
+    :meth:`explorer.geometry.interior.InteriorOrientation.distort`) and the curved detector line (``u = y``,
+    :meth:`~explorer.geometry.interior.InteriorOrientation.detector_x`).  Scalars or arrays.
+    """
+    value = start
+    slope = 0.0 * u
+    power = 1.0 + 0.0 * u
+    for m in range(n_terms):
+        slope = slope + (m + 1) * coef[m] * power
+        power = power * u
+        value = value + coef[m] * power
+    return value, slope
+
+
+@_inlined_when_compiled
+def _radial_distortion(x, y, x_t, y_t, dist, n_terms):
+    """Radial distortion ``r_d = r (1 + k1 r^2 + ...)`` of focal-plane coordinates and their rates
+    (:meth:`explorer.geometry.interior.InteriorOrientation.distort`).
+
+    ``dist`` holds ``k1, k2, ...`` (its first ``n_terms`` are used; none: the coordinates unchanged).
+    Returns ``xd, yd, xd_t, yd_t`` (metres, m/s).
+    """
+    if n_terms == 0:
+        return x, y, x_t, y_t
+    r2 = x * x + y * y
+    factor, dfactor = _power_series(1.0 + 0.0 * r2, r2, dist, n_terms)
+    r2_t = 2.0 * (x * x_t + y * y_t)
+    return x * factor, y * factor, x_t * factor + x * dfactor * r2_t, y_t * factor + y * dfactor * r2_t
+
+
+@_inlined_when_compiled(inline="never")
+def _horner3(coef, t, lowest):
+    """``sum_{j >= lowest} coef[:, j] t^(j - lowest)`` for the three rows of ``coef`` (3, D), by Horner from
+    the highest term (ascending coefficients, as ``polyval_ascending``); ``t`` scalar or array."""
+    d = coef.shape[1]
+    a = coef[0, d - 1] + 0.0 * t
+    b = coef[1, d - 1] + 0.0 * t
+    c = coef[2, d - 1] + 0.0 * t
+    for j in range(d - 2, lowest - 1, -1):
+        a = a * t + coef[0, j]
+        b = b * t + coef[1, j]
+        c = c * t + coef[2, j]
+    return a, b, c
 
 
 def _collinearity_point_py(X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset, curv, dist, sc0, fast):
@@ -89,48 +231,16 @@ def _collinearity_point_py(X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset,
     vz : sensor-frame z of the point, metres (negative in front of the camera)
     """
     # perspective centre and velocity (Horner, ascending coefficients, as polyval_ascending)
-    d_pos = pos.shape[1]
-    sx = pos[0, d_pos - 1] + 0.0 * t
-    sy = pos[1, d_pos - 1] + 0.0 * t
-    sz = pos[2, d_pos - 1] + 0.0 * t
-    for j in range(d_pos - 2, -1, -1):
-        sx = sx * t + pos[0, j]
-        sy = sy * t + pos[1, j]
-        sz = sz * t + pos[2, j]
-    d_vel = dpos.shape[1]
-    vx_s = dpos[0, d_vel - 1] + 0.0 * t
-    vy_s = dpos[1, d_vel - 1] + 0.0 * t
-    vz_s = dpos[2, d_vel - 1] + 0.0 * t
-    for j in range(d_vel - 2, -1, -1):
-        vx_s = vx_s * t + dpos[0, j]
-        vy_s = vy_s * t + dpos[1, j]
-        vz_s = vz_s * t + dpos[2, j]
+    sx, sy, sz = _horner3(pos, t, 0)
+    vx_s, vy_s, vz_s = _horner3(dpos, t, 0)
     # angles (fast: their increments from the constant terms) and rates
-    d_att = att.shape[1]
     lowest = 1 if fast else 0
-    om = att[0, d_att - 1] + 0.0 * t
-    ph = att[1, d_att - 1] + 0.0 * t
-    ka = att[2, d_att - 1] + 0.0 * t
-    if d_att - 1 < lowest:  # fast with constant angles: zero increments
-        om = 0.0 * t
-        ph = 0.0 * t
-        ka = 0.0 * t
-    for j in range(d_att - 2, lowest - 1, -1):
-        om = om * t + att[0, j]
-        ph = ph * t + att[1, j]
-        ka = ka * t + att[2, j]
-    if fast and d_att > 1:
-        om = om * t
-        ph = ph * t
-        ka = ka * t
-    d_rate = datt.shape[1]
-    om_t = datt[0, d_rate - 1] + 0.0 * t
-    ph_t = datt[1, d_rate - 1] + 0.0 * t
-    ka_t = datt[2, d_rate - 1] + 0.0 * t
-    for j in range(d_rate - 2, -1, -1):
-        om_t = om_t * t + datt[0, j]
-        ph_t = ph_t * t + datt[1, j]
-        ka_t = ka_t * t + datt[2, j]
+    om, ph, ka = _horner3(att, t, lowest)
+    if att.shape[1] - 1 < lowest:  # fast with constant angles: zero increments
+        om, ph, ka = 0.0 * t, 0.0 * t, 0.0 * t
+    elif fast:
+        om, ph, ka = om * t, ph * t, ka * t
+    om_t, ph_t, ka_t = _horner3(datt, t, 0)
     for k in range(jit.shape[0]):
         which = int(jit[k, 0])
         amp = jit[k, 1]
@@ -158,83 +268,12 @@ def _collinearity_point_py(X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset,
         cp = np.cos(ph)
         sk = np.sin(ka)
         ck = np.cos(ka)
-    # R = Rx(omega) Ry(phi) Rz(kappa), as explorer.geometry.rotations.rotation_from_opk
-    r00 = cp * ck
-    r01 = -cp * sk
-    r02 = sp
-    r10 = co * sk + so * sp * ck
-    r11 = co * ck - so * sp * sk
-    r12 = -so * cp
-    r20 = so * sk - co * sp * ck
-    r21 = so * ck + co * sp * sk
-    r22 = co * cp
-    # dR/dt = dR/domega omega' + dR/dphi phi' + dR/dkappa kappa'
-    # dR/domega: row 0 -> 0, row 1 -> -row 2, row 2 -> row 1
-    # dR/dphi: Rx(omega) dRy(phi) Rz(kappa)
-    # dR/dkappa: R @ [[0,-1,0],[1,0,0],[0,0,0]] -> column 0 -> column 1, column 1 -> -column 0
-    spck = sp * ck
-    spsk = sp * sk
-    q00 = -spck * ph_t + r01 * ka_t
-    q01 = spsk * ph_t - r00 * ka_t
-    q02 = cp * ph_t
-    q10 = -r20 * om_t + so * cp * ck * ph_t + r11 * ka_t
-    q11 = -r21 * om_t - so * cp * sk * ph_t - r10 * ka_t
-    q12 = -r22 * om_t + so * sp * ph_t
-    q20 = r10 * om_t - co * cp * ck * ph_t + r21 * ka_t
-    q21 = r11 * om_t + co * cp * sk * ph_t - r20 * ka_t
-    q22 = r12 * om_t - co * sp * ph_t
-    # v = R^T (P - S)  (sum over the first index, in order, as the numpy einsum)
-    dx = X - sx
-    dy = Y - sy
-    dz = Z - sz
-    vx = r00 * dx + r10 * dy + r20 * dz
-    vy = r01 * dx + r11 * dy + r21 * dz
-    vz = r02 * dx + r12 * dy + r22 * dz
-    # dv/dt = Rdot^T (P - S) - R^T dS/dt
-    vx_t = (q00 * dx + q10 * dy + q20 * dz) - (r00 * vx_s + r10 * vy_s + r20 * vz_s)
-    vy_t = (q01 * dx + q11 * dy + q21 * dz) - (r01 * vx_s + r11 * vy_s + r21 * vz_s)
-    vz_t = (q02 * dx + q12 * dy + q22 * dz) - (r02 * vx_s + r12 * vy_s + r22 * vz_s)
-    if fast:  # one division
-        inv_vz = 1.0 / vz
-        scale = -focal * inv_vz
-        ratio = vz_t * inv_vz
-    else:  # as ideal_focal_plane
-        scale = -focal / vz
-        ratio = vz_t / vz
-    x = vx * scale
-    y = vy * scale
-    x_t = scale * (vx_t - vx * ratio)
-    y_t = scale * (vy_t - vy * ratio)
-    # radial distortion (explorer.geometry.interior.InteriorOrientation.distort)
-    if dist.shape[0] > 0:
-        r2 = x * x + y * y
-        factor = 1.0 + 0.0 * r2
-        power = 1.0 + 0.0 * r2
-        dfactor = 0.0 * r2
-        dpower = 1.0 + 0.0 * r2
-        for m in range(dist.shape[0]):
-            power = power * r2
-            factor = factor + dist[m] * power
-            dfactor = dfactor + (m + 1) * dist[m] * dpower
-            dpower = dpower * r2
-        r2_t = 2.0 * (x * x_t + y * y_t)
-        xd = x * factor
-        yd = y * factor
-        xd_t = x_t * factor + x * dfactor * r2_t
-        yd_t = y_t * factor + y * dfactor * r2_t
-    else:
-        xd = x
-        yd = y
-        xd_t = x_t
-        yd_t = y_t
+    x, y, x_t, y_t, vz = _focal_plane_and_rate(
+        X - sx, Y - sy, Z - sz, vx_s, vy_s, vz_s, so, co, sp, cp, sk, ck, om_t, ph_t, ka_t, focal, fast
+    )
+    xd, yd, xd_t, yd_t = _radial_distortion(x, y, x_t, y_t, dist, dist.shape[0])
     # detector line (InteriorOrientation.detector_x) and its slope
-    xdet = offset + 0.0 * yd
-    slope = 0.0 * yd
-    power = 1.0 + 0.0 * yd
-    for m in range(curv.shape[0]):
-        slope = slope + (m + 1) * curv[m] * power
-        power = power * yd
-        xdet = xdet + curv[m] * power
+    xdet, slope = _power_series(offset + 0.0 * yd, yd, curv, curv.shape[0])
     g = xd - xdet
     g_t = xd_t - slope * yd_t
     return g, g_t, yd, yd_t, vz
@@ -267,99 +306,26 @@ def _ce_fixed_py(X, Y, Z, t, P, V, A, AR, sc0, jn, jp, jt, js, jc, jt0, jinv_dt,
         for j in range(len(jn) - 1):
             amp = jp[j, 0]
             w = jp[j, 1]
-            e = w * tau
-            q = e * e
-            se = e + e * (q * (_S3 + q * (_S5 + q * (_S7 + q * _S9))))
-            ce = q * (_C2 + q * (_C4 + q * (_C6 + q * (_C8 + q * _C10))))
-            s0 = js[j, k]
-            c0 = jc[j, k]
-            a_s = amp * (s0 + (s0 * ce + c0 * se))
-            a_c = amp * w * (c0 + (c0 * ce - s0 * se))
+            s_j, c_j = _sincos_increment(js[j, k], jc[j, k], w * tau)
+            a_s = amp * s_j
+            a_c = amp * w * c_j
             d_om = d_om + jp[j, 2] * a_s
             d_ph = d_ph + jp[j, 3] * a_s
             d_ka = d_ka + jp[j, 4] * a_s
             om_t = om_t + jp[j, 2] * a_c
             ph_t = ph_t + jp[j, 3] * a_c
             ka_t = ka_t + jp[j, 4] * a_c
-    q = d_om * d_om
-    sd = d_om + d_om * (q * (_S3 + q * (_S5 + q * (_S7 + q * _S9))))
-    cm1 = q * (_C2 + q * (_C4 + q * (_C6 + q * (_C8 + q * _C10))))
-    so = sc0[0, 0] + (sc0[0, 0] * cm1 + sc0[0, 1] * sd)
-    co = sc0[0, 1] + (sc0[0, 1] * cm1 - sc0[0, 0] * sd)
-    q = d_ph * d_ph
-    sd = d_ph + d_ph * (q * (_S3 + q * (_S5 + q * (_S7 + q * _S9))))
-    cm1 = q * (_C2 + q * (_C4 + q * (_C6 + q * (_C8 + q * _C10))))
-    sp = sc0[1, 0] + (sc0[1, 0] * cm1 + sc0[1, 1] * sd)
-    cp = sc0[1, 1] + (sc0[1, 1] * cm1 - sc0[1, 0] * sd)
-    q = d_ka * d_ka
-    sd = d_ka + d_ka * (q * (_S3 + q * (_S5 + q * (_S7 + q * _S9))))
-    cm1 = q * (_C2 + q * (_C4 + q * (_C6 + q * (_C8 + q * _C10))))
-    sk = sc0[2, 0] + (sc0[2, 0] * cm1 + sc0[2, 1] * sd)
-    ck = sc0[2, 1] + (sc0[2, 1] * cm1 - sc0[2, 0] * sd)
-    r00 = cp * ck
-    r01 = -cp * sk
-    r02 = sp
-    r10 = co * sk + so * sp * ck
-    r11 = co * ck - so * sp * sk
-    r12 = -so * cp
-    r20 = so * sk - co * sp * ck
-    r21 = so * ck + co * sp * sk
-    r22 = co * cp
-    spck = sp * ck
-    spsk = sp * sk
-    q00 = -spck * ph_t + r01 * ka_t
-    q01 = spsk * ph_t - r00 * ka_t
-    q02 = cp * ph_t
-    q10 = -r20 * om_t + so * cp * ck * ph_t + r11 * ka_t
-    q11 = -r21 * om_t - so * cp * sk * ph_t - r10 * ka_t
-    q12 = -r22 * om_t + so * sp * ph_t
-    q20 = r10 * om_t - co * cp * ck * ph_t + r21 * ka_t
-    q21 = r11 * om_t + co * cp * sk * ph_t - r20 * ka_t
-    q22 = r12 * om_t - co * sp * ph_t
-    dx = X - sx
-    dy = Y - sy
-    dz = Z - sz
-    vx = r00 * dx + r10 * dy + r20 * dz
-    vy = r01 * dx + r11 * dy + r21 * dz
-    vz = r02 * dx + r12 * dy + r22 * dz
-    vx_t = (q00 * dx + q10 * dy + q20 * dz) - (r00 * vx_s + r10 * vy_s + r20 * vz_s)
-    vy_t = (q01 * dx + q11 * dy + q21 * dz) - (r01 * vx_s + r11 * vy_s + r21 * vz_s)
-    vz_t = (q02 * dx + q12 * dy + q22 * dz) - (r02 * vx_s + r12 * vy_s + r22 * vz_s)
-    inv_vz = 1.0 / vz
-    scale = -focal * inv_vz
-    ratio = vz_t * inv_vz
-    x = vx * scale
-    y = vy * scale
-    x_t = scale * (vx_t - vx * ratio)
-    y_t = scale * (vy_t - vy * ratio)
-    xd = x
-    yd = y
-    xd_t = x_t
-    yd_t = y_t
-    if len(dn) > 1:  # radial distortion
-        r2 = x * x + y * y
-        factor = 1.0 + 0.0 * r2
-        dfactor = 0.0 * r2
-        power = 1.0 + 0.0 * r2
-        for m in range(len(dn) - 1):
-            dfactor = dfactor + (m + 1) * dist[m] * power
-            power = power * r2
-            factor = factor + dist[m] * power
-        r2_t = 2.0 * (x * x_t + y * y_t)
-        xd = x * factor
-        yd = y * factor
-        xd_t = x_t * factor + x * dfactor * r2_t
-        yd_t = y_t * factor + y * dfactor * r2_t
+    so, co = _sincos_increment(sc0[0, 0], sc0[0, 1], d_om)
+    sp, cp = _sincos_increment(sc0[1, 0], sc0[1, 1], d_ph)
+    sk, ck = _sincos_increment(sc0[2, 0], sc0[2, 1], d_ka)
+    x, y, x_t, y_t, vz = _focal_plane_and_rate(
+        X - sx, Y - sy, Z - sz, vx_s, vy_s, vz_s, so, co, sp, cp, sk, ck, om_t, ph_t, ka_t, focal, True
+    )
+    xd, yd, xd_t, yd_t = _radial_distortion(x, y, x_t, y_t, dist, len(dn) - 1)
     g = xd - offset
     g_t = xd_t
     if len(cn) > 1:  # curved detector line
-        slope = 0.0 * yd
-        power = 1.0 + 0.0 * yd
-        xline = 0.0 * yd
-        for m in range(len(cn) - 1):
-            slope = slope + (m + 1) * curv[m] * power
-            power = power * yd
-            xline = xline + curv[m] * power
+        xline, slope = _power_series(0.0 * yd, yd, curv, len(cn) - 1)
         g = g - xline
         g_t = g_t - slope * yd_t
     return g, g_t, yd, yd_t, vz
