@@ -226,7 +226,8 @@ class CompileProgress:
     ``expected`` is the number of kernels predicted to compile (:func:`uncached`); ``done`` counts the
     kernels compiled from Python (a kernel compiled inside another one is part of that one), ``current`` is
     the one compiling.  An observer ``f(progress, finished)`` is called when a kernel starts and ends
-    (``finished`` False), and once with ``finished`` True from :meth:`finish` if anything compiled.
+    (``finished`` False), and once with ``finished`` True from :meth:`finish` if anything compiled -- which
+    happens by itself when the expected number is done.
 
     Parameters
     ----------
@@ -283,6 +284,8 @@ class CompileProgress:
             if self.t_first is not None:
                 self.seconds = time.perf_counter() - self.t_first
             self._notify(False)
+            if self.expected and self.done >= self.expected:
+                self.finish()  # all that was predicted; anything after starts a new count
 
     def finish(self) -> None:
         """Report the end (if anything compiled) and start counting afresh (nothing expected)."""
@@ -291,6 +294,7 @@ class CompileProgress:
                 self._notify(True)
                 self.started = self.done = self.expected = 0
                 self.t_first = None
+                self.seconds = 0.0
 
     # numba's event API
     def install(self) -> CompileProgress:

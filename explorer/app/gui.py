@@ -368,18 +368,20 @@ class ExplorerApp(Views):
     def _run(self, gen: int) -> None:
         with self._lock:
             self._busy = True
+        over = True  # the compilations this update started are over (not so if a newer one takes over)
         try:
             s = self.settings()
             self._expect_compiles(s)
             self.update(s, gen)
+            over = not self.pending  # a method still training compiles its kernels in the redraw after
         except Superseded:
-            pass
+            over = False
         except Exception as exc:  # show, never die
             self.errors.append(traceback.format_exc())
             self._status(f"error: {type(exc).__name__}: {exc}", 0.0)
         finally:
-            if self.compile_progress is not None:
-                self.compile_progress.finish()  # what this update compiled is over
+            if self.compile_progress is not None and over:
+                self.compile_progress.finish()
             with self._lock:
                 self._busy = False
                 self._done_gen = max(self._done_gen, gen)
@@ -414,10 +416,12 @@ class ExplorerApp(Views):
                 self.compile_log.append("")
             return
         if progress.current is None:
-            return
-        text = (f"**Compiling kernels for first use** {progress.done + 1}/{progress.total}: "
-                f"`{progress.current}` ({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them "
-                "once ahead)")
+            text = (f"**Compiling kernels for first use** {progress.done}/{progress.total} compiled "
+                    f"({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them once ahead)")
+        else:
+            text = (f"**Compiling kernels for first use** {progress.done + 1}/{progress.total}: "
+                    f"`{progress.current}` ({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them "
+                    "once ahead)")
         value = 100.0 * progress.done / max(progress.total, 1)
         if "compile_note" not in h:
             order = float(h["status"].order) - 0.5
