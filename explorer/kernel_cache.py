@@ -31,8 +31,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
 
-__all__ = ["CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "is_cached", "kernels", "manifest",
-           "needed_units", "reporting_compiles", "uncached"]
+__all__ = ["CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "expected_compiles", "is_cached", "kernels",
+           "manifest", "needed_units", "reporting_compiles", "uncached"]
 
 WARMUP_HINT = "run `pushbroom warmup` once to skip this"
 
@@ -188,6 +188,12 @@ def uncached(units_or_kernels: Iterable[str] | Iterable[Kernel]) -> list[Kernel]
     items: list[Any] = list(units_or_kernels)
     ks: list[Kernel] = kernels(items) if items and isinstance(items[0], str) else items
     return [k for k in ks if not is_cached(k)]
+
+
+def expected_compiles(units: Iterable[str]) -> int:
+    """How many kernels numba would compile for ``units``: the functions with a signature missing from the
+    cache (a function compiles once per run: one scene has one argument type per kernel)."""
+    return len({(k.module, k.name) for k in uncached(list(units))})
 
 
 def compile_kernels(ks: Iterable[Kernel]) -> list[str]:
@@ -370,7 +376,7 @@ def reporting_compiles(units: Sequence[str], stream: TextIO | None = None) -> It
 
     The total is what :func:`uncached` predicts for ``units``; nothing is printed if nothing compiles.
     """
-    progress = CompileProgress(len(uncached(units)) if units else 0, [TerminalLine(stream)]).install()
+    progress = CompileProgress(expected_compiles(units) if units else 0, [TerminalLine(stream)]).install()
     try:
         yield progress
     finally:

@@ -394,16 +394,16 @@ class ExplorerApp(Views):
         progress = self.compile_progress
         if progress is None or progress.started:
             return
-        from explorer.kernel_cache import needed_units, uncached
+        from explorer.kernel_cache import expected_compiles, needed_units
 
         scene = self.model.fixed_scenes.get(s.preset)
         kind = next((src.kind for src in self.sources if src.label == s.preset), "preset")
         relief = s.relief_m > 0 or (scene is not None and type(scene.terrain).__name__ != "FlatTerrain")
         try:
-            missing = uncached(needed_units("explore", source=kind, methods=s.methods, relief=relief))
+            progress.expected = expected_compiles(needed_units("explore", source=kind, methods=s.methods,
+                                                               relief=relief))
         except Exception:  # only the count shown depends on it
             return
-        progress.expected = len({(k.module, k.name) for k in missing})
 
     def _show_compiling(self, progress: Any, finished: bool) -> None:
         """Observer of :class:`explorer.kernel_cache.CompileProgress`: the compiling line and its bar."""

@@ -248,7 +248,7 @@ def run_explore(args: Any) -> int:
     printed.
     """
     from explorer.app.model import DEFAULT_METHODS
-    from explorer.kernel_cache import CompileProgress, TerminalLine, needed_units, uncached
+    from explorer.kernel_cache import CompileProgress, TerminalLine, expected_compiles, needed_units
     from explorer.sources import SOURCE_KINDS, source_from_args
 
     methods = [m for m in args.methods.split(",") if m] if getattr(args, "methods", None) else None
@@ -260,7 +260,7 @@ def run_explore(args: Any) -> int:
     kind = next((k for k in SOURCE_KINDS if k != "preset" and getattr(args, k, None)), "preset")
     units = needed_units("explore", source=kind, methods=methods if methods is not None else DEFAULT_METHODS,
                          dem=bool(getattr(args, "dem", None)))
-    progress = CompileProgress(len({(k.module, k.name) for k in uncached(units)}), [TerminalLine()]).install()
+    progress = CompileProgress(expected_compiles(units), [TerminalLine()]).install()
     try:
         source = source_from_args(args)
         scops = getattr(args, "scops", None) or 100
