@@ -281,10 +281,10 @@ class SourceImage:
             ii = ii - s0
             jj = jj - c0
             a, b = fr[sel], fc[sel]
-            values[sel] = (buf[ii, jj].astype(np.float64) * (1 - a) * (1 - b)
-                           + buf[ii, jj + 1].astype(np.float64) * (1 - a) * b
-                           + buf[ii + 1, jj].astype(np.float64) * a * (1 - b)
-                           + buf[ii + 1, jj + 1].astype(np.float64) * a * b)
+            # (float32 or integer source values times float64 weights: computed in float64, exactly as from a
+            # float64 copy of the source)
+            values[sel] = (buf[ii, jj] * (1 - a) * (1 - b) + buf[ii, jj + 1] * (1 - a) * b
+                           + buf[ii + 1, jj] * a * (1 - b) + buf[ii + 1, jj + 1] * a * b)
         out[valid] = values
         return out
 

@@ -7,6 +7,8 @@ import json
 import re
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from explorer.commands._args import (
@@ -17,6 +19,7 @@ from explorer.commands._args import (
     positive_float,
     raster_file,
 )
+from explorer.commands._progress import with_compile_progress
 from explorer.commands.simulate import add_scene_arguments, scene_from_args
 
 _SCHEDULER = re.compile(r"^(threads|processes|synchronous|local-cluster(:[1-9][0-9]{0,2})?|tcp://[^\s:/]+:[0-9]{1,5})$")
@@ -132,6 +135,58 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
     return projector, source, grid, pattern
 
 
+WORK_PREFIX = "pushbroom-ortho-"
+
+
+def remove_stale_work_folders(root: Path) -> list[Path]:
+    """Remove the work folders of ortho runs that were killed (SIGKILL, out of memory) in ``root``.
+
+    A run holds an exclusive ``flock`` on the ``.lock`` file of its folder while it lives (:func:`work_folder`);
+    a folder whose lock can be taken belongs to a process that no longer exists (the kernel releases the lock
+    with the process, in any PID namespace sharing the file system).  Folders without a ``.lock`` are left alone.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    import fcntl
+    import shutil
+
+    removed = []
+    for folder in sorted(root.glob(WORK_PREFIX + "*")):
+        try:
+            with open(folder / ".lock", "rb") as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # raises while its run is alive
+                shutil.rmtree(folder, ignore_errors=True)
+                removed.append(folder)
+        except OSError:
+            continue
+    return removed
+
+
+@contextmanager
+def work_folder() -> Iterator[Path]:
+    """A temporary folder for one run, removed when the run ends (normally, on an error, Ctrl-C or SIGTERM).
+
+    The folder is locked (``.lock``, see :func:`remove_stale_work_folders`) so that the next run removes it
+    if this process is killed before it can clean up.
+    """
+    import fcntl
+    import shutil
+
+    folder = Path(tempfile.mkdtemp(prefix=WORK_PREFIX))
+    lock = open(folder / ".lock.new", "wb")  # locked before it gets the name a sweeper looks for
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        (folder / ".lock.new").rename(folder / ".lock")
+        remove_stale_work_folders(folder.parent)
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+        lock.close()
+
+
 def cmd_ortho(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
@@ -143,9 +198,9 @@ def cmd_ortho(args: argparse.Namespace) -> int:
         raise InputError("give --image IMG or --synthetic")
     if args.synthetic and args.image:
         raise InputError("give either --image or --synthetic, not both")
-    with tempfile.TemporaryDirectory(prefix="pushbroom-ortho-") as tmp:
+    with work_folder() as tmp:
         t0 = time.perf_counter()
-        projector, source, grid, pattern = build_ortho_job(args, Path(tmp))
+        projector, source, grid, pattern = build_ortho_job(args, tmp)
         t_setup = time.perf_counter() - t0
         arr = ortho_dask_array(projector, source, grid, args.chunk)
         bar = tqdm(total=arr.npartitions, desc="ortho blocks", unit="block")
@@ -170,8 +225,8 @@ def cmd_ortho(args: argparse.Namespace) -> int:
 
             from explorer.ortho import measure_geolocation
 
-            with rasterio.open(args.out) as ds:
-                report["geolocation"] = measure_geolocation(ds.read(1), grid, pattern)
+            with rasterio.open(args.out) as ds:  # read by strips of tiles, not as one array
+                report["geolocation"] = measure_geolocation(ds, grid, pattern)
         print(json.dumps(report, indent=1))
     return 0
 
@@ -194,4 +249,4 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="threads | processes | synchronous | local-cluster:N | tcp://host:port")
     p.add_argument("--out", required=True, type=output_file,
                    help="output GeoTIFF (written beside as a hidden partial file, renamed when complete)")
-    p.set_defaults(func=cmd_ortho)
+    p.set_defaults(func=with_compile_progress("ortho", cmd_ortho))  # a progress line while kernels compile
