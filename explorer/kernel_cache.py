@@ -190,10 +190,15 @@ def uncached(units_or_kernels: Iterable[str] | Iterable[Kernel]) -> list[Kernel]
     return [k for k in ks if not is_cached(k)]
 
 
-def expected_compiles(units: Iterable[str]) -> int:
-    """How many kernels numba would compile for ``units``: the functions with a signature missing from the
-    cache (a function compiles once per run: one scene has one argument type per kernel)."""
-    return len({(k.module, k.name) for k in uncached(list(units))})
+def expected_compiles(units: Iterable[str]) -> set[str]:
+    """The kernels numba would compile for ``units``, named as :class:`CompileProgress` names them: the
+    functions with a signature missing from the cache (a function compiles once per run: one scene gives
+    one argument type per kernel)."""
+    out = set()
+    for k in uncached(list(units)):
+        disp = _dispatcher(k)
+        out.add(_label(disp) if disp is not None else k.label)
+    return out
 
 
 def compile_kernels(ks: Iterable[Kernel]) -> list[str]:
@@ -229,23 +234,24 @@ def _label(disp: Any) -> str:
 class CompileProgress:
     """Follows numba's compilations of the package's kernels and tells observers.
 
-    ``expected`` is the number of kernels predicted to compile (:func:`uncached`); ``done`` counts the
-    kernels compiled from Python (a kernel compiled inside another one is part of that one), ``current`` is
-    the one compiling.  An observer ``f(progress, finished)`` is called when a kernel starts and ends
-    (``finished`` False), and once with ``finished`` True from :meth:`finish` if anything compiled -- which
-    happens by itself when the expected number is done.
+    ``expected`` names the kernels predicted to compile (:func:`expected_compiles`); ``compiled`` those
+    compiled from Python so far (a kernel compiled inside another one is part of that one), ``current`` the
+    one compiling; the total shown is both together, so a kernel nobody predicted still counts.  An
+    observer ``f(progress, finished)`` is called when a kernel starts and ends (``finished`` False), and once
+    with ``finished`` True from :meth:`finish` if anything compiled -- which happens by itself once every
+    predicted kernel is compiled.
 
     Parameters
     ----------
-    expected : int
-        Kernels predicted to compile (the total shown; raised if more compile).
+    expected : iterable of str
+        Kernels predicted to compile, as ``"module.function"`` without the leading ``explorer.``.
     observers : sequence of callable(CompileProgress, bool)
     """
 
-    def __init__(self, expected: int = 0, observers: Sequence[Callable[[CompileProgress, bool], None]] = ()) -> None:
-        self.expected = int(expected)
-        self.done = 0
-        self.started = 0
+    def __init__(self, expected: Iterable[str] = (),
+                 observers: Sequence[Callable[[CompileProgress, bool], None]] = ()) -> None:
+        self.expected: set[str] = set(expected)
+        self.compiled: set[str] = set()
         self.current: str | None = None
         self.t_first: float | None = None
         self.seconds = 0.0
@@ -255,9 +261,23 @@ class CompileProgress:
         self._listener: Any = None
 
     @property
+    def done(self) -> int:
+        return len(self.compiled)
+
+    @property
     def total(self) -> int:
-        """The expected count, raised to what has started."""
-        return max(self.expected, self.started)
+        """The predicted kernels and any other that compiled or is compiling."""
+        return len(self.expected | self.compiled | ({self.current} if self.current else set()))
+
+    @property
+    def position(self) -> int:
+        """The number of the kernel compiling now (1-based), else of the last compiled."""
+        return self.done + (self.current is not None and self.current not in self.compiled)
+
+    @property
+    def started(self) -> bool:
+        """Something compiled (or is compiling) since the last :meth:`finish`."""
+        return bool(self.compiled) or self.current is not None
 
     @property
     def compiling(self) -> bool:
@@ -276,7 +296,6 @@ class CompileProgress:
         with self._lock:
             if self.t_first is None:
                 self.t_first = time.perf_counter()
-            self.started += 1
             self.current = label
             self._notify(False)
 
@@ -285,20 +304,21 @@ class CompileProgress:
         if self._depth.n:
             return
         with self._lock:
-            self.done += 1
+            self.compiled.add(label)
             self.current = None
             if self.t_first is not None:
                 self.seconds = time.perf_counter() - self.t_first
             self._notify(False)
-            if self.expected and self.done >= self.expected:
+            if self.expected and self.expected <= self.compiled:
                 self.finish()  # all that was predicted; anything after starts a new count
 
     def finish(self) -> None:
         """Report the end (if anything compiled) and start counting afresh (nothing expected)."""
         with self._lock:
-            if self.started and not self.compiling:
+            if self.compiled and not self.compiling:
                 self._notify(True)
-                self.started = self.done = self.expected = 0
+                self.compiled = set()
+                self.expected = set()
                 self.t_first = None
                 self.seconds = 0.0
 
@@ -359,7 +379,7 @@ class TerminalLine:
             return
         if progress.current is None:  # a kernel ended: the next start rewrites the line
             return
-        self._write(f"compiling kernels for first use: {progress.done + 1}/{progress.total} ({progress.current}) ...",
+        self._write(f"compiling kernels for first use: {progress.position}/{progress.total} ({progress.current}) ...",
                     end=False)
 
     def _write(self, text: str, end: bool) -> None:
@@ -376,7 +396,7 @@ def reporting_compiles(units: Sequence[str], stream: TextIO | None = None) -> It
 
     The total is what :func:`uncached` predicts for ``units``; nothing is printed if nothing compiles.
     """
-    progress = CompileProgress(expected_compiles(units) if units else 0, [TerminalLine(stream)]).install()
+    progress = CompileProgress(expected_compiles(units) if units else (), [TerminalLine(stream)]).install()
     try:
         yield progress
     finally:

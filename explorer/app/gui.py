@@ -419,7 +419,7 @@ class ExplorerApp(Views):
             text = (f"**Compiling kernels for first use** {progress.done}/{progress.total} compiled "
                     f"({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them once ahead)")
         else:
-            text = (f"**Compiling kernels for first use** {progress.done + 1}/{progress.total}: "
+            text = (f"**Compiling kernels for first use** {progress.position}/{progress.total}: "
                     f"`{progress.current}` ({progress.seconds:.0f} s so far; `pushbroom warmup` compiles them "
                     "once ahead)")
         value = 100.0 * progress.done / max(progress.total, 1)
