@@ -8,6 +8,8 @@ import time
 
 
 def cmd_warmup(args: argparse.Namespace) -> int:
+    if args.check:
+        return check_cache()
     from explorer.warmup import warm_up
 
     def progress(message: str) -> None:
@@ -22,7 +24,24 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_cache() -> int:
+    """``pushbroom warmup --check``: list the kernels (of every unit of the manifest) numba's cache lacks."""
+    from explorer.kernel_cache import kernels, manifest, uncached
+
+    every = kernels(list(manifest()))
+    missing = uncached(every)
+    if not missing:
+        print(f"all {len(every)} kernel signatures of the manifest are in numba's cache: nothing will compile")
+        return 0
+    names = sorted({k.label for k in missing})
+    print(f"{len(missing)} of {len(every)} kernel signatures are not in numba's cache ({len(names)} kernels: "
+          f"{', '.join(names)}); `pushbroom warmup` compiles them")
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("warmup", help="compile every numba kernel once so later commands start at once")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--check", action="store_true",
+                   help="only say which kernels are not in numba's on-disk cache (compiles nothing)")
     p.set_defaults(func=cmd_warmup)
