@@ -108,8 +108,8 @@ def needed_units(command: str, *, source: str = "preset", methods: Sequence[str]
             units += [f"method:{m}" for m in methods]
         return units
     units.append("scene:relief" if relief else "scene")
-    if source == "rpc":
-        units.append("rpc")
+    if source in ("rpc", "isd"):
+        units.append(source)
     for m in methods:
         units.append(f"method:{m}")
         if relief:

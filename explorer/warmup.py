@@ -23,6 +23,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -157,14 +158,21 @@ def _warm_scene(scene) -> None:
     scene.image_to_ground(*centre)
 
 
+def _isd_scene(path: Path) -> object:
+    from explorer.real.csm import scene_from_isd
+
+    return scene_from_isd(path)
+
+
 def kernel_units() -> dict[str, Callable[[], None]]:
     """Units of work whose kernels :mod:`explorer.kernel_cache` records, by name.
 
     ``scene`` / ``scene:relief``: every preset flat / ``agile`` with 500 m relief, its points and an
     image-to-ground; ``method:NAME``: the method fitted and run on every preset (compiled search methods;
     a kernel's argument types can differ between presets) or on the paper preset (the others);
-    ``method:NAME:relief``: the same on ``agile`` with relief; ``rpc``; ``ortho``.  A command needs the union
-    of some units (:func:`explorer.kernel_cache.needed_units`).
+    ``method:NAME:relief``: the same on ``agile`` with relief; ``rpc``; ``ortho``; ``isd`` (a USGS CSM ISD:
+    the camera's kernels; only in a checkout, which has the test ISDs).  A command needs the union of some
+    units (:func:`explorer.kernel_cache.needed_units`).
     """
     from explorer.methods import available
     from explorer.presets import build_scene, preset_ids
@@ -187,6 +195,9 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         "rpc": _warm_rpc,
         "ortho": _warm_ortho,
     }
+    isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
+    if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
+        units["isd"] = lambda: _warm_scene(_isd_scene(isd))
     for name in available():
         if name in COMPILED_SEARCH_METHODS:
             units[f"method:{name}"] = every_preset(lambda scene, name=name: _warm_methods(scene, [name], n_scps=25_000))

@@ -122,6 +122,7 @@ def test_needed_units_of_the_commands():
         "scene:relief", "rpc", "method:exact", "method:exact:relief"]
     assert needed_units("ortho", source="rpc", dem=True) == ["ortho", "rpc"]
     assert needed_units("ortho", methods=["exact"]) == ["ortho", "scene", "method:exact"]
+    assert needed_units("explore", source="isd", methods=["nr"]) == ["scene", "isd", "method:nr"]
 
 
 def test_command_units_from_parsed_arguments():
@@ -274,6 +275,9 @@ def test_explore_in_an_empty_numba_cache_says_it_compiles_then_says_nothing(tmp_
     missing = json.loads(_python(DETECT, env).stdout)
     assert "geometry.newton_kernel._newton_raphson_nb" in missing
     assert not (tmp_path / "numba").exists() or not any((tmp_path / "numba").rglob("*.nbi"))  # truth: empty
+    check = subprocess.run([sys.executable, "-m", "explorer", "warmup", "--check"], cwd=REPO, env=env,
+                           capture_output=True, text=True, timeout=300, check=True)
+    assert "not in numba's cache" in check.stdout and "newton_kernel._newton_raphson_nb" in check.stdout
     explore = [sys.executable, "-m", "explorer", "explore", "--preset", "WSU", "--methods", "nr", "--scops", "10",
                "--scps", "2000"]
     cold = subprocess.run(explore + ["--export", str(tmp_path / "cold")], cwd=REPO, env=env, capture_output=True,
