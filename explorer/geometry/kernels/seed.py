@@ -8,12 +8,13 @@ from typing import Any
 import numpy as np
 
 from explorer._numba import NUMBA_AVAILABLE, njit
-from explorer.geometry.kernels.evaluators import _table_index
+from explorer.geometry.kernels.evaluators import _inlined_when_compiled, _table_index
 
 # --------------------------------------------------------------------------- seeds
 SEED_TERMS = 20  # cubic seed polynomial; lower degrees are zero-padded
 
 
+@_inlined_when_compiled
 def _seed_row_py(X, Y, Z, mean, inv_scale, coef):
     """Polynomial seed row in normalised ``(X - mean) * inv_scale``: ``coef`` (20,) multiplies the
     monomials of :func:`seed_features` (degree 3; lower degrees zero-padded), nested Horner-style.
@@ -35,9 +36,6 @@ def _seed_row_py(X, Y, Z, mean, inv_scale, coef):
     return c[0] + (u * ru + (v * rv + w * rw))
 
 
-_seed_row: Any = njit(cache=True, fastmath=False, inline="always")(_seed_row_py) if NUMBA_AVAILABLE else None
-
-
 def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half):
     """Seed row: the polynomial plus, when ``len(cs) > 1``, a correction ``H`` (K, 3) tabulated over
     the polynomial's rows at three columns (linear interpolation in the row, quadratic Lagrange in the
@@ -55,26 +53,7 @@ def _seed_full_py(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_m
     return r
 
 
-_seed_full: Any  # compiled below when numba is available, else None
-if NUMBA_AVAILABLE:
-
-    @njit(cache=True, fastmath=False, inline="always")
-    def _seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half):
-        # pragma: no cover - compiled (same operations as _seed_full_py)
-        r = _seed_row(X, Y, Z, mean, inv_scale, coef)
-        if len(cs) > 1:
-            x = (r - c_r0) * c_inv
-            k = _table_index(x, H.shape[0] - 2)
-            f = x - k
-            u = (_seed_row(X, Y, Z, mean, inv_scale, ccoef) - c_mid) * c_inv_half
-            h0 = H[k, 0] + f * (H[k + 1, 0] - H[k, 0])
-            h1 = H[k, 1] + f * (H[k + 1, 1] - H[k, 1])
-            h2 = H[k, 2] + f * (H[k + 1, 2] - H[k, 2])
-            r = r + (h1 + u * (0.5 * (h2 - h0) + u * (0.5 * (h0 + h2) - h1)))
-        return r
-
-else:
-    _seed_full = None
+_seed_full: Any = njit(cache=True, fastmath=False, inline="always")(_seed_full_py) if NUMBA_AVAILABLE else None
 
 
 @dataclass(frozen=True)
