@@ -22,9 +22,8 @@ import numpy as np
 from explorer.geometry.kernels import (
     NUMBA_AVAILABLE,
     CollinearityParams,
-    _ce_fixed,
+    _ce_either,
     _dummy_fixed,
-    collinearity_point,
     njit,
     prange,
 )
@@ -32,11 +31,10 @@ from explorer.geometry.kernels import (
 
 @njit(parallel=True, fastmath=False, cache=True)
 def _newton_raphson_nb(
-    ground, start, gx, fx, use_fixed, focal, offset, pitch, pc, line_period, ref_row, lo0, hi0, tol, max_iter, row_out,
-    col_out, converged_out, ce_out,
+    ground, start, gx, fx, use_fixed, pitch, pc, line_period, ref_row, lo0, hi0, tol, max_iter, row_out, col_out,
+    converged_out, ce_out,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
-    pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx
     scale_f = 1.0 / pitch
     scale_d = line_period / pitch
     for i in prange(ground.shape[0]):
@@ -53,14 +51,9 @@ def _newton_raphson_nb(
         ce = 0
         for _ in range(max_iter):
             t = (r - ref_row) * line_period
-            if use_fixed:
-                g, gt, yd, _ydt, _vz = _ce_fixed(
-                    X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
-                )
-            else:
-                g, gt, yd, _ydt, _vz = collinearity_point(
-                    X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset, curv, dist, sc0, fast
-                )
+            g, gt, yd, _ydt, _vz = _ce_either(
+                X, Y, Z, t, use_fixed, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, gx
+            )
             ce += 1
             f = g * scale_f
             fd = gt * scale_d
@@ -155,7 +148,7 @@ def solve_newton_raphson(
     converged = np.empty(n, dtype=np.bool_)
     ce = np.empty(n, dtype=np.int64)
     _newton_raphson_nb(
-        ground, float(start_row), p.model_args(True), f.args(), fm is not None, p.focal, p.offset, p.pitch,
+        ground, float(start_row), p.model_args(True), f.args(), fm is not None, p.pitch,
         p.principal_column, p.line_period, p.reference_row, lo0, hi0, float(tol), int(max_iter),
         row, col, converged, ce,
     )

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 from explorer._numba import NUMBA_AVAILABLE, njit, prange
 from explorer.geometry.kernels.evaluators import (
+    _ce_either,
     _ce_fixed,
     _ce_fixed_py,
     _collinearity_point_py,
@@ -125,6 +126,7 @@ __all__ = [
     "_NO_ROOT",
     "_RUNNING",
     "_TO_GENERAL",
+    "_ce_either",
     "_ce_fixed",
     "_ce_fixed_py",
     "_collinearity_point_py",

@@ -332,3 +332,20 @@ def _ce_fixed_py(X, Y, Z, t, P, V, A, AR, sc0, jn, jp, jt, js, jc, jt0, jinv_dt,
 
 
 _ce_fixed: Any = njit(cache=True, fastmath=False, inline="always")(_ce_fixed_py) if NUMBA_AVAILABLE else None
+
+
+@_inlined_when_compiled
+def _ce_either(
+    X, Y, Z, t, use_fixed, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, gx
+):  # pragma: no cover - compiled
+    """One CE in a compiled kernel: :func:`_ce_fixed` where ``use_fixed``, else :func:`collinearity_point`.
+
+    ``P ... fcurv`` are :meth:`FixedModel.args` (a placeholder of its types where the fixed evaluator is not
+    used; unpacked by the kernel before its parallel loop, which takes no tuple nested in a tuple), ``gx``
+    :meth:`CollinearityParams.model_args` (its ``focal, offset`` serve both evaluators).  Same returns.
+    """
+    if use_fixed:
+        return _ce_fixed(
+            X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, gx[5], gx[6]
+        )
+    return collinearity_point(X, Y, Z, t, *gx)

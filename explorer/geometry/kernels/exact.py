@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from explorer._numba import njit, prange
-from explorer.geometry.kernels.evaluators import _ce_fixed, _ce_fixed_py, _collinearity_point_py, collinearity_point
+from explorer.geometry.kernels.evaluators import _ce_either, _ce_fixed, _ce_fixed_py, _collinearity_point_py
 from explorer.geometry.kernels.params import (
     STATUS_CONVERGED,
     STATUS_INVALID,
@@ -106,11 +106,10 @@ def _newton_next_nb(
 # --------------------------------------------------------------------------- exact: safeguarded iteration
 @njit(parallel=True, fastmath=False, cache=True)
 def _solve_exact_nb(
-    ground, start, gx, fx, use_fixed, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, tol,
-    accept_step, max_iter, row_out, col_out, status_out, ce_out, trace,
+    ground, start, gx, fx, use_fixed, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, tol, accept_step,
+    max_iter, row_out, col_out, status_out, ce_out, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
-    pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx
     n = ground.shape[0]
     n_trace = trace.shape[0]
     for i in prange(n):
@@ -134,14 +133,9 @@ def _solve_exact_nb(
             if it < n_trace:
                 trace[it, i] = r
             t = (r - ref_row) * line_period
-            if use_fixed:
-                g, gt, yd, ydt, vz = _ce_fixed(
-                    X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
-                )
-            else:
-                g, gt, yd, ydt, vz = collinearity_point(
-                    X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset, curv, dist, sc0, fast
-                )
+            g, gt, yd, ydt, vz = _ce_either(
+                X, Y, Z, t, use_fixed, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, gx
+            )
             ce += 1
             if not (vz < 0.0) or not np.isfinite(g) or not np.isfinite(gt):
                 status = STATUS_INVALID
@@ -493,8 +487,6 @@ def solve_exact(
                 p.model_args(fast),
                 f.args(),
                 fm is not None,
-                p.focal,
-                p.offset,
                 pitch, pc, dt, ref, w_lo, w_hi, orient, tol, accept_step,
                 int(max_iter),
                 r2, c2, s2, ce2, sub_trace,
