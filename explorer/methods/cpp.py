@@ -124,10 +124,9 @@ class CentralPerspectivePlane(BestScanlineMethod):
 
         Parameters
         ----------
-        ground : ndarray, shape (N, 3)
-            Local ENU metres.
-        rows : ndarray, shape (N,)
-            Candidate (fractional) rows.
+        ground, rows
+            As :func:`explorer.methods._common.residual_px`: ground points (N, 3) in local ENU metres
+            and candidate (fractional) rows (N,).
 
         Returns
         -------

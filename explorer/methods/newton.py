@@ -58,11 +58,9 @@ def residual_and_derivative(
 
     Parameters
     ----------
-    scene : Scene
-    ground : ndarray, shape (N, 3)
-        Local ENU metres.
-    rows : ndarray, shape (N,)
-        Fractional rows.
+    scene, ground, rows
+        As :func:`explorer.methods._common.residual_px`: the scene, ground points (N, 3) in local ENU
+        metres and fractional rows (N,).
 
     Returns
     -------
