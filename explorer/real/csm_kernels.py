@@ -145,84 +145,69 @@ def window_tables(times, max_order):
     return win, den
 
 
+@njit(cache=True, inline="always")
+def _running_products(a, b, c, d, e, f, g):
+    """``a, ab, abc, ..., abcdefg``, multiplied left to right."""
+    ab = a * b
+    abc = ab * c
+    abcd = abc * d
+    abcde = abcd * e
+    abcdef = abcde * f
+    return a, ab, abc, abcd, abcde, abcdef, abcdef * g
+
+
 @njit(cache=True)
 def _weights8(times, first, den, i, t):
     """The 8 Lagrange weights of window ``first`` (``den[i]`` their inverse denominators) at ``t``:
     prefix / suffix products of ``t - t_b``, branch-free (the usgscsm window of order 8)."""
     d0, d1, d2, d3 = t - times[first], t - times[first + 1], t - times[first + 2], t - times[first + 3]
     d4, d5, d6, d7 = t - times[first + 4], t - times[first + 5], t - times[first + 6], t - times[first + 7]
-    p1 = d0
-    p2 = p1 * d1
-    p3 = p2 * d2
-    p4 = p3 * d3
-    p5 = p4 * d4
-    p6 = p5 * d5
-    p7 = p6 * d6
-    s6 = d7
-    s5 = s6 * d6
-    s4 = s5 * d5
-    s3 = s4 * d4
-    s2 = s3 * d3
-    s1 = s2 * d2
-    s0 = s1 * d1
+    p1, p2, p3, p4, p5, p6, p7 = _running_products(d0, d1, d2, d3, d4, d5, d6)  # prefixes d0 ... d_{a-1}
+    s6, s5, s4, s3, s2, s1, s0 = _running_products(d7, d6, d5, d4, d3, d2, d1)  # suffixes d_{a+1} ... d7
     return (den[i, 0] * s0, den[i, 1] * p1 * s1, den[i, 2] * p2 * s2, den[i, 3] * p3 * s3, den[i, 4] * p4 * s4,
             den[i, 5] * p5 * s5, den[i, 6] * p6 * s6, den[i, 7] * p7)
+
+
+@njit(cache=True, inline="always")
+def _lagrange_rows(times, values, win, den, t):
+    """Lagrange interpolation of the rows of ``values`` (n, 3) or (n, 4) at ``t`` with precomputed windows
+    (allocation-free): the four column sums, the fourth 0.0 for three columns."""
+    four = values.shape[1] > 3
+    if times.shape[0] == 1:
+        return values[0, 0], values[0, 1], values[0, 2], values[0, 3] if four else 0.0
+    i = interval_index(times, t)
+    first, order = win[i, 0], win[i, 1]
+    o0 = o1 = o2 = o3 = 0.0
+    if order == 8:
+        ww = _weights8(times, first, den, i, t)
+    for a in range(order):
+        if order == 8:
+            w = ww[a]
+        else:
+            w = den[i, a]
+            for b in range(order):
+                if b != a:
+                    w *= t - times[first + b]
+        o0 += w * values[first + a, 0]
+        o1 += w * values[first + a, 1]
+        o2 += w * values[first + a, 2]
+        if four:
+            o3 += w * values[first + a, 3]
+    return o0, o1, o2, o3
 
 
 @njit(cache=True)
 def _lagrange3(times, values, win, den, t):
     """Lagrange interpolation of ``values`` (n, 3) at ``t`` with precomputed windows (allocation-free)."""
-    n = times.shape[0]
-    if n == 1:
-        return values[0, 0], values[0, 1], values[0, 2]
-    i = interval_index(times, t)
-    first, order = win[i, 0], win[i, 1]
-    o0 = o1 = o2 = 0.0
-    if order == 8:
-        w = _weights8(times, first, den, i, t)
-        for a in range(8):
-            o0 += w[a] * values[first + a, 0]
-            o1 += w[a] * values[first + a, 1]
-            o2 += w[a] * values[first + a, 2]
-        return o0, o1, o2
-    for a in range(order):
-        w = den[i, a]
-        for b in range(order):
-            if b != a:
-                w *= t - times[first + b]
-        o0 += w * values[first + a, 0]
-        o1 += w * values[first + a, 1]
-        o2 += w * values[first + a, 2]
+    o0, o1, o2, _ = _lagrange_rows(times, values, win, den, t)
     return o0, o1, o2
 
 
 @njit(cache=True)
 def _quat(times, quats, win, den, t, mode):
     """Interpolated unit quaternion ``(w, x, y, z)`` at ``t`` (allocation-free, see :func:`quaternion_at`)."""
-    n = times.shape[0]
-    if n == 1:
-        q0, q1, q2, q3 = quats[0, 0], quats[0, 1], quats[0, 2], quats[0, 3]
-    elif mode == 1:
-        i = interval_index(times, t)
-        first, order = win[i, 0], win[i, 1]
-        q0 = q1 = q2 = q3 = 0.0
-        if order == 8:
-            ww = _weights8(times, first, den, i, t)
-            for a in range(8):
-                q0 += ww[a] * quats[first + a, 0]
-                q1 += ww[a] * quats[first + a, 1]
-                q2 += ww[a] * quats[first + a, 2]
-                q3 += ww[a] * quats[first + a, 3]
-            order = 0
-        for a in range(order):
-            w = den[i, a]
-            for b in range(order):
-                if b != a:
-                    w *= t - times[first + b]
-            q0 += w * quats[first + a, 0]
-            q1 += w * quats[first + a, 1]
-            q2 += w * quats[first + a, 2]
-            q3 += w * quats[first + a, 3]
+    if mode == 1 or times.shape[0] == 1:
+        q0, q1, q2, q3 = _lagrange_rows(times, quats, win, den, t)
     else:
         i = interval_index(times, t)
         s = (t - times[i]) / (times[i + 1] - times[i])
