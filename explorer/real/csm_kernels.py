@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from explorer._numba import njit, prange
+from explorer.geometry.kernels.params import store_point
 
 # distortion model codes
 DIST_NONE = 0
@@ -587,13 +588,7 @@ def ground_to_image_nb(ground, seed, window_lo, window_hi, tol, max_iter, cam, r
                     break
                 x0, f0, s0 = x1, f1, s1
                 x1 = x2c
-        if status != STATUS_OK:
-            line = np.nan
-            sample = np.nan
-        line_out[i] = line
-        sample_out[i] = sample
-        status_out[i] = status
-        evals_out[i] = n_eval
+        store_point(i, status, STATUS_OK, line, sample, n_eval, line_out, sample_out, status_out, evals_out)
 
 
 @njit(parallel=True, cache=True)

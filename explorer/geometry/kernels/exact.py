@@ -14,6 +14,7 @@ from explorer.geometry.kernels.params import (
     STATUS_NO_ROOT_IN_WINDOW,
     CollinearityParams,
     FixedModel,
+    store_point,
 )
 from explorer.geometry.kernels.residual import _use_numba
 from explorer.geometry.kernels.seed import SeedModel, _seed_full
@@ -189,13 +190,7 @@ def _solve_exact_nb(
                         break
             prev_abs = abs(g)
             r = rn
-        if status != STATUS_CONVERGED:
-            row = np.nan
-            col = np.nan
-        row_out[i] = row
-        col_out[i] = col
-        status_out[i] = status
-        ce_out[i] = ce
+        store_point(i, status, STATUS_CONVERGED, row, col, ce, row_out, col_out, status_out, ce_out)
 
 
 def _evaluate_np(ground, t, p: CollinearityParams, fm: FixedModel | None, fast: bool):

@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from explorer._numba import njit
+
 if TYPE_CHECKING:  # typing only: the scene layer sits above geometry
     from explorer.scene import Scene
 
@@ -18,6 +20,17 @@ STATUS_NO_ROOT_IN_WINDOW = 1  # the residual keeps its sign over the whole searc
 STATUS_INVALID = 2  # behind the camera (v_z >= 0) or a non-finite residual
 STATUS_MAX_ITER = 3  # still iterating after max_iter
 STATUS_NAMES = {0: "converged", 1: "no_root_in_window", 2: "behind_camera_or_invalid", 3: "max_iter"}
+
+
+@njit(cache=True, inline="always")
+def store_point(i, status, ok_status, row, col, evaluations, row_out, col_out, status_out, evaluations_out):
+    """Write point ``i``'s result in a compiled loop: row and column (NaN unless ``status == ok_status``),
+    status code and evaluation count."""
+    done = status == ok_status
+    row_out[i] = row if done else np.nan
+    col_out[i] = col if done else np.nan
+    status_out[i] = status
+    evaluations_out[i] = evaluations
 
 # Taylor coefficients of sin(d) and cos(d) - 1 for |d| <= SMALL_ANGLE (truncation < 1e-19 relative)
 SMALL_ANGLE = 0.0625
