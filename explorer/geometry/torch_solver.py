@@ -39,6 +39,7 @@ from explorer.geometry.kernels import (
     _TO_GENERAL,
     STATUS_NO_ROOT_IN_WINDOW,
     CollinearityParams,
+    NewtonOptions,
     SeedModel,
     _solve_exact_np,
 )
@@ -192,15 +193,9 @@ def solve_exact_torch(
     ground: np.ndarray,
     seed: SeedModel,
     *,
-    window: tuple[float, float],
-    orient: float,
-    tol: float,
-    accept_step: float,
-    max_iter: int,
-    max_fast_passes: int = 8,
-    first_evaluations: int = 1,
     device: str | torch.device = "cpu",
     chunk: int | None = None,
+    **options: Any,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`~explorer.geometry.kernels.solve_exact` with its seed and fast Newton passes on a torch device.
 
@@ -219,27 +214,17 @@ def solve_exact_torch(
         Ground points, local ENU metres (``docs/conventions.md#frames``); float64 on the device.
     seed : SeedModel
         Polynomial row seed (plus optional row correction table).
-    window : (float, float)
-        Search window in rows; roots outside it are reported as ``STATUS_NO_ROOT_IN_WINDOW``.
-    orient : float
-        +1 if the residual increases with the row, -1 otherwise.
-    tol : float
-        Target row error (rows; also the bisection bracket width that counts as converged).
-    accept_step : float
-        Newton steps of at most this many rows are accepted (with the step applied).
-    max_iter : int
-        Evaluations per point in the safeguarded iteration.
-    max_fast_passes : int
-        Plain Newton evaluations per point before the safeguarded iteration takes over; below
-        ``first_evaluations`` every point goes to the (host) safeguarded iteration from its seed.
-    first_evaluations : {1, 2}
-        Newton evaluations every point gets unconditionally in the first pass.
     device : str or torch.device
         "cpu" (default) or "cuda" / "cuda:k" where available.
     chunk : int, optional
         Points per device pass (bounds device memory, about 0.6 kB per point at the peak); default
         16,384 on the CPU (one thread per op, see ``DEFAULT_CHUNK``) and 2,097,152 on CUDA.  Results
         do not depend on it.
+    **options
+        ``window, orient, tol, accept_step, max_iter`` and optionally ``max_fast_passes,
+        first_evaluations`` (:class:`~explorer.geometry.kernels.NewtonOptions`, as ``solve_exact``); with
+        ``max_fast_passes`` below ``first_evaluations`` every point goes to the (host) safeguarded
+        iteration from its seed.
 
     Returns
     -------
@@ -259,16 +244,16 @@ def solve_exact_torch(
     import torch
 
     dev = _resolve_device(device)
-    first = int(first_evaluations)
-    if first not in (1, 2):
-        raise ValueError(f"first_evaluations must be 1 or 2, got {first_evaluations}")
+    o = NewtonOptions(**options)
+    (w_lo, w_hi), orient, tol, accept_step = o.window, o.orient, o.tol, o.accept_step
+    max_iter, max_fast_passes, first = o.max_iter, o.max_fast_passes, o.first_evaluations
     if chunk is None:
         chunk = DEFAULT_CHUNK[dev.type]
     if int(chunk) < 1:
         raise ValueError(f"chunk must be a positive number of points, got {chunk}")
     chunk = int(chunk)
     p = params
-    fm = p.fixed_model(window)
+    fm = p.fixed_model(o.window)
     if fm is None:
         raise ValueError(
             "solve_exact_torch needs the branch-free collinearity evaluator, which does not cover this scene "
@@ -278,8 +263,6 @@ def solve_exact_torch(
         )
     ground = np.ascontiguousarray(ground, dtype=np.float64)
     n = ground.shape[0]
-    w_lo, w_hi = float(window[0]), float(window[1])
-    orient, tol, accept_step = float(orient), float(tol), float(accept_step)
     dt, ref, pitch, pc = p.line_period, p.reference_row, p.pitch, p.principal_column
     row = np.empty(n)
     col = np.empty(n)

@@ -3,6 +3,9 @@ branch-free Newton passes, then a per-point bracketed iteration; numpy fallback 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 
 from explorer._numba import njit, prange
@@ -316,21 +319,63 @@ def _dummy_fixed() -> FixedModel:
     )
 
 
+@dataclass(frozen=True)
+class NewtonOptions:
+    """The search settings of :func:`solve_exact` and :func:`explorer.geometry.torch_solver.solve_exact_torch`
+    (their keyword arguments), checked and converted once.
+
+    Parameters
+    ----------
+    window : (float, float)
+        Search window in rows; roots outside it are reported as ``STATUS_NO_ROOT_IN_WINDOW``.
+    orient : float
+        +1 if the residual increases with the row, -1 otherwise (a property of the scene).
+    tol : float
+        Target row error (also the bisection bracket width that counts as converged).
+    accept_step : float
+        Newton steps below this many rows are accepted (with the step applied); chosen so that
+        the quadratic error of the step is below ``tol``.
+    max_iter : int
+        Evaluations per point in the safeguarded iteration.
+    max_fast_passes : int
+        Plain Newton evaluations per point before the safeguarded iteration takes over.
+    first_evaluations : {1, 2}
+        Newton evaluations every point gets in the first compiled pass, unconditionally (2 when
+        the seed is known to be too coarse for one: it saves a pass over the points).
+
+    Raises
+    ------
+    ValueError
+        ``first_evaluations`` other than 1 or 2.
+    """
+
+    window: tuple[float, float]
+    orient: float
+    tol: float
+    accept_step: float
+    max_iter: int
+    max_fast_passes: int = 8
+    first_evaluations: int = 1
+
+    def __post_init__(self) -> None:
+        if int(self.first_evaluations) not in (1, 2):
+            raise ValueError(f"first_evaluations must be 1 or 2, got {self.first_evaluations}")
+        converted = {"window": (float(self.window[0]), float(self.window[1])), "orient": float(self.orient),
+                     "tol": float(self.tol), "accept_step": float(self.accept_step), "max_iter": int(self.max_iter),
+                     "max_fast_passes": int(self.max_fast_passes), "first_evaluations": int(self.first_evaluations)}
+        for name, value in converted.items():
+            object.__setattr__(self, name, value)
+
+
 def solve_exact(
     params: CollinearityParams,
     ground: np.ndarray,
     seed: SeedModel,
     *,
-    window: tuple[float, float],
-    orient: float,
-    tol: float,
-    accept_step: float,
-    max_iter: int,
-    max_fast_passes: int = 8,
-    first_evaluations: int = 1,
     trace: bool = False,
     backend: str = "auto",
     fast: bool = True,
+    **options: Any,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[np.ndarray] | None]:
     """Seeded Newton on the along-track residual with a safeguarded fallback, per point.
 
@@ -350,28 +395,15 @@ def solve_exact(
     ground : ndarray, shape (N, 3)
     seed : SeedModel
         Polynomial row seed (plus optional row correction table).
-    window : (float, float)
-        Search window in rows; roots outside it are reported as ``STATUS_NO_ROOT_IN_WINDOW``.
-    orient : float
-        +1 if the residual increases with the row, -1 otherwise (a property of the scene).
-    tol : float
-        Target row error (also the bisection bracket width that counts as converged).
-    accept_step : float
-        Newton steps below this many rows are accepted (with the step applied); chosen so that
-        the quadratic error of the step is below ``tol``.
-    max_iter : int
-        Evaluations per point in the safeguarded iteration.
-    max_fast_passes : int
-        Plain Newton evaluations per point before the safeguarded iteration takes over.
-    first_evaluations : {1, 2}
-        Newton evaluations every point gets in the first compiled pass, unconditionally (2 when
-        the seed is known to be too coarse for one: it saves a pass over the points).
     trace : bool
         Return the rows visited per evaluation (NaN once a point has finished).
     backend : {"auto", "numba", "numpy"}
     fast : bool
         Fast evaluators (default; equal to the reference to round-off) or the bitwise reference
         evaluator (safeguarded iteration only).
+    **options
+        ``window, orient, tol, accept_step, max_iter`` and optionally ``max_fast_passes,
+        first_evaluations``: see :class:`NewtonOptions`.
 
     Returns
     -------
@@ -385,20 +417,18 @@ def solve_exact(
     ground = np.ascontiguousarray(ground, dtype=np.float64)
     sx = seed.args()
     n = ground.shape[0]
-    w_lo, w_hi = float(window[0]), float(window[1])
-    orient, tol, accept_step = float(orient), float(tol), float(accept_step)
+    o = NewtonOptions(**options)
+    (w_lo, w_hi), orient, tol, accept_step = o.window, o.orient, o.tol, o.accept_step
+    max_iter, max_fast_passes, first = o.max_iter, o.max_fast_passes, o.first_evaluations
     p = params
     use_nb = _use_numba(backend)
-    fm = p.fixed_model(window) if fast else None
+    fm = p.fixed_model(o.window) if fast else None
     dt, ref, pitch, pc = p.line_period, p.reference_row, p.pitch, p.principal_column
     n_trace = (max_fast_passes + max_iter) if trace else 0
     trace_rows = np.full((n_trace, n), np.nan)
     row = np.empty(n)  # every entry is written below
     col = np.empty(n)
     status = np.zeros(n, np.int8)  # STATUS_CONVERGED
-    first = int(first_evaluations)
-    if first not in (1, 2):
-        raise ValueError(f"first_evaluations must be 1 or 2, got {first_evaluations}")
     if fm is not None and max_fast_passes >= first:
         r = np.empty(n)
         state = np.empty(n, np.int8)
