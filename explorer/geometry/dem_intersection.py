@@ -70,6 +70,9 @@ FLAG_NAMES = {OK: "ok", OUTSIDE_DEM: "outside DEM", NODATA: "no-data", NO_INTERS
 #: Cells per side of a tile of the min/max hierarchy.
 TILE = 16
 
+#: Rounds of the max/min pyramid that narrow a segment before its first cell is solved (:func:`_narrow_step_py`).
+NARROW_STEPS = 2
+
 #: Points per chunk of the public wrappers (bounds the temporaries to a few tens of MB).
 CHUNK = 1 << 20
 
@@ -95,6 +98,10 @@ class HeightGrid:
         Node (0, 0) and spacing.
     z_min, z_max : float
         Lowest and highest valid height, metres.
+    bound_hi, bound_lo : ndarray, shape (n_bounds,)
+        The max/min pyramid (see :func:`bound_pyramid`), all levels one after the other.
+    bound_levels : ndarray of int64, shape (n_levels, 3)
+        Per level: offset into ``bound_hi``/``bound_lo``, number of block rows, number of block columns.
     """
 
     heights: np.ndarray
@@ -105,6 +112,9 @@ class HeightGrid:
     dy: float
     z_min: float
     z_max: float
+    bound_hi: np.ndarray
+    bound_lo: np.ndarray
+    bound_levels: np.ndarray
 
     @classmethod
     def from_array(cls, heights: np.ndarray, x0: float, y0: float, dx: float, dy: float) -> HeightGrid:
@@ -127,12 +137,78 @@ class HeightGrid:
             for tj in range(ntx):
                 j0, j1 = tj * TILE, min((tj + 1) * TILE, nx - 1)
                 tile_max[ti, tj] = rows[:, j0:j1 + 1].max()
+        bound_hi, bound_lo, bound_levels = bound_pyramid(h)
         return cls(h, tile_max, float(x0), float(y0), float(dx), float(dy),
-                   float(h[finite].min()), float(h[finite].max()))
+                   float(h[finite].min()), float(h[finite].max()), bound_hi, bound_lo, bound_levels)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(tile_max, bound_hi, bound_lo, bound_levels)``: what the compiled loops read besides the heights."""
+        return self.tile_max, self.bound_hi, self.bound_lo, self.bound_levels
 
     def to_grid(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional node coordinates (u = column, v = row) of horizontal positions."""
         return (np.asarray(x, np.float64) - self.x0) / self.dx, (np.asarray(y, np.float64) - self.y0) / self.dy
+
+
+def _block_reduce(a: np.ndarray, fill: float, op) -> np.ndarray:
+    """2 x 2 blocks of ``a`` reduced by ``op`` (odd edges padded with ``fill``)."""
+    ny, nx = a.shape
+    padded = np.full((ny + ny % 2, nx + nx % 2), fill)
+    padded[:ny, :nx] = a
+    return op(op(padded[0::2, 0::2], padded[0::2, 1::2]), op(padded[1::2, 0::2], padded[1::2, 1::2]))
+
+
+def _dilate(a: np.ndarray, fill: float, op) -> np.ndarray:
+    """Each element reduced by ``op`` with its eight neighbours (outside the array: ``fill``)."""
+    ny, nx = a.shape
+    padded = np.full((ny + 2, nx + 2), fill)
+    padded[1:-1, 1:-1] = a
+    out = padded[1:-1, 1:-1].copy()
+    for di in range(3):
+        for dj in range(3):
+            out = op(out, padded[di:di + ny, dj:dj + nx])
+    return out
+
+
+def bound_pyramid(heights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Max/min pyramid of a height grid: bounds of the bilinear surface over any box of cells.
+
+    Level ``k`` has one entry per block of ``2**k x 2**k`` cells: the highest (lowest) node of the block and of
+    its eight neighbouring blocks, so that any box of cells at most ``2**k`` cells wide whose middle cell lies
+    in the block is bounded by that entry (:func:`_box_bounds_py`).  A no-data node counts as +inf in the
+    maxima and -inf in the minima (a box that touches a hole is never declared clear of terrain).  Memory:
+    about 2.7 doubles per cell for both pyramids.
+
+    Parameters
+    ----------
+    heights : ndarray, shape (ny, nx)
+        Node heights, metres; NaN = no-data.
+
+    Returns
+    -------
+    bound_hi, bound_lo : ndarray, shape (n_bounds,)
+        All levels, finest first, each C-ordered.
+    bound_levels : ndarray of int64, shape (n_levels, 3)
+        Offset, rows and columns of each level.
+    """
+    finite = np.isfinite(heights)
+    hi = np.where(finite, heights, np.inf)
+    lo = np.where(finite, heights, -np.inf)
+    cell_hi = np.maximum(np.maximum(hi[:-1, :-1], hi[:-1, 1:]), np.maximum(hi[1:, :-1], hi[1:, 1:]))
+    cell_lo = np.minimum(np.minimum(lo[:-1, :-1], lo[:-1, 1:]), np.minimum(lo[1:, :-1], lo[1:, 1:]))
+    his, los, levels = [], [], []
+    offset = 0
+    while True:
+        his.append(_dilate(cell_hi, -np.inf, np.maximum).ravel())
+        los.append(_dilate(cell_lo, np.inf, np.minimum).ravel())
+        levels.append((offset, cell_hi.shape[0], cell_hi.shape[1]))
+        offset += cell_hi.size
+        if cell_hi.shape[0] == 1 and cell_hi.shape[1] == 1:
+            break
+        cell_hi = _block_reduce(cell_hi, -np.inf, np.maximum)
+        cell_lo = _block_reduce(cell_lo, np.inf, np.minimum)
+    return np.concatenate(his), np.concatenate(los), np.array(levels, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------------------------- kernel
@@ -219,55 +295,14 @@ def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     return s
 
 
-def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
-    """First intersection of the segment (ua, va, za) -> (ub, vb, zb) (grid coordinates) with the DEM.
+def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
+    """First hit of the segment between parameters s0 and s1 (inside the node box): ``(s, flag)``, flag -1: none.
 
-    Returns ``(s, flag)``: the segment parameter in [0, 1] of the hit (NaN when the flag is not OK).
+    Tiles of :data:`TILE` cells whose highest node is below the segment are skipped; in the others the cells
+    are walked in order (Amanatides & Woo) and solved exactly (:func:`_cell_hit_py`).
     """
     ny = h.shape[0]
     nx = h.shape[1]
-    du = ub - ua
-    dv = vb - va
-    dz = zb - za
-    if not (dz < 0.0):
-        return math.nan, NO_INTERSECTION
-    if not (math.isfinite(ua) and math.isfinite(va) and math.isfinite(ub) and math.isfinite(vb)):
-        return math.nan, OUTSIDE_DEM
-    # clip to the node box [0, nx-1] x [0, ny-1]
-    s0 = 0.0
-    s1 = 1.0
-    eps = 1e-12
-    for axis in range(2):
-        a = ua if axis == 0 else va
-        d = du if axis == 0 else dv
-        top = (nx - 1.0) if axis == 0 else (ny - 1.0)
-        if d == 0.0:
-            if a < -eps or a > top + eps:
-                return math.nan, OUTSIDE_DEM
-        else:
-            t_lo = (0.0 - a) / d
-            t_hi = (top - a) / d
-            if t_lo > t_hi:
-                t_lo, t_hi = t_hi, t_lo
-            s0 = max(s0, t_lo)
-            s1 = min(s1, t_hi)
-    if s1 < s0:
-        return math.nan, OUTSIDE_DEM
-    if s0 < 1e-12:
-        s0 = 0.0
-    leaves = s1 < 1.0 - 1e-12
-    # fast path: the whole segment inside the grid and inside one cell (coarse DEMs, short segments)
-    if s0 == 0.0 and not leaves:
-        j = min(int(ua), nx - 2)
-        i = min(int(va), ny - 2)
-        if j == min(int(ub), nx - 2) and i == min(int(vb), ny - 2):
-            s_hit = _cell_hit(h, i, j, ua, va, za, du, dv, dz, 0.0, 1.0)
-            if s_hit == -2.0:
-                return math.nan, NODATA
-            if s_hit >= 0.0:
-                return s_hit, OK
-            return math.nan, NO_INTERSECTION
-    # ---- coarse walk over tiles, fine walk over the cells of the tiles that may hold a hit
     tile = TILE
     nty = tile_max.shape[0]
     ntx = tile_max.shape[1]
@@ -362,6 +397,103 @@ def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
             if ti < 0 or ti >= nty:
                 break
         s_cur = s_exit
+
+    return math.nan, -1
+
+
+def _box_cells_py(ncu, ncv, ua, va, du, dv, sa, sb):
+    """Cells [cu_lo, cu_hi] x [cv_lo, cv_hi] under the segment's part [sa, sb] (clamped to the grid)."""
+    u_a = ua + du * sa
+    u_b = ua + du * sb
+    v_a = va + dv * sa
+    v_b = va + dv * sb
+    cu_lo = min(max(int(math.floor(min(u_a, u_b))), 0), ncu - 1)
+    cu_hi = min(max(int(math.floor(max(u_a, u_b))), 0), ncu - 1)
+    cv_lo = min(max(int(math.floor(min(v_a, v_b))), 0), ncv - 1)
+    cv_hi = min(max(int(math.floor(max(v_a, v_b))), 0), ncv - 1)
+    return cu_lo, cu_hi, cv_lo, cv_hi
+
+
+def _level_for_width_py(levels, width):
+    """Finest pyramid level whose blocks are at least ``width`` cells wide (the top level at most)."""
+    k = 0
+    while (1 << k) < width and k < levels.shape[0] - 1:
+        k += 1
+    return k
+
+
+def _narrow_step_py(bound_hi, bound_lo, levels, k, ncu, ncv, ua, va, za, du, dv, dz, sa, sb):
+    """One round of narrowing the part [sa, sb] of a segment that holds its first hit: ``(sa, sb)``.
+
+    The segment (inside the node grid, ``dz < 0``) starts at (ua, va, za) and moves by (du, dv, dz) per unit
+    of s.  The box of cells under [sa, sb] is bounded by level ``k`` of the pyramid (``2**k`` at least its
+    width, :func:`_level_for_width_py`).  No hit can lie above the box's highest node (``sa`` moves down to
+    it); and where the segment is below the box's lowest node it has already crossed the surface (``sb``
+    moves up to it).  A hole counts as +inf in the maxima and -inf in the minima, so a segment over a hole
+    is not narrowed past it.  Branch-free, and ``k`` the same for a whole loop, so that it vectorises.
+    """
+    cu_lo, cu_hi, cv_lo, cv_hi = _box_cells(ncu, ncv, ua, va, du, dv, sa, sb)
+    idx = levels[k, 0] + (((cv_lo + cv_hi) // 2) >> k) * levels[k, 2] + (((cu_lo + cu_hi) // 2) >> k)
+    na = (bound_hi[idx] - za) / dz
+    nb = (bound_lo[idx] - za) / dz
+    na = na if na > sa else sa
+    nb = nb if nb < sb else sb
+    na = na if na < sb else sb
+    nb = nb if nb > na else na
+    return na, nb
+
+
+def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
+    """First intersection of the segment (ua, va, za) -> (ub, vb, zb) (grid coordinates) with the DEM.
+
+    Returns ``(s, flag)``: the segment parameter in [0, 1] of the hit (NaN when the flag is not OK).
+    """
+    ny = h.shape[0]
+    nx = h.shape[1]
+    du = ub - ua
+    dv = vb - va
+    dz = zb - za
+    if not (dz < 0.0):
+        return math.nan, NO_INTERSECTION
+    if not (math.isfinite(ua) and math.isfinite(va) and math.isfinite(ub) and math.isfinite(vb)):
+        return math.nan, OUTSIDE_DEM
+    # clip to the node box [0, nx-1] x [0, ny-1]
+    s0 = 0.0
+    s1 = 1.0
+    eps = 1e-12
+    for axis in range(2):
+        a = ua if axis == 0 else va
+        d = du if axis == 0 else dv
+        top = (nx - 1.0) if axis == 0 else (ny - 1.0)
+        if d == 0.0:
+            if a < -eps or a > top + eps:
+                return math.nan, OUTSIDE_DEM
+        else:
+            t_lo = (0.0 - a) / d
+            t_hi = (top - a) / d
+            if t_lo > t_hi:
+                t_lo, t_hi = t_hi, t_lo
+            s0 = max(s0, t_lo)
+            s1 = min(s1, t_hi)
+    if s1 < s0:
+        return math.nan, OUTSIDE_DEM
+    if s0 < 1e-12:
+        s0 = 0.0
+    leaves = s1 < 1.0 - 1e-12
+    # fast path: the whole segment inside the grid and inside one cell (coarse DEMs, short segments)
+    if s0 == 0.0 and not leaves:
+        j = min(int(ua), nx - 2)
+        i = min(int(va), ny - 2)
+        if j == min(int(ub), nx - 2) and i == min(int(vb), ny - 2):
+            s_hit = _cell_hit(h, i, j, ua, va, za, du, dv, dz, 0.0, 1.0)
+            if s_hit == -2.0:
+                return math.nan, NODATA
+            if s_hit >= 0.0:
+                return s_hit, OK
+            return math.nan, NO_INTERSECTION
+    s, fl = _walk(h, tile_max, ua, va, za, du, dv, dz, s0, s1)
+    if fl != -1:
+        return s, fl
     if leaves:
         return math.nan, OUTSIDE_DEM
     return math.nan, NO_INTERSECTION
@@ -441,6 +573,10 @@ if NUMBA_AVAILABLE:
     _patch_quadratic = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(
         _patch_quadratic_py)
     _cell_hit = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_hit_py)
+    _walk = njit(cache=True, fastmath=False, error_model="numpy")(_walk_py)
+    _box_cells = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_box_cells_py)
+    _level_for_width = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_level_for_width_py)
+    _narrow_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_narrow_step_py)
     _first_hit = njit(cache=True, fastmath=False, error_model="numpy")(_first_hit_py)
     bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
     _segments_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_segments_loop_py)
@@ -450,12 +586,19 @@ if NUMBA_AVAILABLE:
 else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
     _patch_quadratic = _patch_quadratic_py
     _cell_hit = _cell_hit_py
+    _walk = _walk_py
+    _box_cells = _box_cells_py
+    _level_for_width = _level_for_width_py
+    _narrow_step = _narrow_step_py
     _first_hit = _first_hit_py
     bilinear = _bilinear_py
     _segments_loop = _segments_loop_py
     _rays_loop = _rays_loop_serial = _rays_loop_py
 
 first_hit = _first_hit
+box_cells = _box_cells
+level_for_width = _level_for_width
+narrow_step = _narrow_step
 cell_hit = _cell_hit
 patch_quadratic = _patch_quadratic
 

@@ -39,7 +39,7 @@ import numpy as np
 from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
-from explorer.geometry.dem_intersection import NODATA, NOT_CONVERGED, OK, HeightGrid
+from explorer.geometry.dem_intersection import NARROW_STEPS, NOT_CONVERGED, OK, HeightGrid
 from explorer.rpc._kernels import horner_rpc00b
 
 if TYPE_CHECKING:
@@ -218,6 +218,9 @@ def _correction_cells(residual: np.ndarray) -> np.ndarray:
 #: vectorises), then the scalar walk and the scalar fallback for the few points the passes did not settle.
 BLOCK = 512
 
+#: Cells of a narrowed line of sight solved in lockstep over a block before the scalar walk takes the rest.
+CELL_STEPS = 3
+
 #: Nodes per side of the correction grid of the fitted polynomial.
 CORRECTION_NODES = 65
 
@@ -329,25 +332,42 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
             y[k] = y[k] * lat_sc + lat_off
 
 
-def _one_cell_root_py(h00, h01, h10, h11, a0, b0, za, du, dv, dz):
-    """Start of the refinement for a segment that stays in one cell: ``(s, flag)`` (flag -1: walk instead).
+def _cell_step_py(h00, h01, h10, h11, j, i, ua, va, za, du, dv, dz, sa, sb, top_j, top_i):
+    """One cell of a narrowed segment: ``(s, flag, s_next, j_next, i_next)`` (all floats; flag 0.0 is OK).
 
-    The segment starts at (a0, b0) in the cell (fractions of a cell from corner h00) at height ``za`` and
-    moves by (du, dv, dz) per unit of s.  The bilinear patch along it is a quadratic f(s) = z(s) - h(s) with
-    f(0) > 0 >= f(1) when the segment enters above the surface and ends below it (it ends below the DEM's
-    lowest height): exactly one root, approached by the secant and one Newton step (no square root; the
-    refinement that follows is exact).  Anything else (f(0) <= 0, a dip below and back up) returns -1: the
-    exact walk decides; a no-data corner returns NODATA.  Branch-free, so that a loop over points vectorises.
+    The segment (grid coordinates, parameter s) starts at (ua, va, za) and moves by (du, dv, dz) per unit of
+    s; the part [sa, sb] holds its first hit (:func:`explorer.geometry.dem_intersection.narrow_step`) and
+    enters cell (i, j) (corner heights h00 (i, j), h01 (i, j+1), h10, h11) at sa.  Over the cell the
+    bilinear patch along the segment is a quadratic f(s) = z(s) - h(s).  f(sa) <= 0: a hit at sa (flag OK);
+    f(sa) > 0 >= f(se) at the cell's exit se: exactly one root there, approached by the secant and one Newton
+    step (flag OK; no square root, the refinement that follows is exact); a no-data corner, or a dip below
+    the surface and back up inside the cell, or the end sb reached: flag -1 (the exact walk decides);
+    otherwise flag -2 and the next cell, entered at ``s_next``.  Branch-free, so that a loop over points
+    vectorises.
     """
-    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, 0, 0, a0, b0, za, du, dv, dz)
-    fb = c0 + c1 + c2
-    s = c0 / (c0 - fb)
+    cu = ((j + 1.0 if du > 0.0 else j) - ua) / du if du != 0.0 else math.inf
+    cv = ((i + 1.0 if dv > 0.0 else i) - va) / dv if dv != 0.0 else math.inf
+    se = min(min(cu, cv), sb)
+    se = se if se > sa else sa
+    c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz)
+    fa = c0 + sa * (c1 + sa * c2)
+    fe = c0 + se * (c1 + se * c2)
+    s = sa + (se - sa) * fa / (fa - fe)
     ds = c1 + 2.0 * c2 * s
     s2 = s - (c0 + s * (c1 + s * c2)) / ds
-    s = s2 if (ds < 0.0) & (s2 >= 0.0) & (s2 <= 1.0) else s
+    s = s2 if (s2 >= sa) & (s2 <= se) else s
+    s = s if fa > 0.0 else sa
+    sv = -c1 / (2.0 * c2)
+    dip = (c2 > 0.0) & (sv > sa) & (sv < se) & (c0 + sv * (c1 + sv * c2) <= 0.0)
     hole = math.isnan(h00) | math.isnan(h01) | math.isnan(h10) | math.isnan(h11)
-    flag = NODATA if hole else (OK if (c0 > 0.0) & (fb <= 0.0) else -1)
-    return s, flag
+    hit = (fa <= 0.0) | (fe <= 0.0)
+    flag = -1.0 if hole | (dip & ~hit) | (~hit & (se >= sb)) else (0.0 if hit else -2.0)
+    step_u = cu < cv
+    j_next = j + (1.0 if du > 0.0 else -1.0) if step_u else j
+    i_next = i if step_u else i + (1.0 if dv > 0.0 else -1.0)
+    j_next = min(max(j_next, 0.0), top_j)
+    i_next = min(max(i_next, 0.0), top_i)
+    return s, flag, se, j_next, i_next
 
 
 def _clamp_index_py(u, top):
@@ -395,7 +415,7 @@ def _refine_on_dem_py(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x, 
     return x, y, zn, NOT_CONVERGED
 
 
-def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, gx0, gy0, gdx, gdy, z_top, z_bot,
+def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, gy0, gdx, gdy, z_top, z_bot,
                    row, col, tol_px, tol_m, max_iter, lon_out, lat_out, h_out, flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     zn_top = (z_top - h_off) / h_sc
@@ -409,6 +429,10 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
     top_i = hgt.shape[0] - 2.0
     zn_mid = 0.5 * (zn_top + zn_bot)
     tol2 = tol_px * tol_px
+    tile_max, bound_hi, bound_lo, levels = bounds
+    n_cu = hgt.shape[1] - 1
+    n_cv = hgt.shape[0] - 1
+    dz_chord = z_bot - z_top
     cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
@@ -428,28 +452,62 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, tile_max, 
             sc[11, k] = vy * _horner(iv1, cn, rn, zn_top) + v0
             sc[12, k] = ux * _horner(iv0, cn, rn, zn_bot) + u0
             sc[13, k] = vy * _horner(iv1, cn, rn, zn_bot) + v0
-        for k in range(m):  # the cell of a chord that stays in one (gathers; -1: the walk decides)
+        for k in range(m):  # which chords lie inside the DEM (vectorised)
             ua = sc[10, k]
             va = sc[11, k]
             ub = sc[12, k]
             vb = sc[13, k]
-            j = _clamp_index(ua, top_j)
-            i = _clamp_index(va, top_i)
-            one = (ua >= 0.0) & (va >= 0.0) & (ub >= 0.0) & (vb >= 0.0) & (ua <= top_j + 1.0) \
-                & (ub <= top_j + 1.0) & (va <= top_i + 1.0) & (vb <= top_i + 1.0) \
-                & (j == _clamp_index(ub, top_j)) & (i == _clamp_index(vb, top_i))
-            sc[0, k] = hgt[i, j]
-            sc[1, k] = hgt[i, j + 1]
-            sc[2, k] = hgt[i + 1, j]
-            sc[3, k] = hgt[i + 1, j + 1]
-            sc[4, k] = ua - j
-            sc[5, k] = va - i
-            sc[6, k] = 1.0 if one else 0.0
-        for k in range(m):  # the root in that cell (vectorised)
-            s, fl = _one_cell_root(sc[0, k], sc[1, k], sc[2, k], sc[3, k], sc[4, k], sc[5, k], z_top,
-                                   sc[12, k] - sc[10, k], sc[13, k] - sc[11, k], z_bot - z_top)
-            sc[7, k] = s
-            flag_out[i0 + k] = fl if sc[6, k] != 0.0 else -1
+            inside = (ua >= 0.0) & (va >= 0.0) & (ub >= 0.0) & (vb >= 0.0) & (ua <= top_j + 1.0) \
+                & (ub <= top_j + 1.0) & (va <= top_i + 1.0) & (vb <= top_i + 1.0)
+            sc[6, k] = 1.0 if inside else 0.0
+            sc[8, k] = 0.0
+            sc[9, k] = 1.0
+        for _step in range(NARROW_STEPS):  # narrow them with the max/min pyramid, one level per block
+            width = 0
+            for k in range(m):  # (vectorised: an integer maximum)
+                cu_lo, cu_hi, cv_lo, cv_hi = _box_cells(n_cu, n_cv, sc[10, k], sc[11, k], sc[12, k] - sc[10, k],
+                                                        sc[13, k] - sc[11, k], sc[8, k], sc[9, k])
+                width = max(width, max(cu_hi - cu_lo, cv_hi - cv_lo))
+            if width == 0:  # every chord of the block in one cell: nothing to narrow
+                break
+            level = _level_for_width(levels, width)
+            for k in range(m):  # (vectorised; gathers)
+                sc[8, k], sc[9, k] = _narrow_step(bound_hi, bound_lo, levels, level, n_cu, n_cv, sc[10, k], sc[11, k],
+                                                  z_top, sc[12, k] - sc[10, k], sc[13, k] - sc[11, k], dz_chord,
+                                                  sc[8, k], sc[9, k])
+        for k in range(m):  # the cell the narrowed chord starts in (vectorised); -2: still stepping
+            du = sc[12, k] - sc[10, k]
+            dv = sc[13, k] - sc[11, k]
+            u = sc[10, k] + du * sc[8, k]
+            v = sc[11, k] + dv * sc[8, k]
+            sc[4, k] = _clamp_index(math.floor(u) if du >= 0.0 else math.ceil(u) - 1.0, top_j)
+            sc[5, k] = _clamp_index(math.floor(v) if dv >= 0.0 else math.ceil(v) - 1.0, top_i)
+            sc[14, k] = -2.0 if sc[6, k] != 0.0 else -1.0
+        for _cell in range(CELL_STEPS):  # cell by cell in lockstep over the points
+            for k in range(m):  # the cell's corners (gathers)
+                i = int(sc[5, k])
+                j = int(sc[4, k])
+                sc[0, k] = hgt[i, j]
+                sc[1, k] = hgt[i, j + 1]
+                sc[2, k] = hgt[i + 1, j]
+                sc[3, k] = hgt[i + 1, j + 1]
+            n_pending = 0
+            for k in range(m):  # the hit in it, or on to the next cell (vectorised; an integer count)
+                s, fl, s_next, j_next, i_next = _cell_step(sc[0, k], sc[1, k], sc[2, k], sc[3, k], sc[4, k],
+                                                           sc[5, k], sc[10, k], sc[11, k], z_top,
+                                                           sc[12, k] - sc[10, k], sc[13, k] - sc[11, k], dz_chord,
+                                                           sc[8, k], sc[9, k], top_j, top_i)
+                pending = sc[14, k] == -2.0
+                sc[7, k] = s if pending else sc[7, k]
+                sc[14, k] = fl if pending else sc[14, k]
+                n_pending += 1 if pending & (fl == -2.0) else 0
+                sc[8, k] = s_next
+                sc[4, k] = j_next
+                sc[5, k] = i_next
+            if n_pending == 0:
+                break
+        for k in range(m):  # still stepping: the walk decides
+            flag_out[i0 + k] = -1 if sc[14, k] == -2.0 else int(sc[14, k])
         for k in range(m):  # the walk for the others (scalar), then the hit's height
             fl = flag_out[i0 + k]
             s = sc[7, k]
@@ -563,7 +621,7 @@ if NUMBA_AVAILABLE:
     _pixel_residual = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_pixel_residual_py)
     _refine_at_height = njit(cache=True, fastmath=False, error_model="numpy")(_refine_at_height_py)
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
-    _one_cell_root = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_one_cell_root_py)
+    _cell_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_step_py)
     _refine_on_dem = njit(cache=True, fastmath=False, error_model="numpy")(_refine_on_dem_py)
     _localize_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
     _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
@@ -585,11 +643,14 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _pixel_residual = _pixel_residual_py
     _refine_at_height = _refine_at_height_py
     _clamp_index = _clamp_index_py
-    _one_cell_root = _one_cell_root_py
+    _cell_step = _cell_step_py
     _refine_on_dem = _refine_on_dem_py
     _localize_blocks = _localize_blocks_serial = _localize_blocks_py
     _dem_blocks = _dem_blocks_serial = _dem_blocks_py
 _first_hit = _dem.first_hit
+_box_cells = _dem.box_cells
+_level_for_width = _dem.level_for_width
+_narrow_step = _dem.narrow_step
 _bilinear = _dem.bilinear
 _cell_hit = _dem.cell_hit
 _patch_quadratic = _dem.patch_quadratic
@@ -744,6 +805,6 @@ class RPCInverse:
             sl = slice(start, min(start + CHUNK, n))
             kernel = _dem_blocks if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _dem_blocks_serial
             kernel(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
-                        grid.tile_max, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl],
+                        grid.bounds, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl],
                         float(tol_px), float(tol_m), int(max_iter), lon[sl], lat[sl], h[sl], flag[sl])
         return lon, lat, h, flag
