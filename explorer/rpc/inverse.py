@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
+from explorer._numba import NUMBA_AVAILABLE, njit
+from explorer._threads import run_in_parts
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
 from explorer.geometry.dem_intersection import NARROW_STEPS, NOT_CONVERGED, OK, HeightGrid
@@ -47,12 +48,9 @@ if TYPE_CHECKING:
 
 __all__ = ["RPCInverse", "fit_inverse_polynomial"]
 
-#: Points per call of the compiled loops (bounds the temporaries).
-CHUNK = 1 << 20
-
-#: Below this many points the loops run on one thread: a ``prange`` call on the shared 2-core machine cost
-#: 10-20 ms when the other core was busy (1,000 and 10,000 points both took 20 ms at a load of 7.7).
-PARALLEL_MIN_POINTS = 20_000
+#: Fewest points a thread is given (:func:`explorer._threads.run_in_parts`): handing a part to the second
+#: thread costs tens of microseconds, 10,000 pixels about 0.7 ms of work.
+PARALLEL_MIN_POINTS = 10_000
 
 
 def _monomials(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -272,7 +270,7 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
     cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
-    for b in prange(n_blocks):
+    for b in range(n_blocks):
         i0 = b * BLOCK
         i1 = min(n, i0 + BLOCK)
         m = i1 - i0
@@ -436,7 +434,7 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx
     cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
-    for b in prange(n_blocks):
+    for b in range(n_blocks):
         i0 = b * BLOCK
         i1 = min(n, i0 + BLOCK)
         m = i1 - i0
@@ -623,13 +621,9 @@ if NUMBA_AVAILABLE:
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
     _cell_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_step_py)
     _refine_on_dem = njit(cache=True, fastmath=False, error_model="numpy")(_refine_on_dem_py)
-    _localize_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
-    _dem_blocks = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
-    # the same loops without threads, for small calls (waking the second thread costs more than they take)
-    _localize_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
-        serial_twin(_localize_blocks_py))
-    _dem_blocks_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
-        serial_twin(_dem_blocks_py))
+    # serial loops released from the GIL, run on parts of the points by explorer._threads (see there why)
+    _localize_blocks = njit(nogil=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
+    _dem_blocks = njit(nogil=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
 else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _horner = horner_rpc00b
     _poly_grad = _poly_grad_py
@@ -645,8 +639,8 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _clamp_index = _clamp_index_py
     _cell_step = _cell_step_py
     _refine_on_dem = _refine_on_dem_py
-    _localize_blocks = _localize_blocks_serial = _localize_blocks_py
-    _dem_blocks = _dem_blocks_serial = _dem_blocks_py
+    _localize_blocks = _localize_blocks_py
+    _dem_blocks = _dem_blocks_py
 _first_hit = _dem.first_hit
 _box_cells = _dem.box_cells
 _level_for_width = _dem.level_for_width
@@ -768,11 +762,12 @@ class RPCInverse:
         row, col, h = (np.ascontiguousarray(np.ravel(a), dtype=np.float64) for a in np.broadcast_arrays(row, col, h))
         n = row.shape[0]
         lon, lat, flag = np.empty(n), np.empty(n), np.empty(n, np.int8)
-        for start in range(0, n, CHUNK):
-            sl = slice(start, min(start + CHUNK, n))
-            kernel = _localize_blocks if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _localize_blocks_serial
-            kernel(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, row[sl],
+
+        def run(sl: slice) -> None:
+            _localize_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, row[sl],
                              col[sl], h[sl], float(tol_px), int(max_iter), lon[sl], lat[sl], flag[sl])
+
+        run_in_parts(run, n, align=BLOCK, min_points=PARALLEL_MIN_POINTS)
         return lon, lat, flag
 
     def on_dem(self, row: np.ndarray, col: np.ndarray, grid: HeightGrid, *, tol_px: float = 1e-9,
@@ -801,10 +796,11 @@ class RPCInverse:
         lon, lat, h, flag = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int8)
         pad = 1e-6 * max(1.0, abs(grid.z_max), abs(grid.z_min))
         z_top, z_bot = grid.z_max + pad, grid.z_min - pad
-        for start in range(0, n, CHUNK):
-            sl = slice(start, min(start + CHUNK, n))
-            kernel = _dem_blocks if sl.stop - sl.start >= PARALLEL_MIN_POINTS else _dem_blocks_serial
-            kernel(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
+
+        def run(sl: slice) -> None:
+            _dem_blocks(*self.forward, *self.inverse, self.correction, self.correction_grid, self.norm, grid.heights,
                         grid.bounds, grid.x0, grid.y0, grid.dx, grid.dy, z_top, z_bot, row[sl], col[sl],
                         float(tol_px), float(tol_m), int(max_iter), lon[sl], lat[sl], h[sl], flag[sl])
+
+        run_in_parts(run, n, align=BLOCK, min_points=PARALLEL_MIN_POINTS)
         return lon, lat, h, flag

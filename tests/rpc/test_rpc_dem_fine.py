@@ -134,3 +134,25 @@ def test_pyramid_bounds_every_box_of_cells():
         idx = levels[k, 0] + ((cv_lo + cv_hi) // 2 >> k) * levels[k, 2] + ((cu_lo + cu_hi) // 2 >> k)
         assert grid.bound_hi[idx] >= hi_nodes[cv_lo:cv_hi + 2, cu_lo:cu_hi + 2].max()
         assert grid.bound_lo[idx] <= lo_nodes[cv_lo:cv_hi + 2, cu_lo:cu_hi + 2].min()
+
+
+def test_same_bits_on_one_and_two_threads(monkeypatch):
+    """The points are split at block boundaries, so the thread count cannot change a result."""
+    from explorer import _threads
+
+    rpc = read_rpc(PHR_2018)
+    grid = rough_grid(rpc)
+    inverse = RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
+    rng = np.random.default_rng(4)
+    rows, cols = rpc.image_size
+    row, col = rng.uniform(0, rows - 1, 60_000), rng.uniform(0, cols - 1, 60_000)
+    results = {}
+    for threads in (1, 2, 3):
+        monkeypatch.setattr(_threads, "n_threads", lambda threads=threads: threads)
+        results[threads] = inverse.on_dem(row, col, grid)
+        results[threads, "h"] = inverse.localize(row, col, np.full(row.size, 900.0))
+    for threads in (2, 3):
+        for a, b in zip(results[1], results[threads], strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
+        for a, b in zip(results[1, "h"], results[threads, "h"], strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
