@@ -295,6 +295,16 @@ def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     return s
 
 
+def _exit_param_py(a, d, index, size):
+    """Segment parameter where the coordinate ``a + d s`` leaves interval ``index`` of width ``size``.
+
+    The interval is ``[index * size, (index + 1) * size]``; moving up (``d > 0``) it is left at its upper
+    edge, moving down at its lower edge; ``inf`` when the coordinate does not move.  Branch-free selects.
+    """
+    edge = (index + 1.0) * size if d > 0.0 else index * 1.0 * size
+    return (edge - a) / d if d != 0.0 else math.inf
+
+
 def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
     """First hit of the segment between parameters s0 and s1 (inside the node box): ``(s, flag)``, flag -1: none.
 
@@ -322,19 +332,8 @@ def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
     ti = min(max(ti, 0), nty - 1)
     s_cur = s0
     for _ in range(nty + ntx + 4):
-        # exit of tile (ti, tj)
-        if du > 0.0:
-            su = ((tj + 1) * tile - ua) / du
-        elif du < 0.0:
-            su = (tj * tile - ua) / du
-        else:
-            su = math.inf
-        if dv > 0.0:
-            sv = ((ti + 1) * tile - va) / dv
-        elif dv < 0.0:
-            sv = (ti * tile - va) / dv
-        else:
-            sv = math.inf
+        su = exit_param(ua, du, tj, tile)  # exit of tile (ti, tj)
+        sv = exit_param(va, dv, ti, tile)
         s_exit = min(min(su, sv), s1)
         if s_exit < s_cur:
             s_exit = s_cur
@@ -355,18 +354,8 @@ def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
             i = min(max(i, max(ti * tile, 0)), min((ti + 1) * tile, ny - 1) - 1)
             c_cur = s_cur
             for _k in range(2 * tile + 4):
-                if du > 0.0:
-                    cu = (j + 1 - ua) / du
-                elif du < 0.0:
-                    cu = (j - ua) / du
-                else:
-                    cu = math.inf
-                if dv > 0.0:
-                    cv = (i + 1 - va) / dv
-                elif dv < 0.0:
-                    cv = (i - va) / dv
-                else:
-                    cv = math.inf
+                cu = exit_param(ua, du, j, 1)  # exit of cell (i, j)
+                cv = exit_param(va, dv, i, 1)
                 c_exit = min(min(cu, cv), s_exit)
                 if c_exit < c_cur:
                     c_exit = c_cur
@@ -573,6 +562,7 @@ if NUMBA_AVAILABLE:
     _patch_quadratic = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(
         _patch_quadratic_py)
     _cell_hit = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_hit_py)
+    exit_param = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_exit_param_py)
     _walk = njit(cache=True, fastmath=False, error_model="numpy")(_walk_py)
     _box_cells = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_box_cells_py)
     _level_for_width = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_level_for_width_py)
@@ -586,6 +576,7 @@ if NUMBA_AVAILABLE:
 else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
     _patch_quadratic = _patch_quadratic_py
     _cell_hit = _cell_hit_py
+    exit_param = _exit_param_py
     _walk = _walk_py
     _box_cells = _box_cells_py
     _level_for_width = _level_for_width_py

@@ -343,8 +343,8 @@ def _cell_step_py(h00, h01, h10, h11, j, i, ua, va, za, du, dv, dz, sa, sb, top_
     otherwise flag -2 and the next cell, entered at ``s_next``.  Branch-free, so that a loop over points
     vectorises.
     """
-    cu = ((j + 1.0 if du > 0.0 else j) - ua) / du if du != 0.0 else math.inf
-    cv = ((i + 1.0 if dv > 0.0 else i) - va) / dv if dv != 0.0 else math.inf
+    cu = _exit_param(ua, du, j, 1.0)
+    cv = _exit_param(va, dv, i, 1.0)
     se = min(min(cu, cv), sb)
     se = se if se > sa else sa
     c0, c1, c2 = _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz)
@@ -642,6 +642,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _localize_blocks = _localize_blocks_py
     _dem_blocks = _dem_blocks_py
 _first_hit = _dem.first_hit
+_exit_param = _dem.exit_param
 _box_cells = _dem.box_cells
 _level_for_width = _dem.level_for_width
 _narrow_step = _dem.narrow_step
