@@ -5,6 +5,8 @@ Writes ``benchmarks/results/dem.json``.
 
 Usage: python benchmarks/dem_bench.py [--points 100000] [--repeats 7] [--rigorous-points 2000000]
        [--rpc FILE --dem DEM [--datum ellipsoid|geoid]]   (another RPC and DEM than the Pleiades pair)
+       [--synthetic-dem 1,3]   (also the Pleiades RPC on seeded rough DEMs of 1,700 m relief at these spacings,
+                                arc seconds, as SRTM tiles are: fractal terrain, a mountain, a 30 x 60-node void)
 """
 
 from __future__ import annotations
@@ -120,6 +122,32 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
     return results
 
 
+def synthetic_dem(path: Path, rpc, arcsec: float, seed: int = 0, low: float = 200.0, high: float = 1900.0) -> Path:
+    """Write a seeded rough DEM (EPSG:4326, float32, no-data -32768) over the RPC's footprint: power-law terrain
+    (amplitude ~ 1/k^2) plus a mountain, scaled to ``low``..``high`` metres, with a 30 x 60-node void."""
+    import rasterio
+
+    d = arcsec / 3600.0
+    lon0, lon1 = rpc.lon_offset - rpc.lon_scale - 0.02, rpc.lon_offset + rpc.lon_scale + 0.02
+    lat0, lat1 = rpc.lat_offset - rpc.lat_scale - 0.02, rpc.lat_offset + rpc.lat_scale + 0.02
+    nx, ny = int(np.ceil((lon1 - lon0) / d)) + 1, int(np.ceil((lat1 - lat0) / d)) + 1
+    rng = np.random.default_rng(seed)
+    k = np.hypot(np.fft.rfftfreq(nx)[None, :], np.fft.fftfreq(ny)[:, None])
+    k[0, 0] = 1.0
+    spectrum = (rng.normal(size=k.shape) + 1j * rng.normal(size=k.shape)) * k ** -2.0
+    spectrum[0, 0] = 0.0
+    z = np.fft.irfft2(spectrum, s=(ny, nx))
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    z = 0.5 * (z - z.min()) / np.ptp(z) + np.exp(-(((xx - 0.5 * nx) / (0.25 * nx)) ** 2
+                                                   + ((yy - 0.5 * ny) / (0.25 * ny)) ** 2))
+    z = low + (z - z.min()) / np.ptp(z) * (high - low)
+    z[ny // 3: ny // 3 + 30, nx // 3: nx // 3 + 60] = -32768.0
+    with rasterio.open(path, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="float32", crs="EPSG:4326",
+                       transform=rasterio.Affine(d, 0, lon0 - d / 2, 0, -d, lat1 + d / 2), nodata=-32768.0) as dst:
+        dst.write(z.astype(np.float32), 1)
+    return path
+
+
 def rpc_scaling(repeats: int) -> list[dict]:
     from explorer.rpc import read_rpc
     from explorer.terrain_io import read_geotiff_dem
@@ -166,6 +194,7 @@ def main() -> None:
     parser.add_argument("--datum", default="ellipsoid")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "dem.json")
     parser.add_argument("--skip-scaling", action="store_true")
+    parser.add_argument("--synthetic-dem", default="", help="comma-separated DEM spacings, arc seconds")
     args = parser.parse_args()
     import numba
 
@@ -175,6 +204,15 @@ def main() -> None:
     record["pleiades_vs_gdal"] = rpc_vs_gdal(RPC_FILE, DEM_FILE, "ellipsoid", args.points, args.repeats)
     if args.rpc is not None and args.dem is not None:
         record["other_vs_gdal"] = rpc_vs_gdal(args.rpc, args.dem, args.datum, args.points, args.repeats)
+    for arcsec in (float(v) for v in args.synthetic_dem.split(",") if v.strip()):
+        import tempfile
+
+        from explorer.rpc import read_rpc
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = synthetic_dem(Path(tmp) / f"synthetic_{arcsec:g}arcsec.tif", read_rpc(RPC_FILE), arcsec)
+            record[f"synthetic_{arcsec:g}arcsec_vs_gdal"] = rpc_vs_gdal(RPC_FILE, path, "ellipsoid", args.points,
+                                                                       args.repeats)
     if not args.skip_scaling:
         record["rpc_scaling"] = rpc_scaling(max(3, args.repeats // 2))
     if args.rigorous_points:

@@ -16,13 +16,17 @@ instead (Newton).  Converged means a *measured* residual below ``tol_px`` (1e-9 
 On a DEM
 --------
 The line of sight of a pixel between the DEM's highest and lowest heights is the polynomial's curve
-between those heights; its chord is walked against the DEM by the compiled kernel of
-:mod:`explorer.geometry.dem_intersection` (first intersection, exact per bilinear cell).  From that hit
-the point is refined on the *exact* RPC line of sight and the bilinear DEM together: each iteration one
-forward RPC evaluation (pixel correction as above) and one bilinear lookup (height correction along the
-line of sight, Newton on ``h - dem(lon(h), lat(h))``), until the pixel residual is below ``tol_px`` and the
-height residual below ``tol_m``.  Every point carries a flag (:data:`~explorer.geometry.dem_intersection.OK`,
-``OUTSIDE_DEM``, ``NODATA``, ``NO_INTERSECTION``, ``NOT_CONVERGED``); lon/lat/h are NaN unless OK.
+between those heights; its chord is narrowed with the DEM's max/min pyramid and its first cells are solved
+in lockstep over a block of points (:func:`_cell_step_py`); what they do not settle is walked by the
+compiled kernel of :mod:`explorer.geometry.dem_intersection` (first intersection, exact per bilinear cell).
+From that hit the point is refined on the *exact* RPC line of sight and the bilinear DEM together: each
+iteration one forward RPC evaluation (pixel correction as above) and one bilinear lookup (height correction
+along the line of sight, Newton on ``h - dem(lon(h), lat(h))``), until the pixel residual is below
+``tol_px`` and the height residual below ``tol_m``.  Every point carries a flag
+(:data:`~explorer.geometry.dem_intersection.OK`, ``OUTSIDE_DEM``, ``NODATA``, ``NO_INTERSECTION``,
+``NOT_CONVERGED``); lon/lat/h are NaN unless OK.  The loops are serial, released from the GIL and run on
+block-aligned parts of the points by :func:`explorer._threads.run_in_parts` (the same bits on any number of
+threads).  Design and measurements: ``docs/performance.md#image-to-ground-on-terrain``.
 
 Ground coordinates: longitude/latitude in degrees, heights in metres above the ellipsoid; pixels
 0-based, integer = pixel centre (``docs/conventions.md``).
