@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from explorer._numba import njit, prange
-from explorer.geometry.kernels.evaluators import _ce_either, _ce_fixed_py, _collinearity_point_py
+from explorer.geometry.kernels.evaluators import _ce_fixed, _ce_fixed_py, _collinearity_point_py, collinearity_point
 from explorer.geometry.kernels.exact import _dummy_fixed
 from explorer.geometry.kernels.params import CollinearityParams, FixedModel
 from explorer.geometry.kernels.residual import _use_numba
@@ -15,10 +15,11 @@ from explorer.geometry.kernels.residual import _use_numba
 # --------------------------------------------------------------------------- usgscsm secant solver
 @njit(parallel=True, fastmath=False, cache=True)
 def _solve_secant_nb(
-    ground, proj, gx, fx, use_fixed, f_lo, f_hi, pitch, pc, line_period, ref_row, r_min, r_max, precision, first_step,
-    max_count, row_out, col_out, ok_out, ce_out, trace,
+    ground, proj, gx, fx, use_fixed, f_lo, f_hi, focal, offset, pitch, pc, line_period, ref_row, r_min, r_max,
+    precision, first_step, max_count, row_out, col_out, ok_out, ce_out, trace,
 ):  # pragma: no cover - compiled
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
+    pos, dpos, att, datt, jit, _, _, curv, dist, sc0, fast = gx
     n = ground.shape[0]
     n_trace = trace.shape[0]
     for i in prange(n):
@@ -51,10 +52,15 @@ def _solve_secant_nb(
         while True:
             rowq = approx + ts
             t = (rowq - ref_row) * line_period
-            fixed = use_fixed and f_lo <= rowq <= f_hi
-            e, _, yd, _, vz = _ce_either(
-                X, Y, Z, t, fixed, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, gx
-            )
+            if use_fixed and f_lo <= rowq <= f_hi:
+                e, _, yd, _, vz = _ce_fixed(
+                    X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal,
+                    offset,
+                )
+            else:
+                e, _, yd, _, vz = collinearity_point(
+                    X, Y, Z, t, pos, dpos, att, datt, jit, focal, offset, curv, dist, sc0, fast
+                )
             ce += 1
             valid = valid and vz < 0.0
             if phase == 3:
@@ -239,6 +245,8 @@ def solve_secant(
             fm is not None,
             f_lo,
             f_hi,
+            p.focal,
+            p.offset,
             p.pitch,
             p.principal_column,
             p.line_period,
