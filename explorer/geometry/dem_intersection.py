@@ -160,14 +160,19 @@ def _block_reduce(a: np.ndarray, fill: float, op) -> np.ndarray:
 
 
 def _dilate(a: np.ndarray, fill: float, op) -> np.ndarray:
-    """Each element reduced by ``op`` with its eight neighbours (outside the array: ``fill``)."""
+    """Each element reduced by ``op`` with its eight neighbours (outside the array: ``fill``); separable."""
     ny, nx = a.shape
-    padded = np.full((ny + 2, nx + 2), fill)
+    padded = np.full((ny + 2, nx + 2), fill, dtype=a.dtype)
     padded[1:-1, 1:-1] = a
-    out = padded[1:-1, 1:-1].copy()
-    for di in range(3):
-        for dj in range(3):
-            out = op(out, padded[di:di + ny, dj:dj + nx])
+    rows = op(op(padded[:, :-2], padded[:, 1:-1]), padded[:, 2:])
+    return op(op(rows[:-2], rows[1:-1]), rows[2:])
+
+
+def _float32_bound(a: np.ndarray, upward: bool) -> np.ndarray:
+    """``a`` in float32, rounded away from the bound's side (up for maxima, down for minima): still a bound."""
+    out = a.astype(np.float32)
+    wrong = out < a if upward else out > a
+    out[wrong] = np.nextafter(out[wrong], np.float32(np.inf if upward else -np.inf))
     return out
 
 
@@ -177,8 +182,8 @@ def bound_pyramid(heights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     Level ``k`` has one entry per block of ``2**k x 2**k`` cells: the highest (lowest) node of the block and of
     its eight neighbouring blocks, so that any box of cells at most ``2**k`` cells wide whose middle cell lies
     in the block is bounded by that entry (:func:`_box_bounds_py`).  A no-data node counts as +inf in the
-    maxima and -inf in the minima (a box that touches a hole is never declared clear of terrain).  Memory:
-    about 2.7 doubles per cell for both pyramids.
+    maxima and -inf in the minima (a box that touches a hole is never declared clear of terrain).  Stored in
+    float32 rounded outwards (still bounds): about 5.3 bytes per cell for both pyramids.
 
     Parameters
     ----------
@@ -187,7 +192,7 @@ def bound_pyramid(heights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
     Returns
     -------
-    bound_hi, bound_lo : ndarray, shape (n_bounds,)
+    bound_hi, bound_lo : ndarray of float32, shape (n_bounds,)
         All levels, finest first, each C-ordered.
     bound_levels : ndarray of int64, shape (n_levels, 3)
         Offset, rows and columns of each level.
@@ -208,7 +213,8 @@ def bound_pyramid(heights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
             break
         cell_hi = _block_reduce(cell_hi, -np.inf, np.maximum)
         cell_lo = _block_reduce(cell_lo, np.inf, np.minimum)
-    return np.concatenate(his), np.concatenate(los), np.array(levels, dtype=np.int64)
+    return (_float32_bound(np.concatenate(his), True), _float32_bound(np.concatenate(los), False),
+            np.array(levels, dtype=np.int64))
 
 
 # --------------------------------------------------------------------------------------------- kernel
