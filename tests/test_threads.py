@@ -39,3 +39,28 @@ def test_part_errors_reach_the_caller(monkeypatch):
 
     with pytest.raises(ValueError, match="second part failed"):
         _threads.run_in_parts(run, 50_000, align=512, min_points=10_000)
+
+
+def test_forked_child_gets_a_working_pool(monkeypatch):
+    """A process forked after the pool started (multiprocessing, Dask) must not wait for threads it lacks."""
+    import multiprocessing as mp
+
+    monkeypatch.setattr(_threads, "n_threads", lambda: 2)
+    _threads.run_in_parts(lambda sl: None, 50_000, align=512, min_points=10_000)  # the pool exists now
+
+    def child(queue) -> None:
+        seen = np.zeros(50_000, np.int64)
+
+        def run(sl: slice) -> None:
+            seen[sl] += 1
+
+        _threads.run_in_parts(run, 50_000, align=512, min_points=10_000)
+        queue.put(int(seen.sum()))
+
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=child, args=(queue,))
+    proc.start()
+    proc.join(60)
+    assert proc.exitcode == 0
+    assert queue.get(timeout=5) == 50_000
