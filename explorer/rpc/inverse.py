@@ -267,6 +267,13 @@ def _refine_at_height_py(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x, y, m_xr, m_xc,
     return x, y, False
 
 
+def _block_scratch_py(b, n, rows):
+    """Block ``b`` of ``n`` points: its first point, its size, ``rows`` rows of float scratch and a cell index row."""
+    i0 = b * BLOCK
+    m = min(n, i0 + BLOCK) - i0
+    return i0, m, np.empty((rows, m)), np.empty(m, np.int64)
+
+
 def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
                         flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
@@ -275,13 +282,9 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in range(n_blocks):
-        i0 = b * BLOCK
-        i1 = min(n, i0 + BLOCK)
-        m = i1 - i0
-        sc = np.empty((7, m))
-        cell = np.empty(m, np.int64)
-        x = lon_out[i0:i1]
-        y = lat_out[i0:i1]
+        i0, m, sc, cell = _block_scratch(b, n, 7)
+        x = lon_out[i0:i0 + m]
+        y = lat_out[i0:i0 + m]
         for k in range(m):  # the polynomial's guess, inverse Jacobian and residual cell (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
@@ -439,14 +442,8 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in range(n_blocks):
-        i0 = b * BLOCK
-        i1 = min(n, i0 + BLOCK)
-        m = i1 - i0
-        sc = np.empty((16, m))
-        cell = np.empty(m, np.int64)
-        x = lon_out[i0:i1]
-        y = lat_out[i0:i1]
-        zn = h_out[i0:i1]
+        i0, m, sc, cell = _block_scratch(b, n, 16)
+        x, y, zn = lon_out[i0:i0 + m], lat_out[i0:i0 + m], h_out[i0:i0 + m]
         for k in range(m):  # the chord: the polynomial's line of sight at the top and bottom heights (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
@@ -622,6 +619,7 @@ if NUMBA_AVAILABLE:
     _start = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_start_py)
     _pixel_residual = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_pixel_residual_py)
     _refine_at_height = njit(cache=True, fastmath=False, error_model="numpy")(_refine_at_height_py)
+    _block_scratch = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_block_scratch_py)
     _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
     _cell_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_step_py)
     _refine_on_dem = njit(cache=True, fastmath=False, error_model="numpy")(_refine_on_dem_py)
@@ -640,6 +638,7 @@ else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _start = _start_py
     _pixel_residual = _pixel_residual_py
     _refine_at_height = _refine_at_height_py
+    _block_scratch = _block_scratch_py
     _clamp_index = _clamp_index_py
     _cell_step = _cell_step_py
     _refine_on_dem = _refine_on_dem_py
