@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from explorer.geometry.dem_intersection import NODATA, OK, HeightGrid
 from explorer.rpc import read_rpc
@@ -84,13 +85,23 @@ def brute_force(inverse: RPCInverse, grid: HeightGrid, row, col, n_levels: int =
     return 0.5 * (hi + lo), np.where(void_first, NODATA, OK), g
 
 
-def test_rough_dem_first_hit_matches_brute_force_march():
+@pytest.fixture(scope="module")
+def rough():
+    """The Pleiades 2018 RPC, the rough grid and the RPC's inverse over the grid's heights."""
     rpc = read_rpc(PHR_2018)
     grid = rough_grid(rpc)
-    inverse = RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
-    rng = np.random.default_rng(11)
+    return rpc, grid, RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
+
+
+def random_pixels(rpc, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
     rows, cols = rpc.image_size
-    row, col = rng.uniform(0, rows - 1, 5000), rng.uniform(0, cols - 1, 5000)
+    return rng.uniform(0, rows - 1, n), rng.uniform(0, cols - 1, n)
+
+
+def test_rough_dem_first_hit_matches_brute_force_march(rough):
+    rpc, grid, inverse = rough
+    row, col = random_pixels(rpc, 5000, 11)
     # and pixels whose lines of sight meet the void and the cliff
     lon_void = grid.x0 + grid.dx * (grid.heights.shape[1] // 3 + 20)
     lat_void = grid.y0 + grid.dy * (grid.heights.shape[0] // 3 + 10)
@@ -136,16 +147,12 @@ def test_pyramid_bounds_every_box_of_cells():
         assert grid.bound_lo[idx] <= lo_nodes[cv_lo:cv_hi + 2, cu_lo:cu_hi + 2].min()
 
 
-def test_same_bits_on_one_and_two_threads(monkeypatch):
+def test_same_bits_on_one_and_two_threads(monkeypatch, rough):
     """The points are split at block boundaries, so the thread count cannot change a result."""
     from explorer import _threads
 
-    rpc = read_rpc(PHR_2018)
-    grid = rough_grid(rpc)
-    inverse = RPCInverse.for_model(rpc, grid.z_min - 1.0, grid.z_max + 1.0)
-    rng = np.random.default_rng(4)
-    rows, cols = rpc.image_size
-    row, col = rng.uniform(0, rows - 1, 60_000), rng.uniform(0, cols - 1, 60_000)
+    rpc, grid, inverse = rough
+    row, col = random_pixels(rpc, 60_000, 4)
     results = {}
     for threads in (1, 2, 3):
         monkeypatch.setattr(_threads, "n_threads", lambda threads=threads: threads)
