@@ -19,8 +19,8 @@ def _inlined_when_compiled(fn: Callable[..., Any] | None = None, *, inline: str 
     ``fn`` stays the Python function (numpy arrays, and torch tensors in :mod:`explorer.geometry.torch_solver`);
     compiled callers get the same code (numba's ``register_jitable``, under the callers' own
     ``fastmath=False``), so one function serves every evaluator.  ``inline="always"`` inlines it in numba's
-    IR; ``"never"`` compiles it on its own and leaves the inlining to LLVM (for loops whose variables numba's
-    IR inliner mis-scopes when the caller re-assigns the results).
+    IR; ``"never"`` compiles it on its own and leaves the inlining to LLVM (where numba's IR inliner warns that
+    it mis-scoped a loop's variables: a loop inlined twice over, or whose results the caller re-assigns).
     """
     if fn is None:
         return lambda f: _inlined_when_compiled(f, inline=inline)
@@ -154,7 +154,7 @@ def _focal_plane_and_rate(dx, dy, dz, vx_s, vy_s, vz_s, so, co, sp, cp, sk, ck, 
     return x, y, scale * (vx_t - vx * ratio), scale * (vy_t - vy * ratio), vz
 
 
-@_inlined_when_compiled(inline="never")
+@_inlined_when_compiled
 def _power_series(start, u, coef, n_terms):
     """``start + c1 u + c2 u^2 + ...`` and its derivative ``c1 + 2 c2 u + ...`` (the first ``n_terms`` of ``coef``).
 
@@ -172,7 +172,7 @@ def _power_series(start, u, coef, n_terms):
     return value, slope
 
 
-@_inlined_when_compiled
+@_inlined_when_compiled(inline="never")
 def _radial_distortion(x, y, x_t, y_t, dist, n_terms):
     """Radial distortion ``r_d = r (1 + k1 r^2 + ...)`` of focal-plane coordinates and their rates
     (:meth:`explorer.geometry.interior.InteriorOrientation.distort`).
@@ -180,12 +180,14 @@ def _radial_distortion(x, y, x_t, y_t, dist, n_terms):
     ``dist`` holds ``k1, k2, ...`` (its first ``n_terms`` are used; none: the coordinates unchanged).
     Returns ``xd, yd, xd_t, yd_t`` (metres, m/s).
     """
-    if n_terms == 0:
-        return x, y, x_t, y_t
-    r2 = x * x + y * y
-    factor, dfactor = _power_series(1.0 + 0.0 * r2, r2, dist, n_terms)
-    r2_t = 2.0 * (x * x_t + y * y_t)
-    return x * factor, y * factor, x_t * factor + x * dfactor * r2_t, y_t * factor + y * dfactor * r2_t
+    xd, yd, xd_t, yd_t = x, y, x_t, y_t
+    if n_terms > 0:
+        r2 = x * x + y * y
+        factor, dfactor = _power_series(1.0 + 0.0 * r2, r2, dist, n_terms)
+        r2_t = 2.0 * (x * x_t + y * y_t)
+        xd, yd = x * factor, y * factor
+        xd_t, yd_t = x_t * factor + x * dfactor * r2_t, y_t * factor + y * dfactor * r2_t
+    return xd, yd, xd_t, yd_t
 
 
 @_inlined_when_compiled(inline="never")
