@@ -289,13 +289,7 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
             zn = (h[i0 + k] - h_off) / h_sc
-            xg, yg, a, bb, c, d, _e, _f = _inverse_guess(iv0, iv1, cn, rn, zn)
-            x[k] = xg
-            y[k] = yg
-            sc[0, k] = a
-            sc[1, k] = bb
-            sc[2, k] = c
-            sc[3, k] = d
+            x[k], y[k], sc[0, k], sc[1, k], sc[2, k], sc[3, k], _e, _f = _inverse_guess(iv0, iv1, cn, rn, zn)
             cell[k], sc[4, k], sc[5, k], sc[6, k] = _correction_cell(corr, cg, cn, rn, zn)
         for k in range(m):  # the polynomial's residual (gathers: a loop of its own)
             cx, cy = _correction_at(cells, cell[k], sc[4, k], sc[5, k], sc[6, k])
@@ -517,15 +511,8 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx
         for k in range(m):  # start on the line of sight at the hit height (vectorised)
             rn = (row[i0 + k] - row_off) / row_sc
             cn = (col[i0 + k] - col_off) / col_sc
-            xg, yg, a, bb, c, d, e, f = _inverse_guess(iv0, iv1, cn, rn, zn[k])
-            x[k] = xg
-            y[k] = yg
-            sc[0, k] = a
-            sc[1, k] = bb
-            sc[2, k] = c
-            sc[3, k] = d
-            sc[4, k] = e
-            sc[5, k] = f
+            x[k], y[k], sc[0, k], sc[1, k], sc[2, k], sc[3, k], sc[4, k], sc[5, k] = _inverse_guess(iv0, iv1, cn, rn,
+                                                                                                 zn[k])
             sc[6, k] = zn[k]
             cell[k], sc[8, k], sc[9, k], sc[10, k] = _correction_cell(corr, cg, cn, rn, zn[k])
         for k in range(m):  # the polynomial's residual (gathers: a loop of its own)
