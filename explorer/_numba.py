@@ -57,3 +57,19 @@ def serial_twin(fn: Any) -> Any:
 
 
 __all__ += ["serial_twin"]
+
+
+def kernel(**options: Any) -> Any:
+    """Decorator: compile with the package's kernel options, or leave the function as it is without numba.
+
+    Every kernel is cached on disk (``cache=True``), keeps IEEE semantics (``fastmath=False``) and numpy's
+    error model (a division by zero gives inf/NaN, which the kernels test, not an exception); ``options`` adds
+    to them (``inline="always"``, ``parallel=True``, ``nogil=True``).  Without numba the function runs
+    interpreted: the same operations, slowly.
+    """
+    if not NUMBA_AVAILABLE:
+        return lambda fn: fn
+    return njit(cache=True, fastmath=False, error_model="numpy", **options)
+
+
+__all__ += ["kernel"]

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit, prange, serial_twin
+from explorer._numba import kernel, prange, serial_twin
 from explorer.errors import InputError
 
 __all__ = [
@@ -70,7 +70,7 @@ FLAG_NAMES = {OK: "ok", OUTSIDE_DEM: "outside DEM", NODATA: "no-data", NO_INTERS
 #: Cells per side of a tile of the min/max hierarchy.
 TILE = 16
 
-#: Rounds of the max/min pyramid that narrow a segment before its first cell is solved (:func:`_narrow_step_py`).
+#: Rounds of the max/min pyramid that narrow a segment before its first cell is solved (:func:`_narrow_step`).
 NARROW_STEPS = 2
 
 #: Points per chunk of the public wrappers (bounds the temporaries to a few tens of MB).
@@ -218,7 +218,8 @@ def bound_pyramid(heights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 # --------------------------------------------------------------------------------------------- kernel
-def _patch_quadratic_py(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz):
+@kernel(inline="always")
+def _patch_quadratic(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz):
     """``(c0, c1, c2)`` of f(s) = z(s) - h(s) = c0 + c1 s + c2 s^2 along a segment over cell (i, j).
 
     The segment starts at grid coordinates (ua, va) and height za and moves by (du, dv, dz) per unit of s;
@@ -235,7 +236,8 @@ def _patch_quadratic_py(h00, h01, h10, h11, i, j, ua, va, za, du, dv, dz):
     return c0, c1, c2
 
 
-def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
+@kernel(inline="always")
+def _cell_hit(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     """Smallest s in [sa, sb] where the segment meets the bilinear patch of cell (i, j); -1 if none.
 
     Returns -2.0 when the cell has a no-data corner.
@@ -301,7 +303,8 @@ def _cell_hit_py(h, i, j, ua, va, za, du, dv, dz, sa, sb):
     return s
 
 
-def _exit_param_py(a, d, index, size):
+@kernel(inline="always")
+def exit_param(a, d, index, size):
     """Segment parameter where the coordinate ``a + d s`` leaves interval ``index`` of width ``size``.
 
     The interval is ``[index * size, (index + 1) * size]``; moving up (``d > 0``) it is left at its upper
@@ -311,11 +314,12 @@ def _exit_param_py(a, d, index, size):
     return (edge - a) / d if d != 0.0 else math.inf
 
 
-def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
+@kernel()
+def _walk(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
     """First hit of the segment between parameters s0 and s1 (inside the node box): ``(s, flag)``, flag -1: none.
 
     Tiles of :data:`TILE` cells whose highest node is below the segment are skipped; in the others the cells
-    are walked in order (Amanatides & Woo) and solved exactly (:func:`_cell_hit_py`).
+    are walked in order (Amanatides & Woo) and solved exactly (:func:`_cell_hit`).
     """
     ny = h.shape[0]
     nx = h.shape[1]
@@ -396,7 +400,8 @@ def _walk_py(h, tile_max, ua, va, za, du, dv, dz, s0, s1):
     return math.nan, -1
 
 
-def _box_cells_py(ncu, ncv, ua, va, du, dv, sa, sb):
+@kernel(inline="always")
+def _box_cells(ncu, ncv, ua, va, du, dv, sa, sb):
     """Cells [cu_lo, cu_hi] x [cv_lo, cv_hi] under the segment's part [sa, sb] (clamped to the grid)."""
     u_a = ua + du * sa
     u_b = ua + du * sb
@@ -409,7 +414,8 @@ def _box_cells_py(ncu, ncv, ua, va, du, dv, sa, sb):
     return cu_lo, cu_hi, cv_lo, cv_hi
 
 
-def _level_for_width_py(levels, width):
+@kernel(inline="always")
+def _level_for_width(levels, width):
     """Finest pyramid level whose blocks are at least ``width`` cells wide (the top level at most)."""
     k = 0
     while (1 << k) < width and k < levels.shape[0] - 1:
@@ -417,12 +423,13 @@ def _level_for_width_py(levels, width):
     return k
 
 
-def _narrow_step_py(bound_hi, bound_lo, levels, k, ncu, ncv, ua, va, za, du, dv, dz, sa, sb):
+@kernel(inline="always")
+def _narrow_step(bound_hi, bound_lo, levels, k, ncu, ncv, ua, va, za, du, dv, dz, sa, sb):
     """One round of narrowing the part [sa, sb] of a segment that holds its first hit: ``(sa, sb)``.
 
     The segment (inside the node grid, ``dz < 0``) starts at (ua, va, za) and moves by (du, dv, dz) per unit
     of s.  The box of cells under [sa, sb] is bounded by level ``k`` of the pyramid (``2**k`` at least its
-    width, :func:`_level_for_width_py`).  No hit can lie above the box's highest node (``sa`` moves down to
+    width, :func:`_level_for_width`).  No hit can lie above the box's highest node (``sa`` moves down to
     it); and where the segment is below the box's lowest node it has already crossed the surface (``sb``
     moves up to it).  A hole counts as +inf in the maxima and -inf in the minima, so a segment over a hole
     is not narrowed past it.  Branch-free, and ``k`` the same for a whole loop, so that it vectorises.
@@ -438,7 +445,8 @@ def _narrow_step_py(bound_hi, bound_lo, levels, k, ncu, ncv, ua, va, za, du, dv,
     return na, nb
 
 
-def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
+@kernel()
+def _first_hit(h, tile_max, ua, va, za, ub, vb, zb):
     """First intersection of the segment (ua, va, za) -> (ub, vb, zb) (grid coordinates) with the DEM.
 
     Returns ``(s, flag)``: the segment parameter in [0, 1] of the hit (NaN when the flag is not OK).
@@ -494,14 +502,16 @@ def _first_hit_py(h, tile_max, ua, va, za, ub, vb, zb):
     return math.nan, NO_INTERSECTION
 
 
-def _segments_loop_py(h, tile_max, ua, va, za, ub, vb, zb, s_out, flag_out):
+@kernel(parallel=True)
+def _segments_loop(h, tile_max, ua, va, za, ub, vb, zb, s_out, flag_out):
     for k in prange(ua.shape[0]):
         s, f = _first_hit(h, tile_max, ua[k], va[k], za[k], ub[k], vb[k], zb[k])
         s_out[k] = s
         flag_out[k] = f
 
 
-def _rays_loop_py(h, tile_max, x0, y0, dx, dy, z_top, z_bot, origin, direction, out, flag_out):
+@kernel(parallel=True)
+def _rays_loop(h, tile_max, x0, y0, dx, dy, z_top, z_bot, origin, direction, out, flag_out):
     """ENU rays against the grid: segment from height z_top down to z_bot (or from the origin if lower)."""
     for k in prange(origin.shape[0]):
         ox = origin[k, 0]
@@ -539,7 +549,8 @@ def _rays_loop_py(h, tile_max, x0, y0, dx, dy, z_top, z_bot, origin, direction, 
             out[k, 2] = math.nan
 
 
-def _bilinear_py(h, u, v):
+@kernel(inline="always")
+def bilinear(h, u, v):
     """Bilinear height at fractional node (u, v) with the cell's partial derivatives; flag for holes.
 
     Returns ``(z, dz_du, dz_dv, flag)``.
@@ -564,33 +575,8 @@ def _bilinear_py(h, u, v):
     return h00 + p * a + q * b + r * a * b, p + r * b, q + r * a, OK
 
 
-if NUMBA_AVAILABLE:
-    _patch_quadratic = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(
-        _patch_quadratic_py)
-    _cell_hit = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_hit_py)
-    exit_param = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_exit_param_py)
-    _walk = njit(cache=True, fastmath=False, error_model="numpy")(_walk_py)
-    _box_cells = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_box_cells_py)
-    _level_for_width = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_level_for_width_py)
-    _narrow_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_narrow_step_py)
-    _first_hit = njit(cache=True, fastmath=False, error_model="numpy")(_first_hit_py)
-    bilinear = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_bilinear_py)
-    _segments_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_segments_loop_py)
-    _rays_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_rays_loop_py)
-    _rays_loop_serial = njit(parallel=False, cache=True, fastmath=False, error_model="numpy")(
-        serial_twin(_rays_loop_py))
-else:  # pragma: no cover - numba missing: the same code, interpreted (slow, same results)
-    _patch_quadratic = _patch_quadratic_py
-    _cell_hit = _cell_hit_py
-    exit_param = _exit_param_py
-    _walk = _walk_py
-    _box_cells = _box_cells_py
-    _level_for_width = _level_for_width_py
-    _narrow_step = _narrow_step_py
-    _first_hit = _first_hit_py
-    bilinear = _bilinear_py
-    _segments_loop = _segments_loop_py
-    _rays_loop = _rays_loop_serial = _rays_loop_py
+# the same loop without threads, for small calls (waking the second thread costs more than it takes)
+_rays_loop_serial = kernel(parallel=False)(serial_twin(getattr(_rays_loop, "py_func", _rays_loop)))
 
 first_hit = _first_hit
 box_cells = _box_cells
@@ -600,16 +586,11 @@ cell_hit = _cell_hit
 patch_quadratic = _patch_quadratic
 
 
-def _heights_loop_py(h, x0, y0, dx, dy, x, y, out):
+@kernel(parallel=True)
+def _heights_loop(h, x0, y0, dx, dy, x, y, out):
     for k in prange(x.shape[0]):
         z, _du, _dv, flag = bilinear(h, (x[k] - x0) / dx, (y[k] - y0) / dy)
         out[k] = z if flag == OK else math.nan
-
-
-if NUMBA_AVAILABLE:
-    _heights_loop = njit(parallel=True, cache=True, fastmath=False, error_model="numpy")(_heights_loop_py)
-else:  # pragma: no cover
-    _heights_loop = _heights_loop_py
 
 
 def heights_at(grid: HeightGrid, x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ On a DEM
 --------
 The line of sight of a pixel between the DEM's highest and lowest heights is the polynomial's curve
 between those heights; its chord is narrowed with the DEM's max/min pyramid and its first cells are solved
-in lockstep over a block of points (:func:`_cell_step_py`); what they do not settle is walked by the
+in lockstep over a block of points (:func:`_cell_step`); what they do not settle is walked by the
 compiled kernel of :mod:`explorer.geometry.dem_intersection` (first intersection, exact per bilinear cell).
 From that hit the point is refined on the *exact* RPC line of sight and the bilinear DEM together: each
 iteration one forward RPC evaluation (pixel correction as above) and one bilinear lookup (height correction
@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from explorer._numba import NUMBA_AVAILABLE, njit
+from explorer._numba import NUMBA_AVAILABLE, kernel
 from explorer._threads import run_in_parts
 from explorer.errors import InputError
 from explorer.geometry import dem_intersection as _dem
@@ -112,7 +112,8 @@ def fit_inverse_polynomial(
 
 
 # ------------------------------------------------------------------------------------------ kernels
-def _poly_grad_py(c, x, y, z):
+@kernel(inline="always")
+def _poly_grad(c, x, y, z):
     """Value and d/dx, d/dy, d/dz of an RPC00B cubic (x = first variable)."""
     value = _horner(c, x, y, z)
     d_dx = (c[1] + y * (c[4] + c[10] * z + c[12] * y) + z * (c[5] + c[13] * z)
@@ -124,12 +125,14 @@ def _poly_grad_py(c, x, y, z):
     return value, d_dx, d_dy, d_dz
 
 
-def _forward_py(fw0, fw1, fw2, fw3, x, y, z):
+@kernel(inline="always")
+def _forward(fw0, fw1, fw2, fw3, x, y, z):
     """Normalised (row, col) of normalised ground (x, y, z): row_num, row_den, col_num, col_den."""
     return _horner(fw0, x, y, z) / _horner(fw1, x, y, z), _horner(fw2, x, y, z) / _horner(fw3, x, y, z)
 
 
-def _exact_inverse_jacobian_py(fw0, fw1, fw2, fw3, x, y, z):
+@kernel()
+def _exact_inverse_jacobian(fw0, fw1, fw2, fw3, x, y, z):
     """Inverse of d(row_n, col_n)/d(x, y) at (x, y, z): returns (dx/dr, dx/dc, dy/dr, dy/dc)."""
     rn, rn_x, rn_y, _ = _poly_grad(fw0, x, y, z)
     rd, rd_x, rd_y, _ = _poly_grad(fw1, x, y, z)
@@ -143,7 +146,8 @@ def _exact_inverse_jacobian_py(fw0, fw1, fw2, fw3, x, y, z):
     return c_y / det, -r_y / det, -c_x / det, r_x / det
 
 
-def _inverse_guess_py(iv0, iv1, cn, rn, zn):
+@kernel(inline="always")
+def _inverse_guess(iv0, iv1, cn, rn, zn):
     """Polynomial guess (x, y), its inverse Jacobian and line-of-sight slope in normalised units.
 
     Returns ``x, y, dx_dr, dx_dc, dy_dr, dy_dc, dx_dz, dy_dz``.
@@ -153,7 +157,8 @@ def _inverse_guess_py(iv0, iv1, cn, rn, zn):
     return x, y, x_r, x_c, y_r, y_c, x_z, y_z
 
 
-def _correction_cell_py(corr, cg, cn, rn, zn):
+@kernel(inline="always")
+def _correction_cell(corr, cg, cn, rn, zn):
     """Cell of the polynomial's residual grid and the interpolation weights: ``(cell, a, b, w)``.
 
     ``cell`` is the flat index ``i * n_c + j`` of the cell of (col_n, row_n) (clamped: outside the grid the
@@ -173,7 +178,8 @@ def _correction_cell_py(corr, cg, cn, rn, zn):
     return i * n_c + j, fu - j, fv - i, (zn - cg[2]) / cg[5]
 
 
-def _correction_at_py(cells, cell, a, b, w):
+@kernel(inline="always")
+def _correction_at(cells, cell, a, b, w):
     """Residual of the fitted polynomial: bilinear in (col_n, row_n) over ``cells[cell]``, linear in height.
 
     ``cells`` has shape (n_cells, 16): per cell, for the longitude then the latitude, for the lower then the
@@ -191,11 +197,12 @@ def _correction_at_py(cells, cell, a, b, w):
     return lon_lo + w * (lon_hi - lon_lo), lat_lo + w * (lat_hi - lat_lo)
 
 
-def _correction_py(corr, cg, cn, rn, zn):
+@kernel(inline="always")
+def _correction(corr, cg, cn, rn, zn):
     """Residual of the fitted polynomial at (col_n, row_n, z_n), interpolated in its grid.
 
-    ``corr`` has shape (n_r - 1, n_c - 1, 16) (see :func:`_correction_at_py`); ``cg`` = (c0, r0, z0, dc, dr,
-    dz).  The compiled loops split this into a vectorised pass (:func:`_correction_cell_py`) and the gathers.
+    ``corr`` has shape (n_r - 1, n_c - 1, 16) (see :func:`_correction_at`); ``cg`` = (c0, r0, z0, dc, dr,
+    dz).  The compiled loops split this into a vectorised pass (:func:`_correction_cell`) and the gathers.
     """
     cell, a, b, w = _correction_cell(corr, cg, cn, rn, zn)
     return _correction_at(corr.reshape(corr.shape[0] * corr.shape[1], 16), cell, a, b, w)
@@ -231,14 +238,16 @@ CORRECTION_NODES = 65
 MAX_PASSES = 4
 
 
-def _start_py(iv0, iv1, corr, cg, cn, rn, zn):
+@kernel(inline="always")
+def _start(iv0, iv1, corr, cg, cn, rn, zn):
     """Polynomial guess plus its interpolated residual: ``x, y, dx_dr, dx_dc, dy_dr, dy_dc, dx_dz, dy_dz``."""
     x, y, m_xr, m_xc, m_yr, m_yc, x_z, y_z = _inverse_guess(iv0, iv1, cn, rn, zn)
     cx, cy = _correction(corr, cg, cn, rn, zn)
     return x + cx, y + cy, m_xr, m_xc, m_yr, m_yc, x_z, y_z
 
 
-def _pixel_residual_py(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, row_sc, col_sc):
+@kernel(inline="always")
+def _pixel_residual(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, row_sc, col_sc):
     """Normalised residual (row, col) of ground (x, y, zn) against pixel (rn, cn), and its size in pixels."""
     rr, cc = _forward(fw0, fw1, fw2, fw3, x, y, zn)
     er = rn - rr
@@ -246,7 +255,8 @@ def _pixel_residual_py(fw0, fw1, fw2, fw3, x, y, zn, rn, cn, row_sc, col_sc):
     return er, ec, math.sqrt((er * row_sc) ** 2 + (ec * col_sc) ** 2)  # not hypot: a libm call, not vectorised
 
 
-def _refine_at_height_py(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x, y, m_xr, m_xc, m_yr, m_yc, tol_px, max_iter):
+@kernel()
+def _refine_at_height(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x, y, m_xr, m_xc, m_yr, m_yc, tol_px, max_iter):
     """Scalar refinement of one point at a fixed normalised height from (x, y): ``(x, y, converged)``.
 
     Chord steps with the given inverse Jacobian; when a step does not shrink the residual fourfold, the exact
@@ -267,14 +277,16 @@ def _refine_at_height_py(fw0, fw1, fw2, fw3, norm, rn, cn, zn, x, y, m_xr, m_xc,
     return x, y, False
 
 
-def _block_scratch_py(b, n, rows):
+@kernel(inline="always")
+def _block_scratch(b, n, rows):
     """Block ``b`` of ``n`` points: its first point, its size, ``rows`` rows of float scratch and a cell index row."""
     i0 = b * BLOCK
     m = min(n, i0 + BLOCK) - i0
     return i0, m, np.empty((rows, m)), np.empty(m, np.int64)
 
 
-def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
+@kernel(nogil=True)
+def _localize_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, tol_px, max_iter, lon_out, lat_out,
                         flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     tol2 = tol_px * tol_px
@@ -331,7 +343,8 @@ def _localize_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, 
             y[k] = y[k] * lat_sc + lat_off
 
 
-def _cell_step_py(h00, h01, h10, h11, j, i, ua, va, za, du, dv, dz, sa, sb, top_j, top_i):
+@kernel(inline="always")
+def _cell_step(h00, h01, h10, h11, j, i, ua, va, za, du, dv, dz, sa, sb, top_j, top_i):
     """One cell of a narrowed segment: ``(s, flag, s_next, j_next, i_next)`` (all floats; flag 0.0 is OK).
 
     The segment (grid coordinates, parameter s) starts at (ua, va, za) and moves by (du, dv, dz) per unit of
@@ -369,18 +382,20 @@ def _cell_step_py(h00, h01, h10, h11, j, i, ua, va, za, du, dv, dz, sa, sb, top_
     return s, flag, se, j_next, i_next
 
 
-def _clamp_index_py(u, top):
+@kernel(inline="always")
+def _clamp_index(u, top):
     """Cell index of fractional node coordinate u, clamped to [0, top] (NaN -> 0); branch-free selects."""
     uc = u if u >= 0.0 else 0.0
     uc = uc if uc <= top else top
     return int(uc)
 
 
-def _refine_on_dem_py(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x, y, zn, m_xr, m_xc, m_yr, m_yc, x_z,
+@kernel()
+def _refine_on_dem(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x, y, zn, m_xr, m_xc, m_yr, m_yc, x_z,
                       y_z, tol_px, tol_m, max_iter):
     """Scalar refinement of one point on the line of sight and the DEM from (x, y, zn): ``(x, y, zn, flag)``.
 
-    Each iteration: the pixel step of :func:`_refine_at_height_py` and a Newton step on the height along the
+    Each iteration: the pixel step of :func:`_refine_at_height` and a Newton step on the height along the
     line of sight (slopes ``x_z``, ``y_z``) against the bilinear DEM.
     """
     h_off = norm[4]
@@ -414,7 +429,8 @@ def _refine_on_dem_py(fw0, fw1, fw2, fw3, norm, hgt, ux, u0, vy, v0, rn, cn, x, 
     return x, y, zn, NOT_CONVERGED
 
 
-def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, gy0, gdx, gdy, z_top, z_bot,
+@kernel(nogil=True)
+def _dem_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, gy0, gdx, gdy, z_top, z_bot,
                    row, col, tol_px, tol_m, max_iter, lon_out, lat_out, h_out, flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     zn_top = (z_top - h_off) / h_sc
@@ -595,42 +611,8 @@ def _dem_blocks_py(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx
 
 if NUMBA_AVAILABLE:
     from explorer.rpc._kernels import _horner  # compiled cubic (same operations as the numpy path)
-
-    _poly_grad = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_poly_grad_py)
-    _forward = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_forward_py)
-    _exact_inverse_jacobian = njit(cache=True, fastmath=False, error_model="numpy")(_exact_inverse_jacobian_py)
-    _inverse_guess = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_inverse_guess_py)
-    _correction_cell = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_cell_py)
-    _correction_at = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_at_py)
-    _correction = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_correction_py)
-    _start = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_start_py)
-    _pixel_residual = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_pixel_residual_py)
-    _refine_at_height = njit(cache=True, fastmath=False, error_model="numpy")(_refine_at_height_py)
-    _block_scratch = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_block_scratch_py)
-    _clamp_index = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_clamp_index_py)
-    _cell_step = njit(cache=True, fastmath=False, error_model="numpy", inline="always")(_cell_step_py)
-    _refine_on_dem = njit(cache=True, fastmath=False, error_model="numpy")(_refine_on_dem_py)
-    # serial loops released from the GIL, run on parts of the points by explorer._threads (see there why)
-    _localize_blocks = njit(nogil=True, cache=True, fastmath=False, error_model="numpy")(_localize_blocks_py)
-    _dem_blocks = njit(nogil=True, cache=True, fastmath=False, error_model="numpy")(_dem_blocks_py)
 else:  # pragma: no cover - numba missing: interpreted (slow, same operations)
     _horner = horner_rpc00b
-    _poly_grad = _poly_grad_py
-    _forward = _forward_py
-    _exact_inverse_jacobian = _exact_inverse_jacobian_py
-    _inverse_guess = _inverse_guess_py
-    _correction_cell = _correction_cell_py
-    _correction_at = _correction_at_py
-    _correction = _correction_py
-    _start = _start_py
-    _pixel_residual = _pixel_residual_py
-    _refine_at_height = _refine_at_height_py
-    _block_scratch = _block_scratch_py
-    _clamp_index = _clamp_index_py
-    _cell_step = _cell_step_py
-    _refine_on_dem = _refine_on_dem_py
-    _localize_blocks = _localize_blocks_py
-    _dem_blocks = _dem_blocks_py
 _first_hit = _dem.first_hit
 _exit_param = _dem.exit_param
 _box_cells = _dem.box_cells
@@ -666,7 +648,7 @@ class RPCInverse:
     correction : ndarray, shape (n_r - 1, n_c - 1, 16)
         The polynomial's residual (normalised lon, lat; exact inverse minus polynomial) at the nodes of a
         regular grid of normalised column and row at the lowest and highest height, stored per cell
-        (see :func:`_correction_py`), interpolated and added to the guess.
+        (see :func:`_correction`), interpolated and added to the guess.
     correction_grid : tuple of 6 float
         c0, r0, z0 (first node) and dc, dr, dz (spacing) of that grid, normalised units.
     """
