@@ -56,22 +56,31 @@ def _newton_update_np(rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi
 
 
 @njit(parallel=True, fastmath=False, cache=True)
-def _newton_first_nb(
-    ground, sx, fx, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, accept_step, steps, r, row_out,
-    col_out, state, ce, trace,
+def _newton_pass_nb(
+    ground, idx, sx, fx, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, accept_step, k, steps, r,
+    row_out, col_out, state, ce, trace,
 ):  # pragma: no cover - compiled
+    """One compiled Newton pass: ``len(steps)`` unconditional evaluations per point (rows clipped to the window).
+
+    ``k == 0`` (the first pass): every point, starting from the seed; else the points ``idx``, from ``r``,
+    ``k`` evaluations into their iteration (their trace rows and CE counts continue from there).
+    """
     P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
     mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half = sx
     n_trace = trace.shape[0]
-    for i in prange(ground.shape[0]):
+    from_seed = k == 0
+    m = ground.shape[0] if from_seed else idx.shape[0]
+    for j in prange(m):
+        i = np.int64(j) if from_seed else idx[j]
         X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
-        rr = min(max(_seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half), w_lo),
-                 w_hi)
         for s in range(len(steps)):  # 1 or 2 unconditional Newton evaluations (unrolled)
-            if s > 0:
-                rr = min(max(r[i], w_lo), w_hi)
-            if n_trace > s:
-                trace[s, i] = rr
+            if s == 0 and from_seed:
+                rr = _seed_full(X, Y, Z, mean, inv_scale, coef, cs, c_r0, c_inv, H, ccoef, c_mid, c_inv_half)
+            else:
+                rr = r[i]
+            rr = min(max(rr, w_lo), w_hi)
+            if n_trace > k + s:
+                trace[k + s, i] = rr
             t = (rr - ref_row) * line_period
             g, gt, yd, ydt, vz = _ce_fixed(
                 X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
@@ -80,31 +89,10 @@ def _newton_first_nb(
                 i, rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi, orient, accept_step, r, row_out, col_out,
                 state,
             )
-        ce[i] = len(steps)
+        ce[i] = k + len(steps)
 
 
-@njit(parallel=True, fastmath=False, cache=True)
-def _newton_next_nb(
-    ground, idx, fx, focal, offset, pitch, pc, line_period, ref_row, w_lo, w_hi, orient, accept_step, k, r, row_out,
-    col_out, state, ce, trace,
-):  # pragma: no cover - compiled
-    P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv = fx  # unpacked outside prange
-    n_trace = trace.shape[0]
-    for j in prange(idx.shape[0]):
-        i = idx[j]
-        rr = min(max(r[i], w_lo), w_hi)
-        if n_trace > k:
-            trace[k, i] = rr
-        t = (rr - ref_row) * line_period
-        X, Y, Z = ground[i, 0], ground[i, 1], ground[i, 2]
-        g, gt, yd, ydt, vz = _ce_fixed(
-            X, Y, Z, t, P, V, A, AR, sc0f, jn, jp, jt, js, jc, jt0, jinv_dt, dn, fdist, cn, fcurv, focal, offset
-        )
-        _newton_update(
-            i, rr, g, gt, yd, ydt, vz, line_period, pitch, pc, w_lo, w_hi, orient, accept_step, r, row_out, col_out,
-            state,
-        )
-        ce[i] = k + 1
+_EVERY_POINT = np.zeros(0, np.int64)  # the (unused) index array of the first pass, which takes every point
 
 
 # --------------------------------------------------------------------------- exact: safeguarded iteration
@@ -434,15 +422,9 @@ def solve_exact(
         state = np.empty(n, np.int8)
         if use_nb:
             ce = np.empty(n, np.int64)
-            _newton_first_nb(
-                ground,
-                sx,
-                fm.args(),
-                p.focal,
-                p.offset,
-                pitch, pc, dt, ref, w_lo, w_hi, orient, accept_step,
-                (0,) * first,
-                r, row, col, state, ce, trace_rows,
+            _newton_pass_nb(
+                ground, _EVERY_POINT, sx, fm.args(), p.focal, p.offset, pitch, pc, dt, ref, w_lo, w_hi, orient,
+                accept_step, 0, (0,) * first, r, row, col, state, ce, trace_rows,
             )
         else:
             ce = np.full(n, first, np.int64)
@@ -464,13 +446,9 @@ def solve_exact(
         k = first
         while idx.size and k < max_fast_passes:
             if use_nb:
-                _newton_next_nb(
-                    ground,
-                    idx,
-                    fm.args(),
-                    p.focal,
-                    p.offset,
-                    pitch, pc, dt, ref, w_lo, w_hi, orient, accept_step, k, r, row, col, state, ce, trace_rows,
+                _newton_pass_nb(
+                    ground, idx, sx, fm.args(), p.focal, p.offset, pitch, pc, dt, ref, w_lo, w_hi, orient,
+                    accept_step, k, (0,), r, row, col, state, ce, trace_rows,
                 )
             else:
                 rr = np.minimum(np.maximum(r[idx], w_lo), w_hi)
