@@ -1,6 +1,7 @@
 """Atomic result files: a writer fills a temporary file beside the target and renames it into place only
 when it is complete, so a failed, interrupted (Ctrl-C, SIGTERM) or killed run never leaves a file under the
-final name. A killed run (SIGKILL) can leave only the hidden ``.<name>.partial-<pid>`` file."""
+final name. A killed run (SIGKILL) can leave only the hidden ``.<name>.partial-<pid>`` file, which the next
+write of the same name removes once no process with that pid is alive."""
 
 from __future__ import annotations
 
@@ -67,6 +68,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     ...     tmp.write_text("{}")
     """
     target = check_output_path(path)
+    _remove_stale_partials(target)
     tmp = target.with_name(f".{target.name}.partial-{os.getpid()}")
     try:
         yield tmp
@@ -76,6 +78,30 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # it exists but is not ours (EPERM)
+        return True
+    return True
+
+
+def _remove_stale_partials(target: Path) -> None:
+    """Remove ``.<name>.partial-<pid>`` files of ``target`` left by killed writers (their pid is not alive)."""
+    prefix = f".{target.name}.partial-"
+    parent = target.parent if str(target.parent) else Path(".")
+    try:
+        entries = list(parent.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        pid_text = entry.name[len(prefix):] if entry.name.startswith(prefix) else ""
+        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
+            entry.unlink(missing_ok=True)
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
