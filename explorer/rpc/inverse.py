@@ -477,7 +477,7 @@ def _dem_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, 
                 cu_lo, cu_hi, cv_lo, cv_hi = _box_cells(n_cu, n_cv, sc[10, k], sc[11, k], sc[12, k] - sc[10, k],
                                                         sc[13, k] - sc[11, k], sc[8, k], sc[9, k])
                 width = max(width, max(cu_hi - cu_lo, cv_hi - cv_lo))
-            if width == 0:  # every chord of the block in one cell: nothing to narrow
+            if 2 * width + 1 <= CELL_STEPS:  # the lockstep cells cover every chord of the block: nothing to gain
                 break
             level = _level_for_width(levels, width)
             for k in range(m):  # (vectorised; gathers)
