@@ -110,10 +110,11 @@ def test_manifest_names_existing_kernels_with_their_arity():
     for unit, entries in table.items():
         for k in entries:
             disp = _dispatcher(k)
-            assert disp is not None, f"{unit}: {k.module}.{k.name} is not a kernel any more (re-record)"
+            again = "re-record the manifest: python -m explorer.warmup --record"
+            assert disp is not None, f"{unit}: {k.module}.{k.name} is not a kernel any more; {again}"
             sig = _signature(k)
-            assert sig is not None, f"{unit}: {k.signature} does not parse"
-            assert len(sig) == len(inspect.signature(disp.py_func).parameters), (unit, k.label)
+            assert sig is not None, f"{unit}: {k.signature} does not parse; {again}"
+            assert len(sig) == len(inspect.signature(disp.py_func).parameters), f"{unit}: {k.label}; {again}"
 
 
 def test_needed_units_of_the_commands():
