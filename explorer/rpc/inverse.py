@@ -552,19 +552,20 @@ def _dem_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, 
                 sc[13, k] = hgt[i + 1, j + 1] - hgt[i + 1, j] - sc[11, k]
                 sc[14, k] = u - j
                 sc[15, k] = v - i
-            n_open = 0
-            for k in range(m):  # verification (vectorised; an integer count, which LLVM may reorder)
-                a = sc[14, k]
-                bb = sc[15, k]
-                g = zn[k] * h_sc + h_off - (sc[10, k] + sc[11, k] * a + sc[12, k] * bb + sc[13, k] * a * bb)
-                u = ux * x[k] + u0
-                v = vy * y[k] + v0
-                inside = (u >= 0.0) & (u <= top_j + 1.0) & (v >= 0.0) & (v <= top_i + 1.0)
-                good = ((sc[8, k] * row_sc) ** 2 + (sc[9, k] * col_sc) ** 2 <= tol2) & (abs(g) <= tol_m) & inside
-                sc[7, k] = 0.0 if good else 1.0
-                n_open += 1 if (not good) & (flag_out[i0 + k] == OK) else 0
-            if 8 * n_open <= m:
-                break
+            if _p > 0:  # (the guess itself is never within 1e-9 px: not measured)
+                n_open = 0
+                for k in range(m):  # verification (vectorised; an integer count, which LLVM may reorder)
+                    a = sc[14, k]
+                    bb = sc[15, k]
+                    g = zn[k] * h_sc + h_off - (sc[10, k] + sc[11, k] * a + sc[12, k] * bb + sc[13, k] * a * bb)
+                    u = ux * x[k] + u0
+                    v = vy * y[k] + v0
+                    inside = (u >= 0.0) & (u <= top_j + 1.0) & (v >= 0.0) & (v <= top_i + 1.0)
+                    good = ((sc[8, k] * row_sc) ** 2 + (sc[9, k] * col_sc) ** 2 <= tol2) & (abs(g) <= tol_m) & inside
+                    sc[7, k] = 0.0 if good else 1.0
+                    n_open += 1 if (not good) & (flag_out[i0 + k] == OK) else 0
+                if 8 * n_open <= m:
+                    break
             for k in range(m):  # a pixel + height step for the points not yet converged (vectorised)
                 er = sc[8, k]
                 ec = sc[9, k]
@@ -580,7 +581,7 @@ def _dem_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, 
                 dy = sc[2, k] * er + sc[3, k] * ec
                 g -= hu * ux * dx + hv * vy * dy
                 dz = -g / (h_sc - (hu * ux * sc[4, k] + hv * vy * sc[5, k]))
-                step = sc[7, k] != 0.0
+                step = (_p == 0) | (sc[7, k] != 0.0)
                 x[k] += dx + sc[4, k] * dz if step else 0.0
                 y[k] += dy + sc[5, k] * dz if step else 0.0
                 zn[k] += dz if step else 0.0
