@@ -170,9 +170,10 @@ def _dilate(a: np.ndarray, fill: float, op) -> np.ndarray:
 
 def _float32_bound(a: np.ndarray, upward: bool) -> np.ndarray:
     """``a`` in float32, rounded away from the bound's side (up for maxima, down for minima): still a bound."""
-    out = a.astype(np.float32)
-    wrong = out < a if upward else out > a
-    out[wrong] = np.nextafter(out[wrong], np.float32(np.inf if upward else -np.inf))
+    with np.errstate(over="ignore"):  # beyond float32's range: +-inf, still a bound
+        out = a.astype(np.float32)
+        wrong = out < a if upward else out > a
+        out[wrong] = np.nextafter(out[wrong], np.float32(np.inf if upward else -np.inf))
     return out
 
 

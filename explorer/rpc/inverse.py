@@ -161,29 +161,33 @@ def _inverse_guess(iv0, iv1, cn, rn, zn):
 def _correction_cell(corr, cg, cn, rn, zn):
     """Cell of the polynomial's residual grid and the interpolation weights: ``(cell, a, b, w)``.
 
-    ``cell`` is the flat index ``i * n_c + j`` of the cell of (col_n, row_n) (clamped: outside the grid the
-    nearest cell is used), ``a``, ``b`` the fractions within it, ``w`` the fraction of the height between the
-    grid's two layers.  No memory access, so that a loop over points vectorises.
+    ``cell`` is the flat index ``(l * n_r + i) * n_c + j`` of the cell of (col_n, row_n) in height interval
+    ``l`` (clamped: outside the grid the nearest cell is used), ``a``, ``b`` the fractions within it, ``w``
+    the fraction of the height within the interval.  No memory access, so that a loop over points vectorises.
     """
-    n_r = corr.shape[0]
-    n_c = corr.shape[1]
+    n_l = corr.shape[0]
+    n_r = corr.shape[1]
+    n_c = corr.shape[2]
     fu = (cn - cg[0]) / cg[3]
     fv = (rn - cg[1]) / cg[4]
+    fw = (zn - cg[2]) / cg[5]
     fu = fu if fu >= 0.0 else 0.0
     fu = fu if fu <= n_c else float(n_c)
     fv = fv if fv >= 0.0 else 0.0
     fv = fv if fv <= n_r else float(n_r)
     j = min(int(fu), n_c - 1)
     i = min(int(fv), n_r - 1)
-    return i * n_c + j, fu - j, fv - i, (zn - cg[2]) / cg[5]
+    layer = min(int(fw if fw >= 0.0 else 0.0), n_l - 1)
+    return (layer * n_r + i) * n_c + j, fu - j, fv - i, fw - layer
 
 
 @kernel(inline="always")
 def _correction_at(cells, cell, a, b, w):
     """Residual of the fitted polynomial: bilinear in (col_n, row_n) over ``cells[cell]``, linear in height.
 
-    ``cells`` has shape (n_cells, 16): per cell, for the longitude then the latitude, for the lower then the
-    upper height, the corners (0, 0), (0, 1), (1, 0), (1, 1) -- contiguous, so one cell is two cache lines.
+    ``cells`` has shape (n_cells, 16): per cell (of one height interval), for the longitude then the latitude,
+    for the lower then the upper height, the corners (0, 0), (0, 1), (1, 0), (1, 1) -- contiguous, so one cell
+    is two cache lines.
     """
     c = cells[cell]
     w00 = (1.0 - a) * (1.0 - b)
@@ -201,25 +205,26 @@ def _correction_at(cells, cell, a, b, w):
 def _correction(corr, cg, cn, rn, zn):
     """Residual of the fitted polynomial at (col_n, row_n, z_n), interpolated in its grid.
 
-    ``corr`` has shape (n_r - 1, n_c - 1, 16) (see :func:`_correction_at`); ``cg`` = (c0, r0, z0, dc, dr,
-    dz).  The compiled loops split this into a vectorised pass (:func:`_correction_cell`) and the gathers.
+    ``corr`` has shape (n_layers - 1, n_r - 1, n_c - 1, 16) (see :func:`_correction_at`); ``cg`` = (c0, r0,
+    z0, dc, dr, dz).  The compiled loops split this into a vectorised pass (:func:`_correction_cell`) and the gathers.
     """
     cell, a, b, w = _correction_cell(corr, cg, cn, rn, zn)
-    return _correction_at(corr.reshape(corr.shape[0] * corr.shape[1], 16), cell, a, b, w)
+    return _correction_at(corr.reshape(corr.shape[0] * corr.shape[1] * corr.shape[2], 16), cell, a, b, w)
 
 
 def _correction_cells(residual: np.ndarray) -> np.ndarray:
-    """(2, 2, n_r, n_c) node residuals (component, height layer) -> (n_r - 1, n_c - 1, 16) per-cell blocks."""
-    n_r, n_c = residual.shape[2:]
-    cells = np.empty((n_r - 1, n_c - 1, 16))
-    for comp in range(2):
-        for layer in range(2):
-            grid = residual[comp, layer]
-            base = 8 * comp + 4 * layer
-            cells[:, :, base] = grid[:-1, :-1]
-            cells[:, :, base + 1] = grid[:-1, 1:]
-            cells[:, :, base + 2] = grid[1:, :-1]
-            cells[:, :, base + 3] = grid[1:, 1:]
+    """(2, n_z, n_r, n_c) node residuals (component, height layer) -> (n_z - 1, n_r - 1, n_c - 1, 16) blocks."""
+    n_z, n_r, n_c = residual.shape[1:]
+    cells = np.empty((n_z - 1, n_r - 1, n_c - 1, 16))
+    for interval in range(n_z - 1):
+        for comp in range(2):
+            for upper in range(2):
+                grid = residual[comp, interval + upper]
+                base = 8 * comp + 4 * upper
+                cells[interval, :, :, base] = grid[:-1, :-1]
+                cells[interval, :, :, base + 1] = grid[:-1, 1:]
+                cells[interval, :, :, base + 2] = grid[1:, :-1]
+                cells[interval, :, :, base + 3] = grid[1:, 1:]
     return np.ascontiguousarray(cells)
 
 
@@ -232,6 +237,10 @@ CELL_STEPS = 3
 
 #: Nodes per side of the correction grid of the fitted polynomial.
 CORRECTION_NODES = 65
+
+#: Height layers of the correction grid (linear between neighbouring layers): the residual of the cubic is
+#: curved in height (two layers left 1e-3 px on the Pleiades 2017 model, and a third pass for half its points).
+CORRECTION_LAYERS = 5
 
 #: At most this many vectorised passes (forward RPC, verification, a chord step for the points not yet
 #: converged); the passes stop as soon as at most an eighth of a block is left, which the scalar loop finishes.
@@ -290,7 +299,7 @@ def _localize_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, row, col, h, 
                         flag_out):
     lon_off, lon_sc, lat_off, lat_sc, h_off, h_sc, row_off, row_sc, col_off, col_sc = norm
     tol2 = tol_px * tol_px
-    cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
+    cells = corr.reshape(corr.shape[0] * corr.shape[1] * corr.shape[2], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in range(n_blocks):
@@ -448,7 +457,7 @@ def _dem_blocks(fw0, fw1, fw2, fw3, iv0, iv1, corr, cg, norm, hgt, bounds, gx0, 
     n_cu = hgt.shape[1] - 1
     n_cv = hgt.shape[0] - 1
     dz_chord = z_bot - z_top
-    cells = corr.reshape(corr.shape[0] * corr.shape[1], 16)
+    cells = corr.reshape(corr.shape[0] * corr.shape[1] * corr.shape[2], 16)
     n = row.shape[0]
     n_blocks = (n + BLOCK - 1) // BLOCK
     for b in range(n_blocks):
@@ -646,9 +655,9 @@ class RPCInverse:
         Height range of the fit, metres.
     guess_error_px : float
         The polynomial's largest error on the validation grid, pixels (before the correction grid).
-    correction : ndarray, shape (n_r - 1, n_c - 1, 16)
+    correction : ndarray, shape (CORRECTION_LAYERS - 1, n_r - 1, n_c - 1, 16)
         The polynomial's residual (normalised lon, lat; exact inverse minus polynomial) at the nodes of a
-        regular grid of normalised column and row at the lowest and highest height, stored per cell
+        regular grid of normalised column and row at CORRECTION_LAYERS heights, stored per cell
         (see :func:`_correction`), interpolated and added to the guess.
     correction_grid : tuple of 6 float
         c0, r0, z0 (first node) and dc, dr, dz (spacing) of that grid, normalised units.
@@ -691,7 +700,7 @@ class RPCInverse:
                 c_ends = (np.array([-0.5, cols - 0.5]) - rpc.col_offset) / rpc.col_scale
             else:
                 r_ends = c_ends = np.array([-1.0, 1.0])
-            n_grid, n_z = CORRECTION_NODES, 2
+            n_grid, n_z = CORRECTION_NODES, CORRECTION_LAYERS
             r_lo, r_hi = r_ends.min() - 0.02 * np.ptp(r_ends), r_ends.max() + 0.02 * np.ptp(r_ends)
             c_lo, c_hi = c_ends.min() - 0.02 * np.ptp(c_ends), c_ends.max() + 0.02 * np.ptp(c_ends)
             z_lo, z_hi = ((np.array([h_min, h_max]) - rpc.height_offset) / rpc.height_scale)
@@ -699,7 +708,7 @@ class RPCInverse:
             steps = ((c_hi - c_lo) / (n_grid - 1), (r_hi - r_lo) / (n_grid - 1), (z_hi - z_lo) / (n_z - 1))
             grid = tuple(float(v) for v in (c_lo, r_lo, z_lo, *steps))
             first = cls(_tuples(forward), _tuples(coefficients), tuple(float(v) for v in norm), h_min, h_max, error,
-                        np.zeros((n_grid - 1, n_grid - 1, 16)), grid)
+                        np.zeros((n_z - 1, n_grid - 1, n_grid - 1, 16)), grid)
             zz, rr, cc = np.meshgrid(np.linspace(z_lo, z_hi, n_z), np.linspace(r_lo, r_hi, n_grid),
                                      np.linspace(c_lo, c_hi, n_grid), indexing="ij")
             lon, lat, flags = first.localize(rr.ravel() * rpc.row_scale + rpc.row_offset,
