@@ -19,8 +19,8 @@ PACKAGE = ROOT / "explorer"
 
 #: Lowest first; a module may import only from its own layer or lower ones (docs/dev/architecture.md).
 LAYERS = [
-    ["explorer.errors", "explorer._numba", "explorer._lazy", "explorer._resources", "explorer._log",
-     "explorer.io_atomic"],
+    ["explorer.errors", "explorer._numba", "explorer._threads", "explorer._lazy", "explorer._resources",
+     "explorer._log", "explorer.io_atomic"],
     ["explorer.geometry"],
     ["explorer.sensor", "explorer.scene"],
     ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],
@@ -219,7 +219,7 @@ def test_the_model_layers_never_import_gui_libraries(library):
 
 
 #: Private modules of the package root that every subpackage may use (the package's own infrastructure).
-SHARED_PRIVATE = {"explorer._numba", "explorer._lazy", "explorer._resources", "explorer._log"}
+SHARED_PRIVATE = {"explorer._numba", "explorer._threads", "explorer._lazy", "explorer._resources", "explorer._log"}
 
 
 def _package_of(module: str) -> str:
