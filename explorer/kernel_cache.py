@@ -9,7 +9,7 @@ anything (a pickle read per kernel, a few milliseconds for all of them).
 
 What a command needs is a union of *units* (:func:`explorer.warmup.kernel_units`: the scene and point
 simulation on every preset, each method, relief, the RPC model, orthorectification); the manifest
-:mod:`explorer.kernel_manifest` lists, per unit, the kernels called from Python and their argument types,
+``explorer/kernel_manifest.json`` lists, per unit, the kernels called from Python and their argument types,
 recorded by running the unit (``python -m explorer.warmup --record``).  :func:`needed_units` maps a
 command's options to units and :func:`uncached` lists what of them is missing: a new installation, another
 numba version, another CPU, an edited source file, or a cache directory numba cannot write to.
@@ -61,14 +61,21 @@ class Kernel:
         return f"{self.module.removeprefix('explorer.')}.{self.name}"
 
 
+#: The generated data file beside this module (package data of the wheel).
+MANIFEST_NAME = "kernel_manifest.json"
+
+
 def manifest() -> dict[str, tuple[Kernel, ...]]:
-    """The recorded kernels per unit (:mod:`explorer.kernel_manifest`); empty if it is missing."""
+    """The recorded kernels per unit (``explorer/kernel_manifest.json``); empty if it is missing."""
+    import json
+    from importlib.resources import files
+
     try:
-        from explorer.kernel_manifest import KERNELS, UNITS
-    except ImportError:  # pragma: no cover - a build without the manifest: nothing is predicted
+        doc = json.loads(files("explorer").joinpath(MANIFEST_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # pragma: no cover - a build without the manifest: nothing is predicted
         return {}
-    table = [Kernel(*entry) for entry in KERNELS]
-    return {unit: tuple(table[i] for i in indices) for unit, indices in UNITS.items()}
+    table = [Kernel(*entry) for entry in doc["kernels"]]
+    return {unit: tuple(table[i] for i in indices) for unit, indices in doc["units"].items()}
 
 
 def kernels(units: Iterable[str]) -> list[Kernel]:
