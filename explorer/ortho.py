@@ -157,7 +157,7 @@ class RPCProjector:
         self.rpc = rpc
         self.height = height
         self.dem = dem
-        self.image_shape = tuple(int(v) for v in image_shape)
+        self.image_shape = (int(image_shape[0]), int(image_shape[1]))
         self._grid = height_grid_of(dem) if dem is not None else None
 
     def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

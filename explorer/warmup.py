@@ -23,8 +23,9 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -101,8 +102,19 @@ def _warm_methods(scene, names, n_scops: int = 30, n_scps: int = 200) -> None:
         method.ground_to_image(checks.ground)
 
 
+def _warm_compiled_methods(preset: str) -> None:
+    from explorer.presets import build_scene
+
+    _warm_methods(build_scene(preset), COMPILED_SEARCH_METHODS)
+
+
+def _warm_one_method(name: str, scene: Any, **options: Any) -> None:
+    """Warm one method on ``scene`` (a scene, or a callable that builds it)."""
+    _warm_methods(scene() if callable(scene) else scene, [name], **{"n_scps": 25_000, **options})
+
+
 def _warm_ortho() -> None:
-    from explorer.ortho import OrthoGrid, RPCProjector, render_block
+    from explorer.ortho import OrthoGrid, RPCProjector, SourceImage, render_block
 
     rpc = _rpc_for_warmup()
     projector = RPCProjector(rpc, (1000, 1000), height=500.0)
@@ -114,7 +126,7 @@ def _warm_ortho() -> None:
             return np.where(valid, 1.0, np.nan)
 
     grid = OrthoGrid(32631, 730_000.0, 4_987_000.0, 10.0, 8, 8)
-    render_block(projector, _Flat(), grid, slice(0, 8), slice(0, 8))
+    render_block(projector, cast("SourceImage", _Flat()), grid, slice(0, 8), slice(0, 8))
 
 
 def steps() -> list[tuple[str, Callable[[], None]]]:
@@ -131,8 +143,7 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
                                       n_scps=25_000)))
     for pid in ids:
         if pid != paper:
-            out.append((f"{pid}: compiled methods",
-                        lambda pid=pid: _warm_methods(build_scene(pid), COMPILED_SEARCH_METHODS)))
+            out.append((f"{pid}: compiled methods", partial(_warm_compiled_methods, pid)))
     out.append(("orthorectification block", _warm_ortho))
     out.append(("every other kernel of the manifest (explorer.kernel_cache)", _warm_manifest))
     return out
@@ -200,11 +211,10 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         units["isd"] = lambda: _warm_scene(_isd_scene(isd))
     for name in available():
         if name in COMPILED_SEARCH_METHODS:
-            units[f"method:{name}"] = every_preset(lambda scene, name=name: _warm_methods(scene, [name], n_scps=25_000))
+            units[f"method:{name}"] = every_preset(partial(_warm_one_method, name))
         else:
-            units[f"method:{name}"] = lambda name=name: _warm_methods(build_scene(paper), [name], n_scops=60,
-                                                                      n_scps=25_000)
-        units[f"method:{name}:relief"] = lambda name=name: _warm_methods(relief(), [name], n_scps=25_000)
+            units[f"method:{name}"] = partial(_warm_one_method, name, partial(build_scene, paper), n_scops=60)
+        units[f"method:{name}:relief"] = partial(_warm_one_method, name, relief)
     return units
 
 
