@@ -127,20 +127,13 @@ def synthetic_dem(path: Path, rpc, arcsec: float, seed: int = 0, low: float = 20
     (amplitude ~ 1/k^2) plus a mountain, scaled to ``low``..``high`` metres, with a 30 x 60-node void."""
     import rasterio
 
+    from explorer.geometry.terrain import mountain_heights
+
     d = arcsec / 3600.0
     lon0, lon1 = rpc.lon_offset - rpc.lon_scale - 0.02, rpc.lon_offset + rpc.lon_scale + 0.02
     lat0, lat1 = rpc.lat_offset - rpc.lat_scale - 0.02, rpc.lat_offset + rpc.lat_scale + 0.02
     nx, ny = int(np.ceil((lon1 - lon0) / d)) + 1, int(np.ceil((lat1 - lat0) / d)) + 1
-    rng = np.random.default_rng(seed)
-    k = np.hypot(np.fft.rfftfreq(nx)[None, :], np.fft.fftfreq(ny)[:, None])
-    k[0, 0] = 1.0
-    spectrum = (rng.normal(size=k.shape) + 1j * rng.normal(size=k.shape)) * k ** -2.0
-    spectrum[0, 0] = 0.0
-    z = np.fft.irfft2(spectrum, s=(ny, nx))
-    yy, xx = np.mgrid[0:ny, 0:nx]
-    z = 0.5 * (z - z.min()) / np.ptp(z) + np.exp(-(((xx - 0.5 * nx) / (0.25 * nx)) ** 2
-                                                   + ((yy - 0.5 * ny) / (0.25 * ny)) ** 2))
-    z = low + (z - z.min()) / np.ptp(z) * (high - low)
+    z = mountain_heights((ny, nx), low, high, seed)
     z[ny // 3: ny // 3 + 30, nx // 3: nx // 3 + 60] = -32768.0
     with rasterio.open(path, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="float32", crs="EPSG:4326",
                        transform=rasterio.Affine(d, 0, lon0 - d / 2, 0, -d, lat1 + d / 2), nodata=-32768.0) as dst:

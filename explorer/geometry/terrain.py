@@ -215,6 +215,35 @@ def synthetic_relief(
     return GridDEM(xmin - 2 * cell_m, ymin - 2 * cell_m, cell_m, cell_m, h, None, source)
 
 
+def mountain_heights(shape: tuple[int, int], low_m: float, high_m: float, seed: int) -> np.ndarray:
+    """Seeded rough terrain with a mountain, like an SRTM tile of a massif: heights (ny, nx), metres.
+
+    Power-law (fractal) relief -- Fourier amplitudes falling as 1/k^2 with random phases -- plus a Gaussian
+    mountain in the middle, scaled to ``low_m``..``high_m``.  For benchmarks and tests of the DEM search: slopes
+    at every scale, many cells crossed by an oblique line of sight.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Nodes (rows, columns).
+    low_m, high_m : float
+        Lowest and highest height, metres.
+    seed : int
+        The same arguments give the same grid.
+    """
+    ny, nx = shape
+    rng = np.random.default_rng(seed)
+    k = np.hypot(np.fft.rfftfreq(nx)[None, :], np.fft.fftfreq(ny)[:, None])
+    k[0, 0] = 1.0
+    spectrum = (rng.normal(size=k.shape) + 1j * rng.normal(size=k.shape)) * k ** -2.0
+    spectrum[0, 0] = 0.0
+    z = np.fft.irfft2(spectrum, s=(ny, nx))
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    mountain = np.exp(-(((xx - 0.5 * nx) / (0.25 * nx)) ** 2 + ((yy - 0.5 * ny) / (0.25 * ny)) ** 2))
+    z = 0.5 * (z - z.min()) / np.ptp(z) + mountain
+    return low_m + (z - z.min()) / np.ptp(z) * (high_m - low_m)
+
+
 def terrain_from_dict(d: dict) -> Terrain:
     """Inverse of ``to_dict`` of either terrain kind."""
     kind = d.get("kind")

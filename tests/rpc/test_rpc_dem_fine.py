@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from explorer.geometry.dem_intersection import NODATA, OK, HeightGrid
+from explorer.geometry.terrain import mountain_heights
 from explorer.rpc import read_rpc
 from explorer.rpc.inverse import RPCInverse
 
@@ -32,16 +33,7 @@ def rough_grid(rpc, spacing_arcsec: float = 3.0, seed: int = 3) -> HeightGrid:
     lon0, lat0 = rpc.lon_offset - rpc.lon_scale - 0.02, rpc.lat_offset - rpc.lat_scale - 0.02
     nx = int(np.ceil((2 * rpc.lon_scale + 0.04) / d)) + 1
     ny = int(np.ceil((2 * rpc.lat_scale + 0.04) / d)) + 1
-    rng = np.random.default_rng(seed)
-    k = np.hypot(np.fft.rfftfreq(nx)[None, :], np.fft.fftfreq(ny)[:, None])
-    k[0, 0] = 1.0
-    spectrum = (rng.normal(size=k.shape) + 1j * rng.normal(size=k.shape)) * k ** -2.0
-    spectrum[0, 0] = 0.0
-    z = np.fft.irfft2(spectrum, s=(ny, nx))
-    yy, xx = np.mgrid[0:ny, 0:nx]
-    mountain = np.exp(-(((xx - 0.5 * nx) / (0.25 * nx)) ** 2 + ((yy - 0.5 * ny) / (0.25 * ny)) ** 2))
-    z = 0.5 * (z - z.min()) / np.ptp(z) + mountain
-    z = 200.0 + 1700.0 * (z - z.min()) / np.ptp(z)
+    z = mountain_heights((ny, nx), 200.0, 1900.0, seed)
     # a cliff: 150 m over one 90 m cell (about 60 degrees) along a column band
     z[:, int(0.6 * nx):] += 150.0
     # a thin ridge: one row of nodes 900 m up (flanks of 84 degrees, steeper than the lines of sight)
