@@ -7,5 +7,6 @@ from setuptools import find_packages, setup
 setup(
     packages=[*find_packages(include=["explorer", "explorer.*"]), "explorer.assets", "explorer.assets.dem"],
     package_dir={"explorer.assets": "assets"},
-    package_data={"explorer": ["py.typed", "kernel_manifest.json"], "explorer.assets": ["*.json", "*.md"], "explorer.assets.dem": ["*"]},
+    package_data={"explorer": ["py.typed", "kernel_manifest.json"], "explorer.assets": ["*.json", "*.md"],
+                  "explorer.assets.dem": ["*"]},
 )
