@@ -1,7 +1,5 @@
 """``python -m explorer`` is the ``pushbroom`` command line."""
 
-import sys
+from explorer.cli import run
 
-from explorer.cli import main
-
-sys.exit(main())
+run()

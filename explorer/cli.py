@@ -110,5 +110,20 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
+def run() -> None:
+    """The ``pushbroom`` / ``python -m explorer`` entry point: :func:`main`, then exit with its status.
+
+    After Ctrl-C or SIGTERM the writers have removed their partial files by the time :func:`main` returns, but
+    worker threads (a Dask pool, a kernel numba is still compiling) may still run; a normal exit would wait
+    for them, so an interrupted command leaves at once instead.
+    """
+    code = main()
+    if code in (130, 143):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
