@@ -18,6 +18,7 @@ import pytest
 
 from explorer.commands.ortho import WORK_PREFIX, work_folder
 from explorer.errors import InputError
+from tests.interrupts import as_foreground_job
 
 DATA = Path(__file__).parent / "data" / "rpc"
 DEM = Path(__file__).parent.parent / "assets" / "dem" / "MNT_P1BP--2018122638935449CP.tif"
@@ -87,7 +88,7 @@ def test_an_interrupted_ortho_run_removes_its_folder_and_partial_output(tmp_path
         [sys.executable, "-m", "explorer", "ortho", "--rpc", str(DATA / "PHRDIMAP_P1BP--2018122638935449CP.XML"),
          "--dem", str(DEM), "--synthetic", "--rpc-shape", "3000x3000", "--gsd", "0.5", "--chunk", "256",
          "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(root),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(root), preexec_fn=as_foreground_job,
     )
     deadline = time.monotonic() + 300  # a hang guard, not a speed assertion
     while time.monotonic() < deadline and proc.poll() is None:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.interrupts import as_foreground_job
+
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
@@ -18,7 +20,7 @@ def test_interrupted_ortho_leaves_nothing_under_the_final_name(tmp_path: Path, s
     proc = subprocess.Popen(
         [sys.executable, "-m", "explorer", "ortho", "--preset", "linear", "--synthetic", "--gsd", "0.1",
          "--chunk", "256", "--scheduler", "threads", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, preexec_fn=as_foreground_job,
     )
     # wait until the writer has started (its hidden partial file exists), then interrupt
     deadline = time.monotonic() + 300
