@@ -315,7 +315,7 @@ class Scene:
             "exterior": self.exterior.to_dict(),
             "timing": {"line_period_s": self.timing.line_period_s, "reference_row": self.timing.reference_row},
             "terrain": self.terrain.to_dict(),
-            "frame": {"lat0_deg": self.frame.lat0_deg, "lon0_deg": self.frame.lon0_deg, "h0_m": self.frame.h0_m},
+            "frame": self.frame.to_dict(),
             "metadata": self.metadata,
         }
 
@@ -336,7 +336,7 @@ class Scene:
                 timing=LineTiming(float(d["timing"]["line_period_s"]), float(d["timing"]["reference_row"])),
                 n_rows=int(d["n_rows"]),
                 terrain=terrain_from_dict(d["terrain"]),
-                frame=LocalFrame(**{k: float(v) for k, v in d["frame"].items()}),
+                frame=LocalFrame.from_dict(d["frame"]),
                 metadata=dict(d.get("metadata", {})),
             )
         except KeyError as exc:
