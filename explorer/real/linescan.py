@@ -615,7 +615,7 @@ class RigorousLineScanScene(Scene):
         if not isinstance(d, dict) or d.get("format") != RIGOROUS_FORMAT:
             raise SceneFileError(f"{source}: not a rigorous line-scan scene file")
         try:
-            frame = LocalFrame(**{k: float(v) for k, v in d["frame"].items()})
+            frame = LocalFrame.from_dict(d["frame"])
             model = d.get("model", {})
             return cls(
                 name=str(d["name"]),
