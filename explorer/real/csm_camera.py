@@ -69,6 +69,8 @@ SUPPORTED_DISTORTIONS = {
     "lrolrocnac": K.DIST_LROLROCNAC,
 }
 UNIT_TO_M = {"m": 1.0, "km": 1000.0}
+QUATERNION_NORM_TOL = 1e-5  # |norm - 1| above this is not a rounding of a unit quaternion
+STATUS_OUTSIDE_TABLES = 5  # GroundToImage.status: solved at a line the ephemeris tables do not cover
 J2000_FRAME = 1
 
 
@@ -92,7 +94,9 @@ class GroundToImage(NamedTuple):
     valid : ndarray of bool (N,)
         Solved (``status == 0``) and on the image (``0 <= line <= lines``, ``0 <= sample <= samples``).
     status : ndarray of int8 (N,)
-        0 solved, 1 behind the camera, 2 no root in the search window, 3 iteration limit.
+        0 solved, 1 behind the camera, 2 no root in the search window, 3 iteration limit, 5 solved at a
+        line whose time is outside the ephemeris tables (``STATUS_OUTSIDE_TABLES``: the line is
+        returned, computed from extrapolated tables, and flagged).
     evaluations : ndarray of int64 (N,)
         Residual evaluations per point.
     """
@@ -181,12 +185,18 @@ def _rotation_table(isd: _Isd, table: str) -> tuple[np.ndarray, np.ndarray, np.n
     q = isd.array(table, "quaternions", shape=(None, 4))
     if q.shape[0] < 1:
         raise isd.fail(f"{table}.quaternions", "is empty")
-    if np.any(np.linalg.norm(q, axis=1) < 1e-12):
-        raise isd.fail(f"{table}.quaternions", "contains a zero quaternion")
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norm - 1.0) > QUATERNION_NORM_TOL)
+    if bad.size:
+        i = int(bad[0])
+        raise isd.fail(f"{table}.quaternions", f"row {i} has norm {norm[i]:.9g}, not a unit quaternion "
+                       f"({bad.size} of {norm.size} rows off by more than {QUATERNION_NORM_TOL:g})")
     t = _times(isd, table, q.shape[0])
     c = isd.array(table, "constant_rotation", shape=(9,), default=np.eye(3).ravel().tolist()).reshape(3, 3)
     if not np.allclose(c @ c.T, np.eye(3), atol=1e-6):
-        raise isd.fail(f"{table}.constant_rotation", "is not a rotation matrix")
+        raise isd.fail(f"{table}.constant_rotation", "is not a rotation matrix (not orthonormal)")
+    if np.linalg.det(c) < 0:
+        raise isd.fail(f"{table}.constant_rotation", "is a reflection (determinant -1), not a rotation")
     return t, _continuous(q), np.ascontiguousarray(c)
 
 
@@ -271,6 +281,8 @@ class CsmCamera:
     distortion_coefficients: np.ndarray
     height_range_m: tuple[float, float] = (-1000.0, 1000.0)
     metadata: dict = field(default_factory=dict)
+    table_span: tuple[float, float] = (-math.inf, math.inf)
+    table_span_names: tuple[str, str] = ("", "")
 
     def __post_init__(self) -> None:
         fl, fs = self.focal2pixel_lines, self.focal2pixel_samples
@@ -289,6 +301,7 @@ class CsmCamera:
         cam[K.C_LOOK] = 1.0
         cam[K.C_CURV] = np.inf  # until measured: accept on the step only
         self._cam = cam
+        self._check_coverage()
         self._set_look_sign()
         self._seed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._seed_table: tuple = ()
@@ -347,6 +360,63 @@ class CsmCamera:
         k = np.clip(np.searchsorted(starts + 0.5 * self.rate_periods, t, side="right") - 1, 0, None)
         return self.rate_lines[k] - 0.5 + (t - self.rate_times[k]) / self.rate_periods[k]
 
+    def line_period(self, line: np.ndarray) -> np.ndarray:
+        """Seconds per line (N,) of the ``line_scan_rate`` row in effect at CSM lines (N,)."""
+        line = np.atleast_1d(np.asarray(line, dtype=np.float64))
+        k = np.clip(np.searchsorted(self.rate_lines, line, side="right") - 1, 0, None)
+        return self.rate_periods[k]
+
+    def line_covered(self, line: ArrayLike) -> np.ndarray:
+        """True (N,) where the time of CSM lines (N,) lies inside every ephemeris table (``table_span``).
+
+        A line is covered when its time is within the span of the position, pointing and body-rotation
+        tables (those with more than one sample), widened by half a line (plus 1e-6 line of round-off)
+        at either end: ALE starts and ends its tables at the first and last pixels' centres or outer
+        edges, so the outer half of the first and last lines is the most a table may be extrapolated.
+        Lines that are not covered are flagged by :meth:`image_to_ground` and :meth:`ground_to_image`,
+        never extrapolated (``docs/conventions.md#usgs-csm-line-scan-isds``).
+        """
+        line = np.atleast_1d(np.asarray(line, dtype=np.float64))
+        lo, hi = self.table_span
+        t = self.line_time(line)
+        slack = (0.5 + 1e-6) * self.line_period(line)
+        with np.errstate(invalid="ignore"):
+            return (t >= lo - slack) & (t <= hi + slack)
+
+    def covered_line_ranges(self) -> list[tuple[float, float]]:
+        """The image's covered stretches as ``(first, last)`` CSM line pairs (whole lines, pixel edges)."""
+        centres = np.arange(self.n_lines) + 0.5
+        ok = self.line_covered(centres)
+        if not ok.any():
+            return []
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+        return [(float(a), float(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+    def covered_fraction(self) -> float:
+        """Fraction of the image's lines (their centres) covered by every ephemeris table."""
+        return float(np.mean(self.line_covered(np.arange(self.n_lines) + 0.5)))
+
+    def _check_coverage(self) -> None:
+        """Refuse a camera whose tables cover none of the image's lines, naming the table and the times."""
+        if self.covered_fraction() > 0.0:
+            return
+        edges = np.concatenate([[0.0, float(self.n_lines)], self.rate_lines[(self.rate_lines > 0)
+                                                                            & (self.rate_lines < self.n_lines)]])
+        times = np.concatenate([self.line_time(edges), self.line_time(np.maximum(edges - 1e-9, 0.0))])
+        t0, t1 = float(times.min()), float(times.max())
+        lo, hi = self.table_span
+        names = []
+        for name, (a, b) in self.metadata.get("table_spans", {}).items():
+            if a > t1 or b < t0:
+                names.append(f"{name!r} covers ephemeris times {a + self.center_time:.6f} .. "
+                             f"{b + self.center_time:.6f} s")
+        which = "; ".join(names) if names else (
+            f"{self.table_span_names[0]!r} starts at {lo + self.center_time:.6f} s and "
+            f"{self.table_span_names[1]!r} ends at {hi + self.center_time:.6f} s")
+        raise SceneFileError(
+            f"{self.source}: the ephemeris tables do not cover the image: {which}, but the image is exposed "
+            f"from {t0 + self.center_time:.6f} to {t1 + self.center_time:.6f} s")
+
     def exterior(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Perspective centres (N, 3) body-fixed metres and camera -> body rotations (N, 3, 3) at times (N,)
         (seconds from ``center_ephemeris_time``).
@@ -387,15 +457,28 @@ class CsmCamera:
         Returns
         -------
         ImageToGround
-            ``ground`` (N, 3) body-fixed metres, NaN where the ray misses; ``hit`` (N,).
+            ``ground`` (N, 3) body-fixed metres, NaN where the ray misses or the line's time is outside
+            the ephemeris tables (:meth:`line_covered`: flagged, never extrapolated); ``hit`` (N,).
         """
+        line, sample, height = self._broadcast(line, sample, height)
+        ground, hit = self._image_to_ground_raw(line, sample, height)
+        outside = ~self.line_covered(line)
+        if outside.any():
+            ground[outside] = np.nan
+            hit = hit & ~outside
+        return ImageToGround(ground, hit)
+
+    def _image_to_ground_raw(self, line: np.ndarray, sample: np.ndarray,
+                             height: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`image_to_ground` without the table-coverage flag (the tables extrapolated linearly):
+        only for the solver's own set-up (seed polynomial and its correction table)."""
         line, sample, height = self._broadcast(line, sample, height)
         n = line.size
         ground, status = np.empty((n, 3)), np.empty(n, np.int8)
         centre, look = np.empty((n, 3)), np.empty((n, 3))
         K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre,  # type: ignore[call-arg]
                              look)
-        return ImageToGround(ground, status == K.STATUS_OK)
+        return ground, status == K.STATUS_OK
 
     def rays(self, line: ArrayLike, sample: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Perspective centres (N, 3) and unit look directions (N, 3), body-fixed, of image points."""
@@ -426,11 +509,13 @@ class CsmCamera:
         lines = np.linspace(0.0, self.n_lines, 9)
         samples = np.linspace(0.0, self.n_samples, 7)
         ll, ss = (a.ravel() for a in np.meshgrid(lines, samples, indexing="ij"))
-        pts, rows = [], []
+        pts, rows, covered_rows = [], [], []
+        covered = self.line_covered(ll)
         for h in (lo, 0.5 * (lo + hi), hi):
-            g = self.image_to_ground(ll, ss, h)
-            pts.append(g.ground[g.hit])
-            rows.append(ll[g.hit])
+            g, hit = self._image_to_ground_raw(ll, ss, h)
+            pts.append(g[hit])
+            rows.append(ll[hit])
+            covered_rows.append(covered[hit])
         ground = np.concatenate(pts)
         line = np.concatenate(rows)
         if line.size < 10:
@@ -443,14 +528,17 @@ class CsmCamera:
         if line.size < 2 * feats.shape[1]:
             feats = _quadratic((ground - mean) / scale)
         coef, *_ = np.linalg.lstsq(feats, line, rcond=None)
-        samp = np.concatenate([ss[self.image_to_ground(ll, ss, h).hit] for h in (lo, 0.5 * (lo + hi), hi)])
+        samp = np.concatenate([ss[self._image_to_ground_raw(ll, ss, h)[1]] for h in (lo, 0.5 * (lo + hi), hi)])
         scoef, *_ = np.linalg.lstsq(feats, samp, rcond=None)
         self._seed = (mean, scale, coef)
         self._seed_table = self._correction_table(mean, scale, coef, scoef, 0.5 * (lo + hi))
         # slope of the residual at the centre, and the curvature constant C = max |g''| / (2 |g'|) around
         # the grid points' lines (times a safety factor of 4), for the secant's acceptance test
-        c = ground[np.argmin(np.abs(line - 0.5 * self.n_lines))][None, :]
-        mid = np.array([0.5 * self.n_lines])
+        in_tables = np.concatenate(covered_rows)
+        mid_line = self._middle_covered_line()
+        k = int(np.argmin(np.where(in_tables, np.abs(line - mid_line), np.inf)))
+        c = ground[k][None, :]
+        mid = np.array([line[k]])
         r0, _ = self.detector_residual(c, mid - 0.5)
         r1, _ = self.detector_residual(c, mid + 0.5)
         slope = float(r1[0] - r0[0])
@@ -481,10 +569,10 @@ class CsmCamera:
         lines = np.arange(-margin, self.n_lines + margin + step, step)
         seeds, errors = [], []
         for c in (0.0, 0.5 * self.n_samples, float(self.n_samples)):
-            g = self.image_to_ground(lines, np.full(lines.size, c), height)
-            if not g.hit.all():
+            g, hit = self._image_to_ground_raw(lines, np.full(lines.size, c), height)
+            if not hit.all():
                 return _no_table(coef.size, scoef)
-            ls = _features((g.ground - mean) / scale, coef.size) @ coef
+            ls = _features((g - mean) / scale, coef.size) @ coef
             if not np.all(np.diff(ls) > 0):
                 return _no_table(coef.size, scoef)
             seeds.append(ls)
@@ -500,8 +588,16 @@ class CsmCamera:
         """usgscsm intersects the whole line of sight (the root nearest the camera on either side); here
         the look direction is the one of ``+-(-x, -y, -f)`` that points at the body at the centre line
         (``look_sign``), so that points behind the camera and rays that miss can be told apart."""
-        centre, look = self.rays(np.array([0.5 * self.n_lines]), np.array([0.5 * self.n_samples]))
+        centre, look = self.rays(np.array([self._middle_covered_line()]), np.array([0.5 * self.n_samples]))
         self._cam[K.C_LOOK] = 1.0 if float(np.dot(look[0], -centre[0])) > 0 else -1.0
+
+    def _middle_covered_line(self) -> float:
+        """The centre of the image, or of its longest stretch of lines covered by the tables."""
+        ranges = self.covered_line_ranges()
+        if not ranges or ranges == [(0.0, float(self.n_lines))]:
+            return 0.5 * self.n_lines
+        a, b = max(ranges, key=lambda r: r[1] - r[0])
+        return 0.5 * (a + b)
 
     @property
     def look_sign(self) -> float:
@@ -555,7 +651,10 @@ class CsmCamera:
                              int(max_iter), *self._all_args(), line, sample, status, evals)
         with np.errstate(invalid="ignore"):
             inside = (line >= 0) & (line <= self.n_lines) & (sample >= 0) & (sample <= self.n_samples)
-        return GroundToImage(line, sample, (status == K.STATUS_OK) & inside, status, evals)
+        solved = status == K.STATUS_OK
+        outside_tables = solved & ~self.line_covered(line)
+        status[outside_tables] = STATUS_OUTSIDE_TABLES
+        return GroundToImage(line, sample, solved & ~outside_tables & inside, status, evals)
 
     # ------------------------------------------------------------------ description
     def describe(self) -> str:
@@ -635,6 +734,9 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
         raise isd.fail("name_model", f"is {model!r}; only USGS_ASTRO_LINE_SCANNER_SENSOR_MODEL is read")
     n_lines = isd.number("image_lines", positive=True)
     n_samples = isd.number("image_samples", positive=True)
+    for key, v in (("image_lines", n_lines), ("image_samples", n_samples)):
+        if v != round(v) or v < 1 or v > 1e9:
+            raise isd.fail(key, f"must be a whole number of pixels between 1 and 1e9, got {v!r}")
     center = isd.number("center_ephemeris_time")
     rates = isd.array("line_scan_rate", shape=(None, 3))
     if rates.shape[0] < 1:
@@ -649,6 +751,8 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
     order = isd.get("instrument_position", "interpolation_order", default=isd.get("interpolation_order", default=8))
     if not isinstance(order, int) or isinstance(order, bool) or order < 2:
         raise isd.fail("interpolation_order", f"must be an integer >= 2, got {order!r}")
+    a = isd.number("radii", "semimajor", positive=True) * isd.unit("radii", "unit")
+    b = isd.number("radii", "semiminor", positive=True) * isd.unit("radii", "unit")
     # positions
     pos = isd.array("instrument_position", "positions", shape=(None, 3))
     if pos.shape[0] < 2:
@@ -657,6 +761,16 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
     # a float64 spacing of 6e-8 s, tens of microlines for a fast line scanner
     pos_t = _times(isd, "instrument_position", pos.shape[0]) - center
     pos_m = np.ascontiguousarray(pos * isd.unit("instrument_position", "unit", default="km"))
+    # the sensor must be outside the body: a position within the inscribed sphere (radius = the smaller
+    # semi-axis) is inside it whatever the frame (J2000 or body-fixed, both centred on the body)
+    dist = np.linalg.norm(pos_m, axis=1)
+    inside = np.flatnonzero(dist <= min(a, b))
+    if inside.size:
+        i = int(inside[0])
+        raise isd.fail("instrument_position.positions",
+                       f"row {i} is {dist[i]:.6g} m from the body centre, inside the body (radii {a:.6g} / "
+                       f"{b:.6g} m; {inside.size} of {dist.size} rows): a line scanner images from above the "
+                       "surface")
     frame = isd.get("instrument_position", "reference_frame", default=J2000_FRAME)
     body_frames = isd.get("body_rotation", "time_dependent_frames", default=[None])
     body_frame = body_frames[0] if isinstance(body_frames, list) and body_frames else None
@@ -670,6 +784,10 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
     qp_t, qp, cp = _rotation_table(isd, "instrument_pointing")
     qb_t, qb, cb = _rotation_table(isd, "body_rotation")
     qp_t, qb_t = qp_t - center, qb_t - center
+    spans = {name: (float(t[0]), float(t[-1])) for name, t in
+             (("instrument_position", pos_t), ("instrument_pointing", qp_t), ("body_rotation", qb_t)) if t.size > 1}
+    span_lo = max(spans.items(), key=lambda kv: kv[1][0], default=("", (-math.inf, 0.0)))
+    span_hi = min(spans.items(), key=lambda kv: kv[1][1], default=("", (0.0, math.inf)))
     vel = None
     if "velocities" in isd.get("instrument_position"):
         vel = isd.array("instrument_position", "velocities", shape=pos.shape)
@@ -679,8 +797,6 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
         pos_t, pos_m, in_j2000, qp_t, qp, cp, qb_t, qb, cb = _usgscsm_state(
             pos_t, pos_m, vel, int(order), in_j2000, qp_t, qp, cp, qb_t, qb, cb)
         att_mode, att_order, order = "lagrange", (8 if qp_t.size >= 6 else 4), 8
-    a = isd.number("radii", "semimajor", positive=True) * isd.unit("radii", "unit")
-    b = isd.number("radii", "semiminor", positive=True) * isd.unit("radii", "unit")
     fl = isd.array("focal2pixel_lines", shape=(3,))
     fs = isd.array("focal2pixel_samples", shape=(3,))
     name, code, coef = _distortion(isd)
@@ -728,7 +844,10 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
         distortion_coefficients=coef,
         height_range_m=(h_lo, h_hi),
         metadata={"platform": data.get("name_platform"), "sensor": data.get("name_sensor"),
-                  "starting_ephemeris_time": data.get("starting_ephemeris_time"), "interpolation": interpolation},
+                  "starting_ephemeris_time": data.get("starting_ephemeris_time"), "interpolation": interpolation,
+                  "table_spans": spans},
+        table_span=(span_lo[1][0], span_hi[1][1]),
+        table_span_names=(span_lo[0], span_hi[0]),
     )
 
 

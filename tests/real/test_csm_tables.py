@@ -1,0 +1,155 @@
+"""USGS CSM line-scan ISDs whose ephemeris tables do not cover the image, and physically impossible ISDs.
+
+Truths: the real CTX ISD of usgscsm's tests (tests/data/usgscsm/ctxLineScan.json, checked against
+usgscsm's asserted values in test_csm.py) edited in the test into an HRSC-like camera (4 x 4 summing,
+two line rates, the second running past the tables) whose covered lines must give exactly the CTX
+camera's geometry at the corresponding CTX line and sample (same tables, same times); and the tables'
+own times for the lines that must be flagged or refused.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from explorer.errors import SceneFileError
+from explorer.real.csm import camera_from_isd
+from explorer.real.csm_camera import STATUS_OUTSIDE_TABLES
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "usgscsm"
+CTX = json.loads((DATA / "ctxLineScan.json").read_text())
+DT = CTX["line_scan_rate"][0][2]  # CTX seconds per line
+T0 = CTX["line_scan_rate"][0][1]  # the first line's start, seconds from center_ephemeris_time
+SPLIT = 1408  # HRSC-like lines in the first segment (4 CTX lines each)
+
+
+def hrsc_like() -> dict:
+    """CTX re-read as a 4 x 4 summed camera: 1408 lines at 4 CTX periods, then 6 CTX periods per line.
+
+    The second segment runs past the tables (which end with CTX's last line, 5632 + 6 (L - 1408) CTX lines
+    in): HRSC-like lines up to 1408 + 5632 / 6 = 2346.67 are covered, the rest are not."""
+    isd = copy.deepcopy(CTX)
+    isd["image_lines"] = 2816
+    isd["image_samples"] = 1250
+    isd["detector_sample_summing"] = 4
+    isd["detector_line_summing"] = 4
+    isd["line_scan_rate"] = [[0.5, T0, 4 * DT], [SPLIT + 0.5, T0 + 4 * SPLIT * DT, 6 * DT]]
+    return isd
+
+
+def ctx_line(line: np.ndarray) -> np.ndarray:
+    """The CTX line exposed at the same time as an HRSC-like line (closed form of the two rates)."""
+    return np.where(line < SPLIT + 0.5, 4 * line, 4 * SPLIT + 6 * (line - SPLIT))
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    return camera_from_isd(copy.deepcopy(CTX), source="ctxLineScan.json")
+
+
+@pytest.fixture(scope="module")
+def hrsc():
+    return camera_from_isd(hrsc_like(), source="hrsc_like.json")
+
+
+def test_hrsc_like_covered_lines_are_the_ctx_geometry(ctx, hrsc):
+    rng = np.random.default_rng(11)
+    n = 600
+    lines = np.concatenate([rng.uniform(0, SPLIT, n // 2), rng.uniform(SPLIT + 0.5, 2346.0, n // 2)])
+    samples = rng.uniform(0, 1250, n)
+    heights = rng.uniform(-800, 800, n)
+    g = hrsc.image_to_ground(lines, samples, heights)
+    assert g.hit.all()
+    truth = ctx.image_to_ground(ctx_line(lines), 4 * samples, heights)
+    assert truth.hit.all()
+    np.testing.assert_allclose(g.ground, truth.ground, rtol=0, atol=1e-6)
+    r = hrsc.ground_to_image(truth.ground)
+    assert r.valid.all()
+    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-6)
+
+
+def test_hrsc_like_lines_past_the_tables_are_flagged(hrsc):
+    # the tables end with CTX's last line: 1408 + 5632 / 6 = 2346.67 HRSC-like lines, plus half a line
+    assert hrsc.covered_line_ranges() == [(0.0, 2347.0)]
+    assert hrsc.covered_fraction() == pytest.approx(2347 / 2816)
+    lines = np.array([2340.0, 2346.5, 2348.5, 2400.0, 2815.5])
+    g = hrsc.image_to_ground(lines, np.full(5, 600.0), 0.0)
+    np.testing.assert_array_equal(g.hit, [True, True, False, False, False])
+    assert np.isnan(g.ground[2:]).all()
+    # ground points the camera would see there if its tables were extrapolated: flagged, not returned valid
+    past = np.linspace(2360.0, 2815.0, 40)
+    ground, hit = hrsc._image_to_ground_raw(past, np.full(past.size, 600.0), 0.0)
+    assert hit.all()
+    r = hrsc.ground_to_image(ground)
+    assert not r.valid.any()
+    assert (r.status == STATUS_OUTSIDE_TABLES).all()
+    # the residual's search still found the (extrapolated) line: the flag is the tables', not the solver's
+    np.testing.assert_allclose(r.line, past, rtol=0, atol=1e-6)
+
+
+def test_pointing_table_after_the_last_line_is_refused_with_the_times():
+    """MOC-like: the pointing table starts 30 s after the image's last line (the image spans 21.1 s)."""
+    isd = copy.deepcopy(CTX)
+    times = isd["instrument_pointing"]["ephemeris_times"]
+    isd["instrument_pointing"]["ephemeris_times"] = [t + 10.571264 + 30.0 + (t - times[0]) for t in times]
+    with pytest.raises(SceneFileError) as exc:
+        camera_from_isd(isd, source="moc_like.json")
+    msg = str(exc.value)
+    assert "moc_like.json" in msg and "'instrument_pointing'" in msg and "do not cover the image" in msg
+    start = isd["instrument_pointing"]["ephemeris_times"][0]
+    image_start = CTX["center_ephemeris_time"] + T0
+    assert f"{start:.6f}" in msg and f"{image_start:.6f}" in msg
+    assert "\n" not in msg
+
+
+def test_pointing_table_starting_mid_image_flags_the_lines_before():
+    isd = copy.deepcopy(CTX)
+    table = isd["instrument_pointing"]
+    keep = [k for k, t in enumerate(table["ephemeris_times"]) if t >= CTX["center_ephemeris_time"]]
+    table["ephemeris_times"] = [table["ephemeris_times"][k] for k in keep]
+    table["quaternions"] = [table["quaternions"][k] for k in keep]
+    cam = camera_from_isd(isd, source="half.json")
+    first = (table["ephemeris_times"][0] - CTX["center_ephemeris_time"] - T0) / DT  # line of the table's start
+    (a, b), = cam.covered_line_ranges()
+    assert b == CTX["image_lines"] and abs(a - np.ceil(first - 1.0)) <= 1
+    g = cam.image_to_ground([first - 5.0, first + 5.0], [2500.0, 2500.0], 0.0)
+    np.testing.assert_array_equal(g.hit, [False, True])
+
+
+@pytest.mark.parametrize(
+    ("edit", "key", "reason"),
+    [
+        (lambda d: d["instrument_position"].__setitem__(
+            "positions", [[0.0, 0.0, 0.0]] * len(d["instrument_position"]["positions"])),
+         "instrument_position.positions", "inside the body"),
+        (lambda d: d["instrument_position"]["positions"].__setitem__(5, [100.0, 200.0, 50.0]),
+         "instrument_position.positions", "row 5"),
+        (lambda d: d["instrument_pointing"].__setitem__(
+            "constant_rotation", [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0]),
+         "instrument_pointing.constant_rotation", "reflection"),
+        (lambda d: d["instrument_pointing"]["quaternions"].__setitem__(
+            3, [1.5 * v for v in d["instrument_pointing"]["quaternions"][3]]),
+         "instrument_pointing.quaternions", "row 3 has norm 1.5"),
+        (lambda d: d["body_rotation"]["quaternions"].__setitem__(0, [0.0, 0.0, 0.0, 0.0]),
+         "body_rotation.quaternions", "not a unit quaternion"),
+        (lambda d: d["instrument_position"].__setitem__(
+            "ephemeris_times", [t + 100.0 for t in d["instrument_position"]["ephemeris_times"]]),
+         "instrument_position", "do not cover the image"),
+        (lambda d: d.__setitem__("image_lines", 1e-300), "image_lines", "whole number"),
+        (lambda d: d.__setitem__("image_samples", 5000.5), "image_samples", "whole number"),
+    ],
+    ids=["body-centre", "one-inside", "reflection", "non-unit", "zero-quaternion", "ephemeris-after",
+         "tiny-lines", "half-sample"],
+)
+def test_impossible_isd_is_one_line_naming_file_and_key(edit, key, reason):
+    isd = copy.deepcopy(CTX)
+    edit(isd)
+    with pytest.raises(SceneFileError) as exc:
+        camera_from_isd(isd, source="bad_ctx.json")
+    msg = str(exc.value)
+    assert msg.startswith("bad_ctx.json: ") and key in msg and reason in msg and "\n" not in msg
