@@ -97,8 +97,14 @@ R_KM, H_KM, V_KM_S, F_MM, PITCH_MM = 1000.0, 50.0, 2.0, 100.0, 0.01
 
 
 def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_sample=0.0, order=None,
-              j2000_rotation_deg=0.0, distortion=None, body_fixed=False, velocities=True, flip_signs=False) -> dict:
-    """A camera flying straight along x at altitude H over a sphere, looking straight down."""
+              j2000_rotation_deg=0.0, distortion=None, body_fixed=False, velocities=True, flip_signs=False,
+              detector_rotation_deg=0.0, focal2pixel=None) -> dict:
+    """A camera flying straight along x at altitude H over a sphere, looking straight down.
+
+    ``detector_rotation_deg`` turns the camera by that angle about its boresight (its x axis points at
+    that angle from the flight) and the focal2pixel matrix by the same angle, so that the detector line
+    stays across the flight: at 90 degrees the samples run along the focal plane's x axis.
+    ``focal2pixel`` (lines, samples) replaces that matrix."""
     scale = 1.0 if unit == "km" else 1000.0
     times = np.linspace(-2.0, 2.0, 41)
     pos = np.stack([V_KM_S * times, 0 * times, np.full_like(times, R_KM + H_KM)], axis=1)
@@ -108,14 +114,17 @@ def flyby_isd(*, unit="km", rates=None, line_summing=1, sample_summing=1, start_
     rz_inv = np.array([[np.cos(a), np.sin(a), 0], [-np.sin(a), np.cos(a), 0], [0, 0, 1]])
     pos_j2000 = pos if body_fixed else pos @ rz_inv.T  # so that the body-fixed positions are the line above
     # pointing (J2000 -> sensor) makes the camera axes equal to the body axes
-    qp = [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+    th = np.radians(detector_rotation_deg)
+    qp = [np.cos((a - th) / 2), 0.0, 0.0, np.sin((a - th) / 2)]  # camera -> body = R_z(th)
+    c, s = np.cos(th) / PITCH_MM, np.sin(th) / PITCH_MM
+    f2p_lines, f2p_samples = focal2pixel or ([0.0, c, -s], [0.0, s, c])
     isd = {
         "name_model": "USGS_ASTRO_LINE_SCANNER_SENSOR_MODEL",
         "image_lines": 400, "image_samples": 200,
         "center_ephemeris_time": 500.0, "starting_ephemeris_time": 499.0,
         "line_scan_rate": rates or [[0.5, -1.0, 0.005]],
         "detector_sample_summing": sample_summing, "detector_line_summing": line_summing,
-        "focal2pixel_lines": [0.0, 1.0 / PITCH_MM, 0.0], "focal2pixel_samples": [0.0, 0.0, 1.0 / PITCH_MM],
+        "focal2pixel_lines": list(f2p_lines), "focal2pixel_samples": list(f2p_samples),
         "focal_length_model": {"focal_length": F_MM},
         "detector_center": {"line": 0.0, "sample": 100.0},
         "starting_detector_line": 0.0, "starting_detector_sample": start_sample,
@@ -179,6 +188,10 @@ VARIANTS = {
     "no-velocities": {"velocities": False, "order": 6},
     "quaternion-signs": {"j2000_rotation_deg": 50.0, "flip_signs": True},
     "radial-distortion": {"distortion": {"radial": {"coefficients": [-0.007, 3e-4, 2e-6]}}},
+    "detector-along-x": {"detector_rotation_deg": 90.0},
+    "detector-rotated-30": {"detector_rotation_deg": 30.0, "j2000_rotation_deg": 40.0},
+    "detector-rotated-200-summing": {"detector_rotation_deg": 200.0, "sample_summing": 2, "line_summing": 2,
+                                     "start_sample": 10.0},
 }
 
 
@@ -201,6 +214,39 @@ def test_flyby_closed_form(variant, interpolation):
     np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
     r = cam.ground_to_image(truth)
     # closed-form inverse: the ground's x gives the time, its (y, z) the across-track angle
+    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
+
+
+def test_affine_focal2pixel_closed_form():
+    """Any focal2pixel matrix: offsets, unequal scales and a shear, the samples along the focal plane's x
+    axis (the camera turned by 90 degrees about its boresight).  Truth: the focal-plane point of each
+    (line, sample) solved from the 2 x 2 system in numpy, turned into the body frame and its ray
+    (-x, -y, -f) intersected with the sphere in closed form."""
+    fl = [0.4, 0.3, -1.0 / PITCH_MM]
+    fs = [-2.0, 1.05 / PITCH_MM, 0.02 / PITCH_MM]
+    cam = camera_from_isd(flyby_isd(detector_rotation_deg=90.0, focal2pixel=(fl, fs)), source="affine")
+    rng = np.random.default_rng(5)
+    n = 400
+    lines, samples, h = rng.uniform(0, 400, n), rng.uniform(0, 190, n), rng.uniform(-500, 2500, n)
+    # focal plane (camera axes) of each image point: fl . (1, x, y) + centre_line - start_line = 0 (the
+    # detector line), fs . (1, x, y) + centre_sample = sample
+    m = np.array([[fl[1], fl[2]], [fs[1], fs[2]]])
+    rhs = np.stack([np.full(n, -fl[0]), samples - 100.0 - fs[0]])
+    xc, yc = np.linalg.solve(m, rhs)
+    xb, yb = -yc, xc  # camera -> body: R_z(90 deg)
+    d = np.stack([-xb, -yb, -np.full(n, F_MM)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = flyby_truth_time(lines, None)
+    centre = np.stack([V_KM_S * t * 1000.0, np.zeros(n), np.full(n, (R_KM + H_KM) * 1000.0)], axis=1)
+    b = np.sum(centre * d, axis=1)
+    c = np.sum(centre * centre, axis=1) - (R_KM * 1000.0 + h) ** 2
+    truth = centre + (-b - np.sqrt(b * b - c))[:, None] * d
+    g = cam.image_to_ground(lines, samples, h)
+    assert g.hit.all()
+    np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
+    r = cam.ground_to_image(truth)
+    assert r.valid.all()
     np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
     np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
 

@@ -71,3 +71,17 @@ def test_ctx_harmonics_follow_the_attitude():
     ground = scene.image_to_ground(rows, cols, height=0.0)
     res = create("exact", scene).ground_to_image(ground)
     assert res.valid.all() and np.max(np.abs(res.row - rows)) <= 1e-6 and np.max(np.abs(res.col - cols)) <= 1e-6
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, 30.0, 200.0])
+def test_scene_of_a_turned_detector_is_the_camera(turn_deg):
+    """A fly-by whose detector runs along the focal plane's x axis (or at any angle, the focal2pixel matrix
+    turned with the camera): the MPC scene represents it exactly (straight flight, constant attitude), so its
+    fit against the CSM camera is at round-off, as for the unturned detector."""
+    from explorer.real.csm import camera_from_isd, scene_from_camera
+    from tests.real.test_csm import flyby_isd
+
+    scene = scene_from_camera(camera_from_isd(flyby_isd(detector_rotation_deg=turn_deg), source="turned"),
+                              n_check=500)
+    fit = scene.metadata["csm_fit"]
+    assert fit["n"] == 500 and fit["row_max_px"] < 1e-8 and fit["col_max_px"] < 1e-8
