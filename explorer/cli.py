@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     "explorer.commands.scene",
     "explorer.commands.ortho",
     "explorer.commands.warmup",
+    "explorer.commands.refine",
 )
 
 

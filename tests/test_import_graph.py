@@ -26,7 +26,7 @@ LAYERS = [
     ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],
     ["explorer.real", "explorer.methods"],
     ["explorer.evaluate", "explorer.bench_defaults", "explorer.bench", "explorer.ortho", "explorer.warmup",
-     "explorer.kernel_cache"],
+     "explorer.kernel_cache", "explorer.refine"],
     ["explorer.panels", "explorer.scene3d"],
     ["explorer.app", "explorer.notebook", "explorer.commands", "explorer.cli", "explorer.__main__", "explorer"],
 ]

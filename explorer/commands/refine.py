@@ -1,0 +1,118 @@
+"""``refine``: adjust an image-space correction of RPCs to control, check and tie points.
+
+``pushbroom refine SOURCE --gcps gcps.csv [--model shift|affine|poly2] [--check check.csv] --out DIR``
+(one image) and ``pushbroom refine --images A B [C ...] --ties ties.csv [--gcps gcps.csv] --out DIR``
+(bundle adjustment).  Files and results: :mod:`explorer.refine.adjust`, :mod:`explorer.refine.points_io`.
+Pixels are 0-based, integer = pixel centre (``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from explorer.commands._args import existing_file, positive_float, positive_int
+
+__all__ = ["cmd_refine", "register"]
+
+MODELS = ("shift", "affine", "poly2", "attitude", "attitude-drift")
+
+
+def _probability(text: str) -> float:
+    value = positive_float(text)
+    if not value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a probability below 1")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    from explorer.commands._args import non_negative_float
+
+    return non_negative_float(text)
+
+
+def cmd_refine(args: argparse.Namespace) -> int:
+    """Run the adjustment, write DIR/report.json, points.csv, parameters.csv, adjusted RPC(s); print a summary."""
+    from pathlib import Path
+
+    from explorer.errors import InputError
+    from explorer.refine.adjust import refine_rpcs
+    from explorer.refine.points_io import CONTROL_COLUMNS, TIE_COLUMNS, read_points_csv
+    from explorer.rpc import read_rpc
+
+    images = list(args.images or [])
+    if args.source and images:
+        raise InputError("give either SOURCE (one image) or --images (several), not both")
+    if args.source:
+        images = [args.source]
+    if not images:
+        raise InputError("no image: give SOURCE or --images A B ...")
+    if args.model.startswith("attitude"):
+        raise InputError(f"--model {args.model} needs a rigorous or CSM sensor; refine adjusts RPC files "
+                         "(shift, affine, poly2) only")
+    if args.ties and len(images) < 2:
+        raise InputError("--ties needs two images or more (--images A B ...)")
+    if not args.gcps and not args.ties:
+        raise InputError("nothing to adjust to: give --gcps and/or --ties")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {args.out}: exists and is not a folder")
+    rpcs = [read_rpc(p) for p in images]
+    names = [Path(p).name for p in images]
+    if len(set(names)) != len(names):
+        names = list(images)
+    refinement = refine_rpcs(
+        rpcs,
+        model=args.model,
+        control=read_points_csv(args.gcps, CONTROL_COLUMNS) if args.gcps else None,
+        ties=read_points_csv(args.ties, TIE_COLUMNS) if args.ties else None,
+        check=read_points_csv(args.check, CONTROL_COLUMNS) if args.check else None,
+        names=names,
+        sigma_px=args.sigma_px,
+        sigma_ground_m=args.sigma_ground,
+        loss=args.loss,
+        loss_scale=args.loss_scale,
+        outlier_probability=args.outlier_probability,
+        max_iterations=args.max_iterations,
+    )
+    refinement.write(out)
+    report = refinement.report()
+
+    def fmt(value: Any) -> str:
+        return "-" if value is None else f"{value:.4f}"
+
+    print(f"model {report['model']}: sigma0 {report['sigma0']:.4f}, "
+          f"control RMSE {fmt(report['control_rmse_px_before'])} -> {fmt(report['control_rmse_px'])} px, "
+          f"check RMSE {fmt(report['check_rmse_px_before'])} -> {fmt(report['check_rmse_px'])} px, "
+          f"{report['n_outliers']} outlier(s) of {report['n_observations']}")
+    for p in report["parameters"]:
+        prefix = f"{p['image']}:" if len(images) > 1 else ""
+        print(f"  {prefix}{p['name']:<16} {p['value']:+.6e} +- {p['sigma']:.2e}")
+    print(f"wrote {out}/report.json, points.csv, parameters.csv and the adjusted RPC file(s)")
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``refine`` command to ``subparsers`` (argparse only)."""
+    p = subparsers.add_parser(
+        "refine", help="adjust RPC image-space corrections to control / tie points (bundle adjustment)",
+        description="Adjust an image-space correction of one RPC to control points, or of several RPCs to tie "
+                    "points and control points (Levenberg-Marquardt, robust loss). Pixels are 0-based, "
+                    "integer = pixel centre.",
+    )  # fmt: skip
+    p.add_argument("source", nargs="?", type=existing_file, help="RPC file of one image")
+    p.add_argument("--images", nargs="+", type=existing_file, metavar="RPC", help="RPC files of several images")
+    p.add_argument("--gcps", type=existing_file, help="control points CSV: id,lon,lat,h,row,col[,image]")
+    p.add_argument("--ties", type=existing_file, help="tie points CSV: id,image,row,col")
+    p.add_argument("--check", type=existing_file, help="check points CSV: id,lon,lat,h,row,col[,image]")
+    p.add_argument("--model", choices=MODELS, default="affine", help="correction model (default affine)")
+    p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a measured coordinate, px")
+    p.add_argument("--sigma-ground", type=_non_negative, default=0.0,
+                   help="sigma of control points' ground coordinates, m (0 = fixed; default)")
+    p.add_argument("--loss", choices=("huber", "cauchy", "linear"), default="huber", help="robust loss")
+    p.add_argument("--loss-scale", type=positive_float, default=1.5, help="robust loss scale, in sigmas")
+    p.add_argument("--outlier-probability", type=_probability, default=0.999,
+                   help="chi-square(2) probability beyond which a point is an outlier (default 0.999)")
+    p.add_argument("--max-iterations", type=positive_int, default=50, help=argparse.SUPPRESS)
+    p.add_argument("--out", required=True, help="output folder (created)")
+    p.set_defaults(func=cmd_refine)

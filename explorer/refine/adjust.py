@@ -1,0 +1,425 @@
+"""Refine RPCs to control, check and tie points: the adjustment, its report and its files.
+
+:func:`refine_rpcs` adjusts an image-space correction (:mod:`explorer.refine.corrections`) of one or
+several RPCs to control points (ground known to ``sigma_ground_m``, or fixed) and tie points (ground
+unknown) by :func:`explorer.refine.bundle.bundle_adjust`, and returns a :class:`Refinement`:
+
+- residuals ``measured - model`` of every observation before and after, its role (``control``,
+  ``check``, ``tie``) and outlier flag;
+- the parameters with their a posteriori sigmas and correlations, ``sigma0``;
+- RMSEs per image coordinate, ``sqrt(mean((d_row^2 + d_col^2) / 2))`` over the points that are not
+  outliers, in pixels (the noise of one coordinate when the model fits);
+- the adjusted RPCs with the correction folded in (:func:`explorer.refine.fold.fold_correction`).
+
+Check points are kept apart from control: with one image they take no part in the adjustment and are
+projected by the adjusted model; with several images, a check point measured in two images or more
+enters as a tie point (its pixels help, its ground coordinates do not), and its triangulated ground
+position is compared with the surveyed one against the propagated sigma of the adjustment.
+
+:meth:`Refinement.write` writes ``report.json``, ``points.csv``, ``parameters.csv`` and the adjusted RPC
+files (RPC00B text) into a folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from explorer.errors import InputError
+from explorer.refine.bundle import BundleProblem, BundleResult, bundle_adjust, metres_per_degree
+from explorer.refine.corrections import CORRECTION_PARAMETERS, correction_names
+from explorer.refine.fold import FoldResult, fold_correction
+from explorer.refine.points_io import PointTable
+from explorer.rpc.model import RationalFunctionModel
+
+__all__ = ["Refinement", "image_size", "refine_rpcs"]
+
+#: RMSE definition written into every report.
+RMSE_DEFINITION = "per image coordinate: sqrt(mean((d_row^2 + d_col^2) / 2)) over non-outlier points, pixels"
+
+
+def image_size(rpc: RationalFunctionModel) -> tuple[int, int]:
+    """(rows, columns) of the RPC's image: the file's size, else ``2 * offset + 1`` (as RPCSensor)."""
+    if rpc.image_size is not None:
+        return int(rpc.image_size[0]), int(rpc.image_size[1])
+    return int(round(2 * rpc.row_offset + 1)), int(round(2 * rpc.col_offset + 1))
+
+
+def _rmse(d: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(d * d))) if d.size else None
+
+
+@dataclass
+class Refinement:
+    """Result of :func:`refine_rpcs`; :meth:`report` and :meth:`write` give it to other tools."""
+
+    model: str
+    image_names: list[str]
+    rpcs: list[RationalFunctionModel]
+    parameter_names: list[str]
+    result: BundleResult
+    observations: dict[str, Any]
+    adjusted: list[FoldResult]
+    settings: dict[str, Any]
+    check_residuals_before: np.ndarray
+    check_residuals_after: np.ndarray
+    check_ground: dict[str, Any] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def parameters(self) -> np.ndarray:
+        """Stacked adjusted parameters (P,)."""
+        return np.concatenate(self.result.parameters)
+
+    def _role_mask(self, role: str) -> np.ndarray:
+        return np.asarray([r == role for r in self.observations["role"]], dtype=bool)
+
+    @property
+    def control_rmse_px(self) -> float | None:
+        m = self._role_mask("control") & ~self.result.outlier
+        return _rmse(self.result.residuals_after[m])
+
+    @property
+    def check_rmse_px(self) -> float | None:
+        """Check points' RMSE after the adjustment (see the module docstring), pixels; None without them."""
+        return _rmse(self.check_residuals_after) if self.check_residuals_after.size else None
+
+    def parameter_table(self) -> list[dict[str, Any]]:
+        sigma = self.result.parameter_sigma
+        n_per = len(correction_names(self.model))
+        return [{"name": name, "value": float(v), "sigma": float(s), "image": self.image_names[k // n_per]}
+                for k, (name, v, s) in enumerate(zip(self.parameter_names, self.parameters, sigma, strict=True))]
+
+    def report(self) -> dict[str, Any]:
+        """The report (``report.json``): the issue's keys ``model``, ``sigma0``, ``control_rmse_px``,
+        ``check_rmse_px``, ``parameters`` [{name, value, sigma}] and the details."""
+        res = self.result
+        control = self._role_mask("control")
+        out = {
+            "model": self.model,
+            "sigma0": res.sigma0,
+            "control_rmse_px": self.control_rmse_px,
+            "check_rmse_px": self.check_rmse_px,
+            "parameters": self.parameter_table(),
+            "control_rmse_px_before": _rmse(res.residuals_before[control & ~res.outlier]),
+            "check_rmse_px_before": _rmse(self.check_residuals_before) if self.check_residuals_before.size else None,
+            "tie_rmse_px": _rmse(res.residuals_after[self._role_mask("tie") & ~res.outlier]),
+            "rmse_definition": RMSE_DEFINITION,
+            "correlation": np.round(res.parameter_correlation, 6).tolist(),
+            "redundancy": res.redundancy,
+            "iterations": res.iterations,
+            "n_observations": int(res.outlier.size),
+            "n_outliers": int(res.outlier.sum()),
+            "images": [{"name": n, "rows": image_size(r)[0], "columns": image_size(r)[1],
+                        "adjusted_rpc": f"adjusted_rpc_{k}.txt" if len(self.rpcs) > 1 else "adjusted_rpc.txt",
+                        "fold_max_residual_px": f.max_residual_px, "fold_rms_residual_px": f.rms_residual_px}
+                       for k, (n, r, f) in enumerate(zip(self.image_names, self.rpcs, self.adjusted, strict=True))],
+            "settings": self.settings,
+        }
+        if self.check_ground is not None:
+            out["check_ground"] = self.check_ground
+        return out
+
+    def points_rows(self) -> list[dict[str, Any]]:
+        """One row per measured point: id, role, image, row, col, residuals before/after, outlier."""
+        rows = []
+        obs = self.observations
+        res = self.result
+        for i in range(res.outlier.size):
+            before, after = res.residuals_before[i], res.residuals_after[i]
+            rows.append({"id": obs["id"][i], "role": obs["role"][i], "image": self.image_names[obs["image"][i]],
+                         "row": obs["row"][i], "col": obs["col"][i],
+                         "residual_row_before": before[0], "residual_col_before": before[1],
+                         "residual_row_after": after[0], "residual_col_after": after[1],
+                         "outlier": int(res.outlier[i])})
+        ck = self.extra.get("check_only")
+        if ck is not None:
+            for i in range(len(ck["id"])):
+                rows.append({"id": ck["id"][i], "role": "check", "image": self.image_names[ck["image"][i]],
+                             "row": ck["row"][i], "col": ck["col"][i],
+                             "residual_row_before": self.check_residuals_before[i, 0],
+                             "residual_col_before": self.check_residuals_before[i, 1],
+                             "residual_row_after": self.check_residuals_after[i, 0],
+                             "residual_col_after": self.check_residuals_after[i, 1], "outlier": 0})
+        return rows
+
+    def write(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+        """Write ``report.json``, ``points.csv``, ``parameters.csv`` and the adjusted RPC(s) into ``out_dir``."""
+        from explorer.io_atomic import write_text_atomic
+        from explorer.rpc.writers import write_rpc00b_text
+
+        folder = Path(out_dir)
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"{folder}: exists and is not a folder")
+        folder.mkdir(parents=True, exist_ok=True)
+        written = [write_text_atomic(folder / "report.json", json.dumps(self.report(), indent=2) + "\n")]
+        for name, rows in (("points.csv", self.points_rows()), ("parameters.csv", self.parameter_table())):
+            text = io.StringIO()
+            writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+            writer.writeheader()
+            writer.writerows({k: (f"{v:.10g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
+            written.append(write_text_atomic(folder / name, text.getvalue()))
+        for entry, fold in zip(self.report()["images"], self.adjusted, strict=True):
+            written.append(write_rpc00b_text(fold.rpc, folder / entry["adjusted_rpc"]))
+        return written
+
+
+def _image_of(table: PointTable, names: list[str]) -> np.ndarray:
+    """Image index (N,) of each row of ``table``: its ``image`` column (index or name), else image 0."""
+    if table.image is None:
+        if len(names) > 1:
+            raise InputError(f"{table.path}: an 'image' column is needed with several images")
+        return np.zeros(len(table), dtype=np.int64)
+    out = np.empty(len(table), dtype=np.int64)
+    stems = [Path(n).name for n in names]
+    for i, value in enumerate(table.image):
+        if value.isdigit() and int(value) < len(names):
+            out[i] = int(value)
+        elif value in names or value in stems:
+            out[i] = names.index(value) if value in names else stems.index(value)
+        else:
+            raise InputError(f"{table.path}: line {i + 2}: image {value!r} is not one of the images "
+                             f"(0..{len(names) - 1} or {', '.join(stems)})")
+    return out
+
+
+def _check_inside(table: PointTable, image: np.ndarray, rpcs: list[RationalFunctionModel], role: str) -> None:
+    """InputError for a measurement outside its image or a ground point outside the RPC's domain."""
+    for k, rpc in enumerate(rpcs):
+        sel = np.flatnonzero(image == k)
+        rows, cols = image_size(rpc)
+        bad = sel[~((table.row[sel] >= -0.5) & (table.row[sel] <= rows - 0.5)
+                    & (table.col[sel] >= -0.5) & (table.col[sel] <= cols - 0.5))]
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(f"{table.path}: {role} point {table.ids[i]!r} (line {i + 2}) at row {table.row[i]:g}, "
+                             f"col {table.col[i]:g} is outside the image ({rows} x {cols} pixels)")
+        if table.has_ground:
+            assert table.lon is not None and table.lat is not None and table.h is not None
+            ok = rpc.ground_validity(table.lon[sel], table.lat[sel], table.h[sel])
+            if not ok.all():
+                i = int(sel[~ok][0])
+                raise InputError(f"{table.path}: {role} point {table.ids[i]!r} (line {i + 2}) at lon {table.lon[i]:g}, "
+                                 f"lat {table.lat[i]:g}, h {table.h[i]:g} is outside the RPC's validity domain")
+
+
+def _initial_ground(rpcs: list[RationalFunctionModel], image: np.ndarray, row: np.ndarray,
+                    col: np.ndarray) -> np.ndarray:
+    """A start (lon, lat, h) of a tie point: localised in its first image at the RPC's height offset."""
+    rpc = rpcs[int(image[0])]
+    lon, lat, ok = rpc.localization(row[:1], col[:1], np.array([rpc.height_offset]))[:3]
+    if not ok[0]:
+        raise InputError(f"a tie point at row {row[0]:g}, col {col[0]:g} does not localise in its image")
+    return np.array([lon[0], lat[0], rpc.height_offset])
+
+
+def refine_rpcs(
+    rpcs: list[RationalFunctionModel],
+    *,
+    model: str = "affine",
+    control: PointTable | None = None,
+    ties: PointTable | None = None,
+    check: PointTable | None = None,
+    names: list[str] | None = None,
+    sigma_px: float = 0.5,
+    sigma_ground_m: float = 0.0,
+    loss: str = "huber",
+    loss_scale: float = 1.5,
+    outlier_probability: float = 0.999,
+    max_iterations: int = 50,
+) -> Refinement:
+    """Adjust an image-space correction of each RPC to control and tie points.
+
+    Parameters
+    ----------
+    rpcs : list of RationalFunctionModel
+        The images (one for a resection to control points, several for a bundle adjustment).
+    model : {"shift", "affine", "poly2"}
+        Correction model (:mod:`explorer.refine.corrections`), the same for every image.
+    control, ties, check : PointTable, optional
+        Control points (``id,lon,lat,h,row,col`` [+ ``image``]), tie points (``id,image,row,col``) and
+        check points (as control; never used as control).
+    names : list of str, optional
+        Image names (default ``image0``, ...); the ``image`` columns may use them.
+    sigma_px : float
+        Stated sigma of each measured image coordinate, pixels.
+    sigma_ground_m : float
+        Stated sigma of each control point's ground coordinates (east, north, up), metres; 0 fixes them.
+    loss, loss_scale, outlier_probability, max_iterations
+        As :func:`explorer.refine.bundle.bundle_adjust` (``loss_scale`` in sigmas).
+
+    Returns
+    -------
+    Refinement
+
+    Raises
+    ------
+    InputError
+        Too few points, a point outside its image or the RPC's domain, an unknown image name, a
+        degenerate configuration, bad sigmas (one line naming the problem).
+    """
+    import explorer.refine.torch_rpc as torch_rpc
+
+    if not rpcs:
+        raise InputError("no image to refine")
+    if model not in CORRECTION_PARAMETERS:
+        raise InputError(f"unknown RPC correction model {model!r} (one of {', '.join(CORRECTION_PARAMETERS)}; "
+                         "attitude models need a rigorous or CSM sensor)")
+    names = names or [f"image{k}" for k in range(len(rpcs))]
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise InputError(f"pixel sigma must be a finite number > 0, got {sigma_px}")
+    if not (np.isfinite(sigma_ground_m) and sigma_ground_m >= 0):
+        raise InputError(f"ground sigma must be a finite number >= 0, got {sigma_ground_m}")
+    if control is None and ties is None:
+        raise InputError("no control points and no tie points: nothing to adjust to")
+    if control is not None and not control.has_ground:
+        raise InputError(f"{control.path}: control points need lon, lat, h")
+    if check is not None and not check.has_ground:
+        raise InputError(f"{check.path}: check points need lon, lat, h")
+    n_par = len(correction_names(model))
+    multi = len(rpcs) > 1
+
+    point_key: dict[tuple[str, str], int] = {}  # (role, id) -> ground point index
+    ground: list[np.ndarray] = []
+    sigma_g: list[float] = []
+    obs: dict[str, list[Any]] = {"id": [], "role": [], "image": [], "row": [], "col": [], "point": []}
+    check_only: dict[str, list[Any]] = {"id": [], "image": [], "row": [], "col": [], "ground": []}
+
+    def add(table: PointTable, role: str, as_tie: bool) -> None:
+        image = _image_of(table, names)
+        _check_inside(table, image, rpcs, role)
+        by_id: dict[str, list[int]] = {}
+        for i, pid in enumerate(table.ids):
+            by_id.setdefault(pid, []).append(i)
+        for pid, rows in by_id.items():
+            if as_tie and len(rows) < 2:
+                if role == "tie":
+                    raise InputError(f"{table.path}: tie point {pid!r} is measured in one image only")
+                for i in rows:  # a check point seen once: projected only
+                    check_only["id"].append(pid)
+                    check_only["image"].append(int(image[i]))
+                    check_only["row"].append(table.row[i])
+                    check_only["col"].append(table.col[i])
+                    assert table.lon is not None and table.lat is not None and table.h is not None
+                    check_only["ground"].append((table.lon[i], table.lat[i], table.h[i]))
+                continue
+            key = (role, pid)
+            if key in point_key:
+                raise InputError(f"{table.path}: point id {pid!r} repeated")
+            point_key[key] = len(ground)
+            if as_tie:
+                idx = np.asarray(rows)
+                ground.append(_initial_ground(rpcs, image[idx], table.row[idx], table.col[idx]))
+                sigma_g.append(np.inf)
+            else:
+                assert table.lon is not None and table.lat is not None and table.h is not None
+                i0 = rows[0]
+                ground.append(np.array([table.lon[i0], table.lat[i0], table.h[i0]]))
+                sigma_g.append(sigma_ground_m)
+            for i in rows:
+                obs["id"].append(pid)
+                obs["role"].append(role)
+                obs["image"].append(int(image[i]))
+                obs["row"].append(float(table.row[i]))
+                obs["col"].append(float(table.col[i]))
+                obs["point"].append(point_key[key])
+
+    if control is not None:
+        add(control, "control", False)
+    if ties is not None:
+        add(ties, "tie", True)
+    if check is not None and multi:
+        add(check, "check", True)
+    elif check is not None:  # one image: projected by the adjusted model, never adjusted to
+        assert check.lon is not None and check.lat is not None and check.h is not None
+        image = _image_of(check, names)
+        _check_inside(check, image, rpcs, "check")
+        check_only.update(id=list(check.ids), image=image.tolist(), row=check.row.tolist(), col=check.col.tolist(),
+                          ground=list(zip(check.lon, check.lat, check.h, strict=True)))
+    if not obs["id"]:
+        raise InputError("no usable observation (every check point is measured in one image only)")
+    n_control = sum(1 for r in obs["role"] if r == "control")
+    if not multi and n_control * 2 <= n_par:
+        raise InputError(f"too few control points: the {model} model has {n_par} parameters and needs at least "
+                         f"{n_par // 2 + 1} points, got {n_control}")
+    projectors = [torch_rpc.TorchRPC(r, model) for r in rpcs]
+    problem = BundleProblem(
+        projectors=projectors,
+        initial_parameters=[np.zeros(n_par) for _ in rpcs],
+        ground=np.asarray(ground),
+        ground_sigma_m=np.asarray(sigma_g)[:, None],
+        image_index=np.asarray(obs["image"]),
+        point_index=np.asarray(obs["point"]),
+        measured=np.stack([obs["row"], obs["col"]], axis=1),
+        sigma_px=np.asarray(sigma_px, dtype=np.float64),
+    )
+    base = list(correction_names(model))
+    stacked = [n if not multi else f"{names[k]}:{n}" for k in range(len(rpcs)) for n in base]
+    result = bundle_adjust(problem, loss=loss, loss_scale=loss_scale, outlier_probability=outlier_probability,
+                           max_iterations=max_iterations, parameter_names=stacked)
+    adjusted = [fold_correction(r, model, p) for r, p in zip(rpcs, result.parameters, strict=True)]
+
+    # check points projected only (one image): residuals before and after by the folded-free correction
+    ck_before = np.zeros((0, 2))
+    ck_after = np.zeros((0, 2))
+    extra: dict[str, Any] = {}
+    if check_only["id"]:
+        from explorer.refine.corrections import apply_correction
+
+        g = np.asarray(check_only["ground"])
+        img = np.asarray(check_only["image"])
+        measured = np.stack([check_only["row"], check_only["col"]], axis=1)
+        before = np.empty_like(measured)
+        after = np.empty_like(measured)
+        for k, rpc in enumerate(rpcs):
+            sel = img == k
+            row, col = rpc.projection(g[sel, 0], g[sel, 1], g[sel, 2])
+            before[sel] = np.stack([row, col], axis=1)
+            after[sel] = np.stack(apply_correction(model, result.parameters[k], row, col), axis=1)
+        ck_before, ck_after = measured - before, measured - after
+        extra["check_only"] = check_only
+    check_ground = None
+    if multi and check is not None:
+        check_ground = _check_ground(check, obs, result)
+        is_check = np.asarray([r == "check" for r in obs["role"]])
+        keep = is_check & ~result.outlier
+        ck_before = np.concatenate([ck_before, result.residuals_before[keep]])
+        ck_after = np.concatenate([ck_after, result.residuals_after[keep]])
+    settings = {"sigma_px": sigma_px, "sigma_ground_m": sigma_ground_m, "loss": loss, "loss_scale_sigma": loss_scale,
+                "outlier_probability": outlier_probability,
+                "outlier_threshold_sigma": float(np.sqrt(-2.0 * np.log(1.0 - outlier_probability)))}
+    return Refinement(model=model, image_names=names, rpcs=list(rpcs), parameter_names=stacked, result=result,
+                      observations=obs, adjusted=adjusted, settings=settings, check_residuals_before=ck_before,
+                      check_residuals_after=ck_after, check_ground=check_ground, extra=extra)
+
+
+def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleResult) -> dict[str, Any]:
+    """Triangulated check points against their surveyed ground: errors (E, N, U metres) and predicted sigmas."""
+    assert check.lon is not None and check.lat is not None and check.h is not None
+    truth = {pid: (check.lon[i], check.lat[i], check.h[i]) for i, pid in enumerate(check.ids)}
+    points = sorted({p for p, r in zip(obs["point"], obs["role"], strict=True) if r == "check"})
+    ids = {p: pid for p, pid, r in zip(obs["point"], obs["id"], obs["role"], strict=True) if r == "check"}
+    if not points:
+        return {"n": 0}
+    est = result.ground[points]
+    tru = np.asarray([truth[ids[p]] for p in points])
+    m_lon, m_lat = metres_per_degree(tru[:, 1], tru[:, 2])
+    err = np.stack([(est[:, 0] - tru[:, 0]) * m_lon, (est[:, 1] - tru[:, 1]) * m_lat, est[:, 2] - tru[:, 2]], axis=1)
+    cov = result.ground_covariance_m[points]
+    predicted = np.sqrt(np.einsum("jii->j", cov))
+    return {
+        "n": len(points),
+        "rmse_3d_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
+        "predicted_rmse_3d_m": float(np.sqrt(np.mean(predicted**2))),
+        "rmse_enu_m": np.sqrt(np.mean(err**2, axis=0)).tolist(),
+        "predicted_rmse_enu_m": np.sqrt(np.mean(np.diagonal(cov, axis1=1, axis2=2), axis=0)).tolist(),
+        "ids": [ids[p] for p in points],
+        "errors_enu_m": err.tolist(),
+    }

@@ -1,0 +1,47 @@
+"""``pushbroom refine``: files written, summary printed, one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("torch")
+
+from explorer.cli import main  # noqa: E402
+from tests.refine.cases import PLEIADES, pleiades, simulate_points, write_points_csv  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def gcps(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("refine_cli")
+    rpc = pleiades()
+    return (write_points_csv(folder / "gcps.csv", simulate_points(rpc, 20, seed=1)),
+            write_points_csv(folder / "check.csv", simulate_points(rpc, 30, seed=2, prefix="c")))
+
+
+def test_refine_writes_the_report(gcps, tmp_path, capsys):
+    control, check = gcps
+    out = tmp_path / "out"
+    assert main(["refine", str(PLEIADES), "--gcps", str(control), "--check", str(check), "--model", "affine",
+                 "--sigma-px", "0.3", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["model"] == "affine"
+    assert report["check_rmse_px"] < 0.5 < report["check_rmse_px_before"]
+    assert (out / "adjusted_rpc.txt").exists() and (out / "points.csv").exists()
+    assert "row_per_row" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--model", "poly2"], "too few control points: the poly2 model has 12 parameters"),
+    (["--model", "attitude"], "needs a rigorous or CSM sensor"),
+    (["--ties", "{gcps}"], "--ties needs two images"),
+])
+def test_refine_bad_input_is_one_line(gcps, tmp_path, capsys, extra, message):
+    control, _ = gcps
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join(control.read_text().splitlines()[:6]) + "\n")
+    args = ["refine", str(PLEIADES), "--gcps", str(few), "--out", str(tmp_path / "o")]
+    assert main(args + [a.format(gcps=control) for a in extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
