@@ -58,6 +58,7 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
 
     from explorer.real.from_rpc import load_dem, rpc_image_size
     from explorer.rpc import read_rpc
+    from explorer.rpc.dem import localization_on_dem
 
     rpc = read_rpc(rpc_path)
     dem = load_dem(dem_path, datum=datum)
@@ -76,7 +77,7 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
     rng = np.random.default_rng(seed)
     row = rng.uniform(0, rows - 1, n)
     col = rng.uniform(0, cols - 1, n)
-    rpc.localization_on_dem(row[:100], col[:100], dem)  # fit the inverse, load the kernels
+    localization_on_dem(rpc, row[:100], col[:100], dem)  # fit the inverse, load the kernels
     g = gdal_rpc(rpc)
     zeros = np.zeros(n)
     results = {}
@@ -87,7 +88,7 @@ def rpc_vs_gdal(rpc_path: Path, dem_path: Path, datum: str, n: int, repeats: int
         ours_t, gdal_t, ours_cpu, gdal_cpu = [], [], [], []
         for _ in range(repeats):
             t0, c0 = time.perf_counter(), time.process_time()
-            lon, lat, h, ok, flags = rpc.localization_on_dem(row, col, dem, return_flags=True)
+            lon, lat, h, ok, flags = localization_on_dem(rpc, row, col, dem, return_flags=True)
             ours_t.append(time.perf_counter() - t0)
             ours_cpu.append(time.process_time() - c0)
             t0, c0 = time.perf_counter(), time.process_time()
@@ -143,6 +144,7 @@ def synthetic_dem(path: Path, rpc, arcsec: float, seed: int = 0, low: float = 20
 
 def rpc_scaling(repeats: int) -> list[dict]:
     from explorer.rpc import read_rpc
+    from explorer.rpc.dem import localization_on_dem
     from explorer.terrain_io import read_geotiff_dem
 
     rpc = read_rpc(RPC_FILE)
@@ -153,7 +155,7 @@ def rpc_scaling(repeats: int) -> list[dict]:
         rng = np.random.default_rng(1)
         row, col = rng.uniform(0, rows - 1, n), rng.uniform(0, cols - 1, n)
         rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        t, _, _ = timed(lambda row=row, col=col: rpc.localization_on_dem(row, col, dem), repeats)
+        t, _, _ = timed(lambda row=row, col=col: localization_on_dem(rpc, row, col, dem), repeats)
         rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         out.append({"points": n, "s": t, "ns_per_point": t / n * 1e9, "peak_rss_mb": rss1 / 1024,
                     "rss_growth_mb": (rss1 - rss0) / 1024})

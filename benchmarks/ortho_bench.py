@@ -34,6 +34,7 @@ from explorer.ortho import (
 )
 from explorer.presets import build_scene
 from explorer.rpc import read_rpc
+from explorer.rpc.dem import localization_on_dem
 from explorer.terrain_io import read_geotiff_dem
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,13 +47,13 @@ def gdal_comparison(n: int, tmp: Path, repeats: int = 3) -> dict:
     dem = read_geotiff_dem(DEM)
     r = np.array([0, 0, n - 1, n - 1.0])
     c = np.array([0, n - 1, n - 1, 0.0])
-    lon, lat, _, _ = rpc.localization_on_dem(r, c, dem)
+    lon, lat, _, _ = localization_on_dem(rpc, r, c, dem)
     epsg = LocalFrame(float(lat.mean()), float(lon.mean())).utm_epsg()
     grid = grid_covering(lon, lat, 0.5, epsg)
     pattern = default_pattern(epsg, 0.5, (grid.x0, grid.y0))
 
     def to_lonlat(rr, cc):
-        lo, la, _, _ = rpc.localization_on_dem(rr, cc, dem)
+        lo, la, _, _ = localization_on_dem(rpc, rr, cc, dem)
         return lo, la
 
     t0 = time.perf_counter()

@@ -23,7 +23,6 @@ import numpy as np
 import pyproj
 
 from explorer.geometry.dem_intersection import heights_at
-from explorer.geometry.terrain import FlatTerrain, GridDEM
 from explorer.scene import Scene
 from explorer.terrain_io import height_grid_of
 
@@ -128,11 +127,8 @@ class SceneProjector:
         h = np.full(lon.shape, terrain.mean_height)
         for _ in range(4):
             p = frame.geodetic_to_enu(lon, lat, h)
-            target = terrain.height(p[:, 0], p[:, 1]) if isinstance(terrain, GridDEM) else terrain.height_m
-            h = h + (target - p[:, 2])
+            h = h + (terrain.height(p[:, 0], p[:, 1]) - p[:, 2])
         p = frame.geodetic_to_enu(lon, lat, h)
-        if isinstance(terrain, FlatTerrain):
-            return p
         return np.where(np.isfinite(terrain.height(p[:, 0], p[:, 1]))[:, None], p, np.nan)
 
     def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

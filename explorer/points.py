@@ -15,8 +15,7 @@ from typing import Any
 import numpy as np
 
 from explorer.errors import InputError
-from explorer.geometry.dem_intersection import intersect_rays
-from explorer.geometry.terrain import FlatTerrain, GridDEM
+from explorer.geometry.dem_intersection import OK
 from explorer.io_atomic import atomic_path
 from explorer.scene import Scene
 
@@ -147,14 +146,11 @@ def image_grid(
         rng = np.random.default_rng(seed)
         rr = np.clip(rr + rng.uniform(-jitter_px, jitter_px, rr.shape), -0.5, scene.n_rows - 0.5)
         cc = np.clip(cc + rng.uniform(-jitter_px, jitter_px, cc.shape), -0.5, scene.n_columns - 0.5)
-    if layers == 1 and isinstance(scene.terrain, FlatTerrain) and not jitter_px:
-        ground = _grid_on_plane(scene, rows, cols, scene.terrain.height_m)
-        return PointSet(rr, cc, ground, scene.scanline_time(rr), (gr, gc, 1))
-    if layers == 1 and isinstance(scene.terrain, GridDEM) and not jitter_px and \
-            type(scene).image_to_ground is Scene.image_to_ground:
+    if layers == 1 and not jitter_px and _lines_of_sight_are_the_scenes(scene):
+        # a regular grid: orientation once per grid row, then the terrain's own first hit
         origin, direction = _grid_rays(scene, rows, cols)
-        ground, _ = intersect_rays(origin, direction, scene.terrain.height_grid())
-        ok = np.isfinite(ground[:, 0])
+        ground, flags = scene.terrain.intersect(origin, direction)
+        ok = flags == OK
         return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
     if layers == 1:
         ground = scene.image_to_ground(rr, cc)
@@ -166,11 +162,14 @@ def image_grid(
             lo, hi = lo - 500.0, hi + 500.0
         height_range = (lo, hi)
     heights = np.linspace(height_range[0], height_range[1], layers)
-    origin, direction = scene.rays(rr, cc)
-    parts = []
-    for h in heights:
-        lam = (h - origin[:, 2]) / direction[:, 2]
-        parts.append(origin + lam[:, None] * direction)
+    if _lines_of_sight_are_the_scenes(scene):  # one set of lines of sight for every layer
+        origin, direction = scene.rays(rr, cc)
+        parts = []
+        for h in heights:
+            lam = (h - origin[:, 2]) / direction[:, 2]
+            parts.append(origin + lam[:, None] * direction)
+    else:  # lines of sight that depend on the height (aberration, refraction): the model's own, per layer
+        parts = [scene.image_to_ground(rr, cc, height=float(h)) for h in heights]
     ground = np.concatenate(parts)
     r3, c3 = np.tile(rr, layers), np.tile(cc, layers)
     return PointSet(r3, c3, ground, scene.scanline_time(r3), (gr, gc, layers))
@@ -194,11 +193,13 @@ def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.nda
     return origin, direction.reshape(-1, 3)
 
 
-def _grid_on_plane(scene: Scene, rows: np.ndarray, cols: np.ndarray, height: float) -> np.ndarray:
-    """Fast path for a regular grid on a plane: the grid's lines of sight cut at ``Z = height`` (N, 3)."""
-    origin, direction = _grid_rays(scene, rows, cols)
-    lam = (height - origin[:, 2]) / direction[:, 2]
-    return origin + lam[:, None] * direction
+def _lines_of_sight_are_the_scenes(scene: Scene) -> bool:
+    """True where ``scene`` takes its lines of sight and their terrain intersection from :class:`Scene` (so
+    :func:`_grid_rays` is its geometry); a model that corrects them (aberration, refraction: e.g.
+    :class:`explorer.real.linescan.RigorousLineScanScene`) goes through its own ``image_to_ground``."""
+    cls = type(scene)
+    return cls.rays is Scene.rays and cls.intersect_terrain is Scene.intersect_terrain and \
+        cls.image_to_ground is Scene.image_to_ground
 
 
 def simulate_points(

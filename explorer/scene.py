@@ -25,8 +25,7 @@ from explorer.geometry.terrain import (
     FlatTerrain,
     GridDEM,
     Terrain,
-    intersect_dem,
-    intersect_plane,
+    intersect_heights,
     terrain_from_dict,
 )
 from explorer.io_atomic import write_text_atomic
@@ -61,7 +60,9 @@ class Scene:
     timing : LineTiming
     n_rows : int
         Number of scanlines.
-    terrain : FlatTerrain or GridDEM
+    terrain : Terrain
+        :class:`~explorer.geometry.terrain.FlatTerrain`, :class:`~explorer.geometry.terrain.GridDEM` or any
+        other :class:`~explorer.geometry.terrain.Terrain`.
     frame : LocalFrame
         Where the local ENU frame sits on the WGS84 ellipsoid.
     metadata : dict
@@ -214,7 +215,7 @@ class Scene:
         ----------
         row, col : ndarray, shape (N,)
             Image coordinates (0-based, pixel centre).
-        terrain : FlatTerrain or GridDEM, optional
+        terrain : Terrain, optional
             Defaults to the scene's terrain.
         height : float or ndarray (N,), optional
             Intersect with the plane(s) Z = height instead (exact).
@@ -239,14 +240,9 @@ class Scene:
         """Ground points (N, 3) and flags (N,) int8 of :meth:`image_to_ground` (the part a sensor model
         with other lines of sight overrides, e.g. :class:`explorer.real.linescan.RigorousLineScanScene`)."""
         origin, direction = self.rays(row, col)
-        terrain = self.terrain if terrain is None else terrain
         if height is not None:
-            points = intersect_plane(origin, direction, check_finite(np.asarray(height, dtype=np.float64), "height"))
-        elif isinstance(terrain, FlatTerrain):
-            points = intersect_plane(origin, direction, terrain.height_m)
-        else:
-            return intersect_dem(origin, direction, terrain, return_flags=True)
-        return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
+            return intersect_heights(origin, direction, check_finite(np.asarray(height, dtype=np.float64), "height"))
+        return (self.terrain if terrain is None else terrain).intersect(origin, direction)
 
     def footprint(self, height: float | None = None) -> np.ndarray:
         """Ground corners of the image at a height (default: mean terrain height), shape (4, 3).

@@ -56,6 +56,7 @@ def _rpc_for_warmup():
 def _warm_rpc() -> None:
     from explorer.geometry.dem_intersection import HeightGrid, intersect_segments
     from explorer.rpc import project_compiled
+    from explorer.rpc.dem import localization_on_dem
     from explorer.rpc.inverse import RPCInverse
 
     rpc = _rpc_for_warmup()
@@ -80,7 +81,7 @@ def _warm_rpc() -> None:
     for r, c in ((row, col), (big[0], big[1])):
         inverse.localize(r, c, np.full(r.size, 500.0))
         inverse.on_dem(r, c, grid)
-        rpc.localization_on_dem(r, c, grid)
+        localization_on_dem(rpc, r, c, grid)
     u, v = grid.to_grid(lon, lat)
     intersect_segments(grid, u, v, np.full(64, grid.z_max), u + 0.5, v + 0.3, np.full(64, grid.z_min))
 

@@ -1,8 +1,10 @@
 """The package's import graph: no circle, one direction between layers (``docs/dev/architecture.md``).
 
 Imports are read from the source with :mod:`ast`, function-level ones included (a lazy import is still
-an edge: it may not close a circle either); ``if TYPE_CHECKING:`` blocks are type annotations only and
-are left out.  Discovery by ``importlib`` (the method registry) is not an import statement.
+an edge: it may not close a circle either), and so are the imports made for type checking only
+(``if TYPE_CHECKING:``): two modules that name each other's types are one concept split in two, and
+the circle shows the moment a type checker or a ``typing.get_type_hints`` call follows it.  Discovery by
+``importlib`` (the method registry) is not an import statement.
 """
 
 from __future__ import annotations
@@ -52,12 +54,12 @@ def _is_type_checking(test: ast.expr) -> bool:
     )
 
 
-def _import_nodes(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
-    """Every import statement at any depth, except inside ``if TYPE_CHECKING:``."""
+def _import_nodes(tree: ast.AST, type_checking: bool) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement at any depth; those inside ``if TYPE_CHECKING:`` only with ``type_checking``."""
     found: list[ast.Import | ast.ImportFrom] = []
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
+        if not type_checking and isinstance(node, ast.If) and _is_type_checking(node.test):
             for child in node.orelse:
                 visit(child)
             return
@@ -71,11 +73,12 @@ def _import_nodes(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
 
 
 @cache
-def imported_names(name: str, path: Path) -> list[tuple[str, int]]:
-    """(absolute dotted name, line) of every runtime import of a module."""
+def imported_names(name: str, path: Path, type_checking: bool = True) -> list[tuple[str, int]]:
+    """(absolute dotted name, line) of every import of a module; ``type_checking=False`` leaves out those made
+    for type checking only."""
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = []
-    for node in _import_nodes(ast.parse(path.read_text(), str(path))):
+    for node in _import_nodes(ast.parse(path.read_text(), str(path)), type_checking):
         if isinstance(node, ast.Import):
             out += [(a.name, node.lineno) for a in node.names]
             continue
@@ -89,8 +92,9 @@ def imported_names(name: str, path: Path) -> list[tuple[str, int]]:
 
 
 @cache
-def import_graph() -> dict[str, dict[str, int]]:
-    """Module -> {imported package module: line}; ``from a import b`` counts as ``a.b`` when that is a module."""
+def import_graph(type_checking: bool = True) -> dict[str, dict[str, int]]:
+    """Module -> {imported package module: line}; ``from a import b`` counts as ``a.b`` when that is a module.
+    ``type_checking=False``: without the imports made for type checking only."""
     files = module_files()
 
     def resolve(dotted: str) -> str | None:
@@ -101,7 +105,7 @@ def import_graph() -> dict[str, dict[str, int]]:
     graph: dict[str, dict[str, int]] = {}
     for name, path in files.items():
         edges: dict[str, int] = {}
-        for dotted, line in imported_names(name, path):
+        for dotted, line in imported_names(name, path, type_checking):
             target = resolve(dotted)
             if target is not None and target != name:
                 edges.setdefault(target, line)
@@ -166,29 +170,53 @@ def test_the_cycle_finder_finds_a_planted_circle():
     assert cycles(graph) == []
 
 
-def test_function_level_and_relative_imports_are_edges_type_checking_ones_are_not(tmp_path):
+def test_function_level_relative_and_type_checking_imports_are_edges(tmp_path):
     src = (
+        "import typing\n"
         "from typing import TYPE_CHECKING\n"
         "if TYPE_CHECKING:\n    from explorer.app import gui\n"
+        "if typing.TYPE_CHECKING:\n    import explorer.panels\nelse:\n    import explorer.bench\n"
         "def f():\n    from explorer.scene import Scene\n    from . import points\n"
     )
     path = tmp_path / "mod.py"
     path.write_text(src)
     names = [n for n, _ in imported_names("explorer.real.mod", path)]
     assert "explorer.scene.Scene" in names and "explorer.real.points" in names
-    assert not any(n.startswith("explorer.app") for n in names)
+    assert {"explorer.app.gui", "explorer.panels", "explorer.bench"} <= set(names)
+    runtime = [n for n, _ in imported_names("explorer.real.mod", path, type_checking=False)]
+    assert "explorer.bench" in runtime and not any(n.startswith(("explorer.app", "explorer.panels")) for n in runtime)
+
+
+def test_a_circle_closed_only_by_a_type_checking_import_is_found(tmp_path):
+    """The shape of the former rpc/model <-> rpc/inverse circle: a function-level import one way, a
+    type-checking one back."""
+    (tmp_path / "model.py").write_text("def on_dem():\n    from explorer.rpc.inverse import RPCInverse\n")
+    (tmp_path / "inverse.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from explorer.rpc.model import Model\n")
+    graph = {}
+    for name in ("model", "inverse"):
+        dotted = [n for n, _ in imported_names(f"explorer.rpc.{name}", tmp_path / f"{name}.py")]
+        graph[f"explorer.rpc.{name}"] = {n.rpartition(".")[0]: 1 for n in dotted if n.startswith("explorer.rpc.")}
+    assert cycles(graph) == [["explorer.rpc.inverse", "explorer.rpc.model"]]
+
+
+#: Circles known and being removed in this round (issue 23: the explorer's controls use only the app's public
+#: methods -- the ``maps`` part); any other circle fails.  Remove the entry when the circle is gone.
+PENDING_CIRCLES = [["explorer.app.controls", "explorer.app.gui"]]
 
 
 def test_no_import_circle_among_explorer_modules():
     graph = import_graph()
     assert len(graph) > 50  # the whole package was read
-    found = cycles(graph)
+    found = [c for c in cycles(graph) if c not in PENDING_CIRCLES]
     detail = [[f"{m} -> {t} (line {graph[m][t]})" for m in comp for t in graph[m] if t in comp] for comp in found]
     assert found == [], f"import circles: {detail}"
 
 
 def test_imports_go_one_way_between_layers():
-    graph = import_graph()
+    """Runtime imports: an annotation may name a type of a higher layer (``geometry.kernels`` packs a ``Scene``)
+    as long as no circle closes (checked above with the type-checking imports counted)."""
+    graph = import_graph(type_checking=False)
     unlayered = sorted(m for m in graph if layer_of(m) is None)
     assert unlayered == [], f"modules not placed in a layer (tests/test_import_graph.py LAYERS): {unlayered}"
     upward = [

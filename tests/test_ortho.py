@@ -23,6 +23,7 @@ from explorer.ortho import (
     write_orthoimage,
 )
 from explorer.presets import build_scene
+from explorer.rpc.dem import localization_on_dem
 
 DATA = Path(__file__).parent / "data" / "rpc"
 ASSETS = Path(__file__).parent.parent / "assets" / "dem"
@@ -67,14 +68,14 @@ def test_rpc_orthoimage_agrees_with_gdal_rpc_warp(tmp_path):
     dem = read_geotiff_dem(dem_path)
     n = 200
     corners = np.array([0, 0, n - 1, n - 1.0]), np.array([0, n - 1, n - 1, 0.0])
-    lon, lat, _, ok = rpc.localization_on_dem(*corners, dem)
+    lon, lat, _, ok = localization_on_dem(rpc, *corners, dem)
     assert ok.all()
     epsg = LocalFrame(float(lat.mean()), float(lon.mean())).utm_epsg()
     grid = grid_covering(lon, lat, 0.5, epsg)
     pattern = default_pattern(epsg, 0.5, (grid.x0, grid.y0))
 
     def to_lonlat(r, c):
-        lo, la, _, _ = rpc.localization_on_dem(r, c, dem, n_levels=12)
+        lo, la, _, _ = localization_on_dem(rpc, r, c, dem, n_levels=12)
         return lo, la
 
     src = render_synthetic_source(to_lonlat, (n, n), pattern, tmp_path / "src.npy")

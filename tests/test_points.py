@@ -25,6 +25,22 @@ def test_fast_grid_path_equals_general_path():
     np.testing.assert_allclose(fast.ground, general, atol=1e-7)
 
 
+@pytest.mark.parametrize("layers", [1, 3])
+def test_points_of_a_rigorous_scene_lie_on_its_own_lines_of_sight(layers):
+    """A rigorous line-scan model corrects its lines of sight (aberration of light, refraction); the grid's
+    ground points are where the model's own (bracketing, independent) ground to image puts them back.  The
+    grid once took the uncorrected lines of sight on a flat terrain: 26 px off on WorldView-1."""
+    from explorer.real.worldview import rigorous_scene_from_dg
+
+    from .real.conftest import WV1
+
+    scene = rigorous_scene_from_dg(WV1)
+    assert scene.aberration and scene.refraction
+    pts = image_grid(scene, 60, layers=layers)
+    row, col = scene.ground_to_image(pts.ground)
+    assert np.max(np.hypot(row - pts.row, col - pts.col)) < 1e-5
+
+
 def test_scp_grid_differs_from_scop_grid():
     scene = build_scene("WSU")
     a = simulate_points(scene, 100, kind="scop")

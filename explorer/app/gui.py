@@ -398,7 +398,7 @@ class ExplorerApp(Views):
 
         scene = self.model.fixed_scenes.get(s.preset)
         kind = next((src.kind for src in self.sources if src.label == s.preset), "preset")
-        relief = s.relief_m > 0 or (scene is not None and type(scene.terrain).__name__ != "FlatTerrain")
+        relief = s.relief_m > 0 or (scene is not None and scene.terrain.max_height > scene.terrain.min_height)
         try:
             progress.expected = expected_compiles(needed_units("explore", source=kind, methods=s.methods,
                                                                relief=relief))

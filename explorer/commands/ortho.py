@@ -45,9 +45,11 @@ def image_shape(text: str) -> tuple[int, int]:
 def _rpc_image_to_lonlat(rpc, dem, height):
     import numpy as np
 
+    from explorer.rpc.dem import localization_on_dem
+
     def fn(row, col):
         if dem is not None:
-            lon, lat, _, ok = rpc.localization_on_dem(row, col, dem)
+            lon, lat, _, ok = localization_on_dem(rpc, row, col, dem)
         else:
             lon, lat, ok = rpc.localization(row, col, np.full(row.shape, float(height)))
         return lon, lat

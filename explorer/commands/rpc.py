@@ -175,6 +175,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
 
     from explorer.errors import InputError
     from explorer.rpc import read_rpc
+    from explorer.rpc.dem import localization_on_dem
 
     if not args.points:
         if args.row is None or args.col is None:
@@ -192,7 +193,7 @@ def cmd_localize(args: argparse.Namespace) -> int:
         if dem is None:
             arrays["h"] = np.array([args.h])
     if dem is not None:
-        lon, lat, h, ok = model.localization_on_dem(arrays["row"], arrays["col"], dem)
+        lon, lat, h, ok = localization_on_dem(model, arrays["row"], arrays["col"], dem)
     else:
         h = arrays["h"]
         lon, lat, ok = model.localization(arrays["row"], arrays["col"], h)

@@ -1,20 +1,84 @@
-"""Terrain in the local ENU frame: a constant height plane, a regular-grid DEM
-(bilinear, explicit no-data) and a seeded synthetic relief generator; ray/terrain
-intersection for ``image_to_ground``.  Heights are the local ``up`` coordinate in
-metres (``docs/conventions.md#frames``).
+"""Terrain in the local ENU frame: the :class:`Terrain` interface, a constant height plane
+(:class:`FlatTerrain`), a regular-grid DEM (:class:`GridDEM`, bilinear, explicit no-data) and a seeded
+synthetic relief generator.  Heights are the local ``up`` coordinate in metres
+(``docs/conventions.md#frames``).
+
+Every image-to-ground path intersects its lines of sight through :meth:`Terrain.intersect` (the first hit
+from the sensor, with a flag per ray, ``docs/conventions.md#validity``) and samples heights through
+:meth:`Terrain.height`; no caller branches on the terrain's type.  A new kind of terrain implements the
+protocol (``isinstance(obj, Terrain)`` checks the members exist).
 """
 
 from __future__ import annotations
 
 import base64
 from dataclasses import dataclass, field
-from typing import Literal, overload
+from typing import Literal, Protocol, overload, runtime_checkable
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from explorer.errors import InputError
-from explorer.geometry.dem_intersection import HeightGrid, intersect_rays
+from explorer.geometry.dem_intersection import NO_INTERSECTION, OK, HeightGrid, intersect_rays
+
+
+@runtime_checkable
+class Terrain(Protocol):
+    """A terrain surface ``Z = h(X, Y)`` in local ENU metres: heights, bounds and the first hit of rays.
+
+    Implemented by :class:`FlatTerrain` and :class:`GridDEM`.
+    """
+
+    @property
+    def min_height(self) -> float:
+        """Lowest height, metres."""
+        ...
+
+    @property
+    def max_height(self) -> float:
+        """Highest height, metres (equal to :attr:`min_height` for a terrain of one height)."""
+        ...
+
+    @property
+    def mean_height(self) -> float:
+        """Mean height, metres (the reference height of footprints and ground sample distances)."""
+        ...
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Height (N,) at (x, y) (N,) metres; NaN where the terrain is unknown (outside, no-data)."""
+        ...
+
+    def intersect(self, origin: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """First intersection of rays with the surface from their origins.
+
+        Parameters
+        ----------
+        origin, direction : ndarray, shape (N, 3)
+            Ray origins (above the terrain) and directions (need not be unit), metres.
+
+        Returns
+        -------
+        points : ndarray, shape (N, 3)
+            Ground points, metres; NaN rows where the flag is not OK.
+        flags : ndarray of int8, shape (N,)
+            :mod:`explorer.geometry.dem_intersection` flags: 0 OK, 1 outside the DEM, 2 no-data,
+            3 no intersection.
+        """
+        ...
+
+    def to_dict(self) -> dict:
+        """JSON-ready description (:func:`terrain_from_dict` is the inverse)."""
+        ...
+
+
+def intersect_heights(
+    origin: np.ndarray, direction: np.ndarray, height: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rays against the plane(s) ``Z = height`` (one height, or one per ray): points (N, 3) and flags (N,)
+    int8 as :meth:`Terrain.intersect` (:data:`~explorer.geometry.dem_intersection.NO_INTERSECTION` where the
+    ray does not reach its plane going forward)."""
+    points = intersect_plane(origin, direction, height)
+    return points, np.where(np.isfinite(points[:, 0]), OK, NO_INTERSECTION).astype(np.int8)
 
 
 @dataclass(frozen=True)
@@ -32,6 +96,10 @@ class FlatTerrain:
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Height (N,) at (x, y) (N,), metres."""
         return np.full(np.broadcast(np.asarray(x), np.asarray(y)).shape, self.height_m)
+
+    def intersect(self, origin: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact intersection with the plane (:meth:`Terrain.intersect`)."""
+        return intersect_heights(origin, direction, self.height_m)
 
     def to_dict(self) -> dict:
         return {"kind": "flat", "height_m": self.height_m}
@@ -132,6 +200,11 @@ class GridDEM:
             self.__dict__["_height_grid"] = cached
         return cached
 
+    def intersect(self, origin: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact first intersection with the bilinear surface (:meth:`Terrain.intersect`; the compiled cell walk
+        of :mod:`explorer.geometry.dem_intersection`)."""
+        return intersect_rays(origin, direction, self.height_grid())
+
     def to_dict(self) -> dict:
         d = {
             "kind": "grid",
@@ -148,9 +221,6 @@ class GridDEM:
                 np.ascontiguousarray(self.heights, dtype="<f8").tobytes()
             ).decode("ascii")
         return d
-
-
-Terrain = FlatTerrain | GridDEM
 
 
 #: Largest synthetic relief grid (nodes) :func:`synthetic_relief` builds: 4096 x 4096 (134 MB of float64).
@@ -244,7 +314,7 @@ def mountain_heights(shape: tuple[int, int], low_m: float, high_m: float, seed: 
     return low_m + (z - z.min()) / np.ptp(z) * (high_m - low_m)
 
 
-def terrain_from_dict(d: dict) -> Terrain:
+def terrain_from_dict(d: dict) -> FlatTerrain | GridDEM:
     """Inverse of ``to_dict`` of either terrain kind."""
     kind = d.get("kind")
     if kind == "flat":

@@ -5,7 +5,7 @@ files, obtain ground control points through the RPC (heights from a DEM), and so
 model by space resection before simulating points.  :func:`scene_from_rpc` does the same:
 
 1. a regular grid of image points (GCPs) is localised through the RPC, at DEM heights
-   (:meth:`~explorer.rpc.RationalFunctionModel.localization_on_dem`; an orthometric DEM is
+   (:func:`~explorer.rpc.dem.localization_on_dem`; an orthometric DEM is
    converted to ellipsoidal heights with EGM96 so that DEM and RPC share the ellipsoid datum),
    at the RPC's height offset, or on several height layers over the RPC's validity range;
 2. lon/lat/h are converted to a local ENU frame at the image centre
@@ -37,6 +37,7 @@ from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain, GridDEM, Terrain
 from explorer.real.resection import ResectionReport, image_residuals, mpc_from_lines_of_sight, resect
 from explorer.rpc import RationalFunctionModel, read_rpc
+from explorer.rpc.dem import localization_on_dem
 from explorer.scene import Scene
 
 __all__ = [
@@ -65,7 +66,7 @@ def rpc_image_size(rpc: RationalFunctionModel) -> tuple[int, int]:
 
 
 def load_dem(dem: Any, datum: str = "geoid") -> Any:
-    """A height source with ellipsoidal heights for :meth:`localization_on_dem`.
+    """A height source with ellipsoidal heights for :func:`~explorer.rpc.dem.localization_on_dem`.
 
     Parameters
     ----------
@@ -138,7 +139,7 @@ def gcps_from_rpc(
     rows, cols = rpc_image_size(rpc)
     r, c = _grid(n, rows, cols, offset_grid)
     if dem is not None:
-        lon, lat, h, ok = rpc.localization_on_dem(r, c, dem)
+        lon, lat, h, ok = localization_on_dem(rpc, r, c, dem)
         return r[ok], c[ok], lon[ok], lat[ok], h[ok]
     hs = np.atleast_1d(np.asarray([rpc.height_offset] if heights is None else heights, dtype=np.float64))
     rr = np.tile(r, hs.size)

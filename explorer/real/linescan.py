@@ -41,7 +41,7 @@ from explorer.geometry.exterior import LineTiming
 from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
-from explorer.geometry.terrain import FlatTerrain, Terrain, intersect_dem, intersect_plane, terrain_from_dict
+from explorer.geometry.terrain import Terrain, intersect_heights, terrain_from_dict
 from explorer.real.mpc_fit import mpc_scene_from_sensor
 from explorer.scene import RIGOROUS_SCENE_FORMAT, Scene
 
@@ -517,23 +517,18 @@ class RigorousLineScanScene(Scene):
         sight are evaluated at the intersection height (one extra pass on a DEM), so refraction is exact
         there too."""
         terrain = self.terrain if terrain is None else terrain
-
-        def on_plane(h: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-            origin, direction = self.rays(row, col, height=h)
-            points = intersect_plane(origin, direction, h)
-            return points, np.where(np.isfinite(points[:, 0]), 0, 3).astype(np.int8)
-
         if height is not None:
-            points, flags = on_plane(check_finite(np.asarray(height, dtype=np.float64), "height"))
-        elif isinstance(terrain, FlatTerrain):
-            points, flags = on_plane(terrain.height_m)
-        else:
-            origin, direction = self.rays(row, col, height=terrain.mean_height)
-            points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
-            if self.refraction:
-                h = np.where(np.isfinite(points[:, 2]), points[:, 2], terrain.mean_height)
-                origin, direction = self.rays(row, col, height=h)
-                points, flags = intersect_dem(origin, direction, terrain, return_flags=True)
+            h = check_finite(np.asarray(height, dtype=np.float64), "height")
+            origin, direction = self.rays(row, col, height=h)
+            return intersect_heights(origin, direction, h)
+        origin, direction = self.rays(row, col, height=terrain.mean_height)
+        points, flags = terrain.intersect(origin, direction)
+        if self.refraction and terrain.max_height > terrain.min_height:
+            # the refraction shift depends on the height: the lines of sight again at the heights found
+            # (a terrain of one height was already met at its own height)
+            h = np.where(np.isfinite(points[:, 2]), points[:, 2], terrain.mean_height)
+            origin, direction = self.rays(row, col, height=h)
+            points, flags = terrain.intersect(origin, direction)
         return points, flags
 
     # ------------------------------------------------------------ description

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from explorer.rpc import ConvergenceError, RationalFunctionModel, read_rpc
+from explorer.rpc.dem import localization_on_dem
 from explorer.rpc.model import RPC00B_TERMS, evaluate_rpc00b_polynomial, rpc00b_monomials
 
 from .conftest import RPC_DIR
@@ -132,7 +133,7 @@ def test_localization_on_dem_recovers_ground_point_on_real_dem():
     h = dem.height(lon, lat)
     assert np.isfinite(h).all()
     row, col = model.projection(lon, lat, h)
-    lon_d, lat_d, h_d, found = model.localization_on_dem(row, col, dem)
+    lon_d, lat_d, h_d, found = localization_on_dem(model, row, col, dem)
     assert found.all()
     # Pleiades ~0.5 m pixels: 1e-7 deg ~ 1 cm; heights to the bisection tolerance scale
     np.testing.assert_allclose(lon_d, lon, atol=1e-7)
@@ -153,7 +154,7 @@ def test_localization_on_dem_takes_first_crossing_of_a_ridge():
         lon = np.asarray(lon)
         return np.where(np.abs(lon - wall_lon) < 2e-4, 400.0, 0.0)
 
-    lon, lat, h, found = tilted.localization_on_dem(
+    lon, lat, h, found = localization_on_dem(tilted,
         500.0, 1000.0, terrain, h_min=-10.0, h_max=1000.0, n_levels=400
     )
     assert found
@@ -161,7 +162,7 @@ def test_localization_on_dem_takes_first_crossing_of_a_ridge():
     assert abs(lon - wall_lon) <= 2e-4 + 1e-9
     assert h == pytest.approx(300.0 + 2.5, abs=1e-2)
     # no crossing: terrain always below the search interval
-    _, _, h2, found2 = tilted.localization_on_dem(
+    _, _, h2, found2 = localization_on_dem(tilted,
         500.0, 1000.0, lambda x, y: x * 0 - 50.0, h_min=0.0, h_max=100.0
     )
     assert not found2 and np.isnan(h2)
