@@ -39,6 +39,8 @@ Conventions: ``docs/conventions.md``; the papers' tables next to ours: ``docs/re
 
 from __future__ import annotations
 
+import inspect
+import json
 import math
 import time
 import warnings
@@ -54,7 +56,7 @@ from explorer.bench_defaults import (
     DEFAULT_SCPS,
     DEFAULT_SLOW_SECONDS,
 )
-from explorer.errors import InputError
+from explorer.errors import ExplorerError, InputError, UnknownNameError
 from explorer.evaluate import Evaluation, evaluate_method
 from explorer.methods import available, create, registry
 from explorer.points import PointSet, simulate_points
@@ -223,6 +225,54 @@ def _create(name: str, scene, params: dict, seed: int | None):
         if "seed" not in str(exc):
             raise
         return create(name, scene, **params)
+
+
+def _param_type_problem(value: object, default: object) -> str | None:
+    """Why ``value`` cannot stand for a parameter whose default is ``default`` (None if it can)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "not a finite number"
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else "must be true or false"
+    if isinstance(default, int):
+        return None if isinstance(value, int) and not isinstance(value, bool) else "must be an integer"
+    if isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        return None if ok else "must be a number"
+    return None
+
+
+def check_method_params(scene, method_params: dict[str, dict], seed: int = 0) -> None:
+    """Refuse constructor parameters a method does not take or rejects, before anything is benchmarked.
+
+    Each method with parameters is built once on ``scene`` with them; an unknown name or a value of the wrong
+    type or range is an :class:`~explorer.errors.InputError` naming ``METHOD.NAME=VALUE`` (``--param``),
+    not a failed run.
+    """
+    reg = registry()
+    for name, params in method_params.items():
+        if name not in reg:
+            raise UnknownNameError("method (in --param)", name, sorted(reg))
+        shown = ", ".join(f"{name}.{k}={json.dumps(v)}" for k, v in params.items())
+        signature = inspect.signature(reg[name].__init__)
+        takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in signature.parameters.values())
+        accepted = [k for k in signature.parameters if k not in ("self", "scene")]
+        unknown = [k for k in params if k not in accepted]
+        if unknown and not takes_any:
+            raise InputError(f"--param {name}.{unknown[0]}: method {name!r} has no parameter {unknown[0]!r} "
+                             f"(it takes: {', '.join(accepted) or 'none'})")
+        for key, value in params.items():
+            default = signature.parameters[key].default if key in signature.parameters else None
+            problem = _param_type_problem(value, default)
+            if problem:
+                raise InputError(f"--param {name}.{key}={json.dumps(value)}: {problem}")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                _create(name, scene, params, seed if reg[name].needs_fit else None)
+        except ExplorerError as exc:
+            raise InputError(f"--param {shown}: {exc}") from None
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InputError(f"--param {shown}: refused by {name!r} ({type(exc).__name__}: {exc})") from None
 
 
 def _time_locate(method, ground: np.ndarray) -> float:
@@ -458,6 +508,7 @@ def bench_scene(
     """
     reg = registry()
     method_params = method_params or {}
+    check_method_params(scene, method_params, seed)
     result = BenchResult({"runs": []})
     if bar is not None:
         bar.set_description(f"{label}: simulating SCPs")

@@ -7,7 +7,9 @@ standard library at module level; the library is imported by the handler of the 
 One error path: every deliberate error of the package (:class:`explorer.errors.ExplorerError`: a bad file,
 a bad number, a bad path, an unknown name) and every file-system error ends the command with one line on
 stderr naming the problem and exit status 2, as argparse does for bad arguments. Ctrl-C and SIGTERM stop the
-command (writers remove their partial files) with exit status 130 / 143.
+command (writers remove their partial files) with exit status 130 / 143.  Anything else (a bug) still ends
+as one line and exit status 2 (``PUSHBROOM_TRACEBACK=1`` shows the traceback); input validation
+(``docs/validation.md``) exists so that this line is never the answer to a bad input.
 """
 
 from __future__ import annotations
@@ -75,20 +77,62 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"pushbroom: warning: {_one_line(Warning(message))}", file=sys.stderr)
 
 
+def _options_of(args: argparse.Namespace, value: str) -> list[str]:
+    """The ``--options`` (or positional names) of ``args`` that hold ``value``."""
+    return [key if key == "file" else "--" + key.replace("_", "-")
+            for key, held in vars(args).items() if held == value and key not in ("func", "command")]
+
+
+def _option_of(args: argparse.Namespace, value: str) -> str:
+    return next(iter(_options_of(args, value)), repr(value))
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_paths(args: argparse.Namespace, inputs: list[str], outputs: list[str]) -> str | None:
+    """The problem with the command's paths, if any: an output that is an input or another output."""
+    for i, out in enumerate(outputs):
+        for other in outputs[i + 1:]:
+            if _same_file(out, other):
+                names = list(dict.fromkeys(_options_of(args, out) + _options_of(args, other))) or ["two outputs"]
+                return (f"{' and '.join(names)} name the same file {out!r}; give each output its own name")
+        for src in inputs:
+            if _same_file(out, src):
+                return (f"{_option_of(args, out)} {out!r} is the input {_option_of(args, src)}; "
+                        "refusing to overwrite an input")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit status."""
+    from explorer.commands import parsed_paths
+
     parser = build_parser()
+    parsed_paths.clear()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a bad argument (2, message already printed)
         return exc.code if isinstance(exc.code, int) else 2
     name = _command_name(args)
+    problem = check_paths(args, list(parsed_paths.INPUTS), list(parsed_paths.OUTPUTS))
+    if problem is not None:
+        print(f"pushbroom {name}: error: {problem}", file=sys.stderr)
+        return 2
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     warnings.showwarning = _show_warning  # one line per warning, no file paths
     from explorer.errors import ExplorerError
+    from explorer.io_atomic import note_input, protect_inputs
 
     try:
-        return int(args.func(args) or 0)
+        with protect_inputs():
+            for path in parsed_paths.INPUTS:
+                note_input(path)
+            return int(args.func(args) or 0)
     except ExplorerError as exc:
         print(f"pushbroom {name}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
@@ -107,6 +151,16 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"pushbroom {name}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print(f"pushbroom {name}: error: out of memory; lower the sizes asked for (points, layers, --scps)",
+              file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: still one line (PUSHBROOM_TRACEBACK=1 shows the traceback)
+        if os.environ.get("PUSHBROOM_TRACEBACK"):
+            raise
+        print(f"pushbroom {name}: error: unexpected {type(exc).__name__}: {_one_line(exc)} (a bug: please "
+              "report it; PUSHBROOM_TRACEBACK=1 shows the traceback)", file=sys.stderr)
+        return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
 

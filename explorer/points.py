@@ -17,6 +17,7 @@ import numpy as np
 from explorer.errors import InputError
 from explorer.geometry.dem_intersection import OK
 from explorer.io_atomic import atomic_path
+from explorer.memory import check_allocation
 from explorer.scene import Scene
 
 
@@ -96,6 +97,10 @@ def grid_shape_for(n: int, n_rows: int, n_columns: int) -> tuple[int, int]:
     return gr, gc
 
 
+#: Peak memory of :func:`image_grid` per point (measured: ~100 bytes on a flat or DEM terrain; twice that as margin).
+BYTES_PER_POINT = 200
+
+
 def image_grid(
     scene: Scene,
     n: int,
@@ -133,6 +138,8 @@ def image_grid(
     """
     if layers < 1:
         raise InputError(f"layers must be >= 1, got {layers}")
+    check_allocation(float(n) * layers * BYTES_PER_POINT, f"a grid of {n} points x {layers} layer(s)",
+                     "ask for fewer points or layers")
     gr, gc = grid_shape_for(n, scene.n_rows, scene.n_columns)
     if cell_centred:
         rows = (np.arange(gr) + 0.5) * scene.n_rows / gr - 0.5

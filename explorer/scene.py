@@ -29,6 +29,7 @@ from explorer.geometry.terrain import (
     terrain_from_dict,
 )
 from explorer.io_atomic import write_text_atomic
+from explorer.io_input import load_json_file
 
 SCENE_FILE_VERSION = 1
 RIGOROUS_SCENE_FORMAT = "pushbroom-explorer rigorous line-scan scene"
@@ -367,10 +368,7 @@ class Scene:
 
         :func:`explorer.real.load_scene` reads either an MPC scene or a rigorous line-scan scene."""
         path = Path(path)
-        try:
-            d = json.loads(path.read_text(), parse_constant=_NonFinite)
-        except json.JSONDecodeError as exc:
-            raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+        d = load_json_file(path, "scene file", parse_constant=_NonFinite)
         if cls is Scene and isinstance(d, dict) and d.get("format") == RIGOROUS_SCENE_FORMAT:
             raise SceneFileError(
                 f"{path}: a rigorous line-scan scene; load it with explorer.load_scene (explorer.real.load_scene)"

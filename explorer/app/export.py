@@ -32,6 +32,7 @@ import numpy as np
 
 from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, _Recording, point_status
 from explorer.evaluate import Evaluation, evaluate_method
+from explorer.io_atomic import atomic_folder
 from explorer.methods.base import BestScanlineMethod
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status")
@@ -188,14 +189,13 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     t0 = time.perf_counter()
     files = export_files(scene, s, source=source.to_dict(), seed=seed)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     written = {}
-    for name, data in files.items():
-        path = out / name
-        tmp = path.with_name(path.name + ".part")
-        tmp.write_bytes(data)
-        tmp.replace(path)
-        written[name] = path
+    # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a
+    # failure, SIGTERM or a full disk the folder holds the previous complete export or nothing
+    with atomic_folder(out, tuple(files)) as tmp:
+        for name, data in files.items():
+            (tmp / name).write_bytes(data)
+            written[name] = out / name
     log(f"pushbroom explore: exported {', '.join(files)} to {out} ({time.perf_counter() - t0:.1f} s)")
     return written
 

@@ -9,13 +9,20 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import stat
 from pathlib import Path
+
+from explorer.commands import parsed_paths
 
 __all__ = [
     "existing_file",
     "finite_float",
+    "height_m",
+    "pixel_coordinate",
+    "random_seed",
     "int_in_range",
     "latitude",
+    "method_list",
     "longitude",
     "non_negative_float",
     "non_negative_int",
@@ -70,11 +77,41 @@ def non_negative_float(text: str) -> float:
     return value
 
 
+def height_m(text: str) -> float:
+    """A height above the ellipsoid in metres, -12 km .. 100 km (the deepest trench to the edge of space)."""
+    value = finite_float(text)
+    if not -12_000.0 <= value <= 100_000.0:
+        raise argparse.ArgumentTypeError(f"height {text!r} m is outside -12000 .. 100000 m")
+    return value
+
+
+def pixel_coordinate(text: str) -> float:
+    """A row or column in pixels, |value| <= 1e9 (no image is larger)."""
+    value = finite_float(text)
+    if not abs(value) <= 1e9:
+        raise argparse.ArgumentTypeError(f"pixel coordinate {text!r} is outside -1e9 .. 1e9")
+    return value
+
+
 def _integer(text: str) -> int:
+    if len(text.strip()) > 30:
+        raise argparse.ArgumentTypeError(f"{text[:20]!r}... is not an integer of a sensible size")
     try:
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+#: Largest seed (numpy's generators take any integer, but a seed is written in reports and JSON).
+MAX_SEED = 2**32 - 1
+
+
+def random_seed(text: str) -> int:
+    """A random seed, an integer 0 .. 2**32 - 1 (the same range for every command)."""
+    value = _integer(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed {text!r} must be an integer between 0 and {MAX_SEED}")
+    return value
 
 
 def positive_int(text: str) -> int:
@@ -106,6 +143,22 @@ def int_in_range(low: int, high: int, what: str = "value"):
     return parse
 
 
+def method_list(text: str) -> str:
+    """A comma-separated list of method names (or ``all``): not empty, no empty item, no odd characters.
+
+    Whether each name is registered is checked by the command (that needs the registry, not loaded here).
+    """
+    items = [t.strip() for t in text.split(",")]
+    if not text.strip() or not any(items):
+        raise argparse.ArgumentTypeError("the list of methods is empty; name at least one (or 'all')")
+    if any(not t for t in items):
+        raise argparse.ArgumentTypeError(f"{text!r} has an empty method name between commas")
+    bad = [t for t in items if not all(c.isalnum() or c in "_-" for c in t)]
+    if bad:
+        raise argparse.ArgumentTypeError(f"{bad[0]!r} is not a method name (letters, digits, '_' and '-')")
+    return ",".join(items)
+
+
 def port_number(text: str) -> int:
     """A TCP port, 0 (pick a free one) to 65535."""
     value = _integer(text)
@@ -114,15 +167,33 @@ def port_number(text: str) -> int:
     return value
 
 
+
+
+def _special_kind(mode: int) -> str:
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISCHR(mode):
+        return "a character device"
+    if stat.S_ISBLK(mode):
+        return "a block device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
 def existing_file(text: str) -> str:
-    """A path to a readable regular file."""
+    """A path to a readable regular file (a FIFO, a device or a socket is refused without being opened)."""
     path = Path(text)
     if not path.exists():
         raise argparse.ArgumentTypeError(f"no such file: {text!r}")
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a directory, not a file")
+    mode = path.stat().st_mode
+    if not stat.S_ISREG(mode):
+        raise argparse.ArgumentTypeError(f"{text!r} is {_special_kind(mode)}, not a regular file")
     if not os.access(path, os.R_OK):
         raise argparse.ArgumentTypeError(f"{text!r} is not readable")
+    parsed_paths.INPUTS.append(text)
     return text
 
 
@@ -150,9 +221,13 @@ def output_file(text: str) -> str:
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a directory; give a file name")
+    if path.exists() and not stat.S_ISREG(path.stat().st_mode):
+        raise argparse.ArgumentTypeError(f"{text!r} is {_special_kind(path.stat().st_mode)}, not a regular "
+                                         "file; refusing to replace it")
     parent = path.parent
     if not parent.is_dir():
         raise argparse.ArgumentTypeError(f"the folder of {text!r} does not exist")
     if not os.access(parent, os.W_OK):
         raise argparse.ArgumentTypeError(f"the folder of {text!r} is not writable")
+    parsed_paths.OUTPUTS.append(text)
     return text

@@ -21,11 +21,13 @@ from explorer.bench_defaults import (
 )
 from explorer.commands._args import (
     existing_file,
+    method_list,
     non_negative_float,
     non_negative_int,
     output_file,
     positive_float,
     positive_int,
+    random_seed,
     raster_file,
 )
 from explorer.commands._progress import with_compile_progress
@@ -120,14 +122,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmark best-scanline methods on presets (the papers' protocol)")
     p.add_argument("--preset", default=None, help="preset ids, comma-separated, or 'all' / 'paper' (default WSU)")
-    p.add_argument("--methods", default="all", help="method names, comma-separated, or 'all' (default all)")
+    p.add_argument("--methods", default="all", type=method_list,
+                   help="method names, comma-separated, or 'all' (default all)")
     p.add_argument("--scops", default=",".join(map(str, DEFAULT_SCOPS)),
                    help="SCOP counts for learned methods (default 10,30,50,100)")
     p.add_argument("--scps", type=positive_int, default=DEFAULT_SCPS, help="SCPs per preset (default 5000000)")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=random_seed, default=0)
     p.add_argument("--relief", type=non_negative_float, default=0.0,
                    help="synthetic relief amplitude, metres (default 0)")
-    p.add_argument("--relief-seed", type=non_negative_int, default=0)
+    p.add_argument("--relief-seed", type=random_seed, default=0)
     p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0,
                    help="multiplies the presets' body rates (0: orbit-following attitude)")
     p.add_argument("--max-points-slow", type=positive_int, default=DEFAULT_MAX_POINTS_SLOW,

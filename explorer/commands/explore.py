@@ -10,7 +10,12 @@ from __future__ import annotations
 
 import argparse
 
-from explorer.commands._args import port_number, positive_int
+from explorer.commands._args import (
+    method_list,
+    port_number,
+    positive_int,
+    random_seed,
+)
 
 
 def cmd_explore(args: argparse.Namespace) -> int:
@@ -38,11 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=port_number, default=8080,
                    help="port (default 8080; 0 picks a free one; a busy port is an error)")
-    p.add_argument("--methods", default=None,
+    p.add_argument("--methods", default=None, type=method_list,
                    help="comma-separated methods (default lrm,prm,mlp,nr where registered)")
     p.add_argument("--scops", type=positive_int, default=100, help="SCOPs (control points) to train on (default 100)")
     p.add_argument("--scps", type=positive_int, default=50_000, help="SCPs (check points) of the maps (default 50000)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the point heights and subsamples (default 0)")
+    p.add_argument("--seed", type=random_seed, default=0, help="seed of the point heights and subsamples (default 0)")
     p.add_argument("--export", default=None, metavar="DIR",
                    help="write DIR/summary.json, residuals.csv and panels.html (every SCP) and exit without serving")
     p.set_defaults(func=cmd_explore)

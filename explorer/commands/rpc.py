@@ -13,7 +13,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from explorer.commands._args import existing_file, finite_float, latitude, longitude, output_file, raster_file
+from explorer.commands._args import (
+    existing_file,
+    height_m,
+    latitude,
+    longitude,
+    output_file,
+    pixel_coordinate,
+    raster_file,
+)
 
 if TYPE_CHECKING:
     from explorer.rpc import RationalFunctionModel
@@ -239,16 +247,16 @@ def register(subparsers: Any) -> None:
     project.add_argument("file", type=existing_file)
     project.add_argument("--lon", type=longitude, help="degrees")
     project.add_argument("--lat", type=latitude, help="degrees")
-    project.add_argument("--h", type=finite_float, default=0.0, help="metres above the ellipsoid")
+    project.add_argument("--h", type=height_m, default=0.0, help="metres above the ellipsoid")
     project.add_argument("--points", type=existing_file, help="CSV with columns lon,lat,h")
     project.add_argument("--out", type=output_file, help="output CSV (default: stdout); adds row,col")
     project.set_defaults(func=cmd_project)
 
     localize = sub.add_parser("localize", help="image (row, col) -> ground (lon, lat)")
     localize.add_argument("file", type=existing_file)
-    localize.add_argument("--row", type=finite_float)
-    localize.add_argument("--col", type=finite_float)
-    localize.add_argument("--h", type=finite_float, help="metres above the ellipsoid")
+    localize.add_argument("--row", type=pixel_coordinate)
+    localize.add_argument("--col", type=pixel_coordinate)
+    localize.add_argument("--h", type=height_m, help="metres above the ellipsoid")
     localize.add_argument("--dem", type=raster_file, help="GeoTIFF or SRTM .hgt DEM to intersect")
     localize.add_argument(
         "--dem-orthometric", action="store_true",

@@ -19,7 +19,13 @@ import json
 import time
 from typing import Any
 
-from explorer.commands._args import existing_file, int_in_range, non_negative_int, output_file, raster_file
+from explorer.commands._args import (
+    existing_file,
+    int_in_range,
+    output_file,
+    random_seed,
+    raster_file,
+)
 
 __all__ = ["cmd_from_dg", "cmd_from_dimap", "cmd_from_isd", "cmd_from_rpc", "register"]
 
@@ -171,7 +177,7 @@ def register(subparsers: Any) -> None:
                    help="non-uniform detector spacing terms (1 for products resampled across track, e.g. IKONOS)")
     p.add_argument("--check", type=int_in_range(0, 1_000_000, "--check"), default=400,
                    help="about this many check points (0: none)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the check-point heights")
+    p.add_argument("--seed", type=random_seed, default=0, help="seed of the check-point heights")
     p.add_argument("--method", choices=("lm", "trf"), default="lm", help="least-squares method")
     p.add_argument("--per-point", action="store_true", help="print every GCP residual")
     p.add_argument("--out", type=output_file, help="output scene JSON")
@@ -208,6 +214,6 @@ def register(subparsers: Any) -> None:
                    help="usgscsm's resampled state (default) or the ISD's tables as given")
     p.add_argument("--check", type=int_in_range(0, 1_000_000, "--check"), default=2000,
                    help="CSM check points on which the scene's fit is reported (0: none)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the check points")
+    p.add_argument("--seed", type=random_seed, default=0, help="seed of the check points")
     p.add_argument("--report", type=output_file, help="write the camera description and the fit as JSON")
     p.set_defaults(func=cmd_from_isd)

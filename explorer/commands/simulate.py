@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING
 from explorer.commands._args import (
     existing_file,
     non_negative_float,
-    non_negative_int,
     output_file,
     positive_int,
+    random_seed,
 )
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default=None, help="preset id (default: the presets file's default, WSU)")
     p.add_argument("--scene", default=None, type=existing_file, help="scene JSON file (instead of --preset)")
     p.add_argument("--relief", type=non_negative_float, default=0.0, help="synthetic relief amplitude, metres")
-    p.add_argument("--relief-seed", type=non_negative_int, default=0)
+    p.add_argument("--relief-seed", type=random_seed, default=0)
     p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0)
     p.add_argument("--jitter-scale", type=non_negative_float, default=1.0)
 
@@ -110,7 +110,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--n", type=positive_int, default=100, help="about this many points per layer (>= 4)")
     p.add_argument("--layers", type=positive_int, default=1, help="height layers of a 3D grid")
     p.add_argument("--kind", choices=("scop", "scp"), default="scop")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=random_seed, default=0)
     p.add_argument("--out", default=None, type=output_file,
                    help="output .npz file, written under exactly this name (arrays row, col, ground, time, scene_json)")
     p.set_defaults(func=cmd_simulate)

@@ -29,7 +29,6 @@ and measured agreement with the vendor RPCs: ``docs/real_images.md``.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
@@ -42,6 +41,7 @@ from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import Terrain, intersect_heights, terrain_from_dict
+from explorer.io_input import load_json_file
 from explorer.real.mpc_fit import mpc_scene_from_sensor
 from explorer.scene import RIGOROUS_SCENE_FORMAT, Scene
 
@@ -640,10 +640,7 @@ def load_scene(path: str | Path) -> Scene:
         Not valid JSON, not a scene file, or a malformed one (the message names the file).
     """
     path = Path(path)
-    try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+    d = load_json_file(path, "scene file")
     if isinstance(d, dict) and d.get("format") == RIGOROUS_FORMAT:
         return RigorousLineScanScene.from_dict(d, source=str(path))
     return Scene.from_dict(d, source=str(path))
