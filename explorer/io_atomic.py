@@ -216,7 +216,7 @@ def _unlock_folder(target: Path, fd: int) -> None:
     try:
         target.with_name(f".{target.name}.lock").unlink(missing_ok=True)
     finally:
-        _unlock_folder(target, fd)
+        os.close(fd)
 
 
 def _remove_stale_partial_folders(target: Path) -> None:
