@@ -34,9 +34,17 @@ What is read (every key is checked; a missing key, a NaN or a bad unit raises
 * ``focal_length_model.focal_length`` (mm), ``detector_center`` (line, sample),
   ``starting_detector_line``/``sample``, ``focal2pixel_lines``/``samples``,
   ``detector_line_summing``/``sample_summing``;
-* ``optical_distortion``: ``radial``, ``transverse``, ``kaguyalism``, ``lrolrocnac``, ``dawnfc``
-  (each closed form one way and solved by Newton the other, :mod:`explorer.real.csm_kernels`);
-  any other model raises :class:`~explorer.errors.SceneFileError` naming it;
+* ``optical_distortion``: usgscsm's ``radial``, ``transverse``, ``kaguyalism``, ``lrolrocnac``, ``dawnfc``,
+  ``cahvor`` (``coefficients``: k0, k1, k2, x and y offsets), ``radtan`` (k1, k2, p1, p2, k3 on
+  coordinates divided by the focal length), ``kplo_shadowcam`` (one coefficient) and ``lunarorbiter``
+  (``perspective_x``/``_y``, ``center_point_x``/``_y``, ``coefficients`` k0, k1: ISIS's
+  ``LoHighDistortionMap``), and the models ALE writes for line scanners that usgscsm does not read:
+  ``legendre`` (New Horizons MVIC TDI, ``x_coefficients``/``y_coefficients`` of 20 terms: ISIS's
+  ``NewHorizonsMvicTdiCameraDistortionMap``, x only, over half of ``image_samples`` x the pixel pitch of
+  ``focal2pixel_samples``) and ``themisir`` (Mars Odyssey THEMIS IR, ISIS's ``ThemisIrDistortionMap``:
+  ``band`` 1-10 or ``k``, optional ``alpha1``, ``alpha2``); each closed form one way and solved by
+  Newton the other (:mod:`explorer.real.csm_kernels`); any other model (usgscsm's ``cassis``, ...)
+  raises :class:`~explorer.errors.SceneFileError` naming it;
 * ``radii`` (``semimajor``, ``semiminor``, ``unit`` m or km): any body.
 
 A ray that misses the body comes back as NaN with ``hit=False``: usgscsm instead returns the
@@ -67,7 +75,16 @@ SUPPORTED_DISTORTIONS = {
     "kaguyalism": K.DIST_KAGUYALISM,
     "dawnfc": K.DIST_DAWNFC,
     "lrolrocnac": K.DIST_LROLROCNAC,
+    "cahvor": K.DIST_CAHVOR,
+    "lunarorbiter": K.DIST_LUNARORBITER,
+    "radtan": K.DIST_RADTAN,
+    "kplo_shadowcam": K.DIST_KPLOSHADOWCAM,
+    "legendre": K.DIST_LEGENDRE,
+    "themisir": K.DIST_THEMISIR,
 }
+# ISIS ThemisIrDistortionMap: the x scale k of each of THEMIS IR's 10 bands and the y terms alpha1, alpha2
+THEMIS_IR_BAND_K = (0.996005, 0.995358, 0.994260, 0.993290, 0.992389, 0.991474, 0.990505, 0.989611, 0.988653, 0.9877)
+THEMIS_IR_ALPHA = (0.00447623, 0.00107556)
 UNIT_TO_M = {"m": 1.0, "km": 1000.0}
 QUATERNION_NORM_TOL = 1e-5  # |norm - 1| above this is not a rounding of a unit quaternion
 STATUS_OUTSIDE_TABLES = 5  # GroundToImage.status: solved at a line the ephemeris tables do not cover
@@ -227,12 +244,47 @@ def _distortion(isd: _Isd) -> tuple[str, int, np.ndarray]:
             if first:
                 coef[start] = isd.number(*key, f"boresight_{axis}")
             coef[start + first: start + first + c.size] = c
-    else:  # dawnfc, lrolrocnac: one coefficient
-        c = isd.array(*key, "coefficients", shape=(None,))
-        if c.size != 1:
-            raise isd.fail(f"optical_distortion.{name}.coefficients", f"must hold 1 value, got {c.size}")
-        coef = c.copy()
+    elif name in ("cahvor", "radtan"):  # cahvor: k0, k1, k2, x offset, y offset; radtan: k1, k2, p1, p2, k3
+        coef = _exact_size(isd, (*key, "coefficients"), 5)
+        if name == "radtan":  # on coordinates normalised by the focal length (usgscsm)
+            coef = np.append(coef, isd.number("focal_length_model", "focal_length", positive=True))
+    elif name == "lunarorbiter":  # ISIS LoHighDistortionMap: perspective factors, point of symmetry, k0, k1
+        k = isd.array(*key, "coefficients", shape=(None,))
+        if not 1 <= k.size <= 2:
+            raise isd.fail(f"optical_distortion.{name}.coefficients", f"must hold 1 or 2 values, got {k.size}")
+        coef = np.array([isd.number(*key, "perspective_x"), isd.number(*key, "perspective_y"),
+                         isd.number(*key, "center_point_x"), isd.number(*key, "center_point_y"),
+                         k[0], k[1] if k.size == 2 else 0.0])
+    elif name == "legendre":  # ISIS NewHorizonsMvicTdiCameraDistortionMap: 20 x terms over the half detector
+        cx = _exact_size(isd, (*key, "x_coefficients"), 20)
+        _exact_size(isd, (*key, "y_coefficients"), 20)  # read and checked; the TDI map corrects x only
+        fs = isd.array("focal2pixel_samples", shape=(3,))
+        pitch = 1.0 / math.hypot(fs[1], fs[2]) if math.hypot(fs[1], fs[2]) > 0 else math.nan
+        half = 0.5 * isd.number("image_samples", positive=True) * pitch  # ISIS: half of Samples() x PixelPitch()
+        if not (math.isfinite(half) and half > 0):
+            raise isd.fail("focal2pixel_samples", "gives no pixel pitch for the legendre model's half detector")
+        coef = np.concatenate([[half], cx])
+    elif name == "themisir":  # ISIS ThemisIrDistortionMap: x / k, y from alpha1, alpha2
+        band = isd.get(*key, "band", default=None)
+        if band is not None:
+            if not isinstance(band, int) or isinstance(band, bool) or not 1 <= band <= 10:
+                raise isd.fail(f"optical_distortion.{name}.band", f"must be a THEMIS IR band 1 .. 10, got {band!r}")
+            k_default: Any = THEMIS_IR_BAND_K[band - 1]
+        else:
+            k_default = ...
+        coef = np.array([isd.number(*key, "k", default=k_default, positive=True),
+                         isd.number(*key, "alpha1", default=THEMIS_IR_ALPHA[0]),
+                         isd.number(*key, "alpha2", default=THEMIS_IR_ALPHA[1])])
+    else:  # dawnfc, lrolrocnac, kplo_shadowcam: one coefficient
+        coef = _exact_size(isd, (*key, "coefficients"), 1)
     return name, SUPPORTED_DISTORTIONS[name], np.ascontiguousarray(coef, dtype=np.float64)
+
+
+def _exact_size(isd: _Isd, path: tuple[str, ...], n: int) -> np.ndarray:
+    c = isd.array(*path, shape=(None,))
+    if c.size != n:
+        raise isd.fail(".".join(path), f"must hold {n} value{'s' if n > 1 else ''}, got {c.size}")
+    return c.copy()
 
 
 # --------------------------------------------------------------------------- camera

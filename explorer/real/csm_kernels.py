@@ -32,6 +32,12 @@ DIST_TRANSVERSE = 2
 DIST_KAGUYALISM = 3
 DIST_DAWNFC = 4
 DIST_LROLROCNAC = 5
+DIST_CAHVOR = 6
+DIST_LUNARORBITER = 7
+DIST_RADTAN = 8
+DIST_KPLOSHADOWCAM = 9
+DIST_LEGENDRE = 10
+DIST_THEMISIR = 11
 
 STATUS_OK = 0
 STATUS_BEHIND = 1  # the ground point is behind the camera (or a non-finite evaluation)
@@ -357,13 +363,55 @@ def _closed_form(model, c, x, y):
         return x * (1.0 + c[0] * r2), y * (1.0 + c[0] * r2)
     if model == DIST_LROLROCNAC:
         return x, y / (1.0 + c[0] * y * y)
+    if model == DIST_CAHVOR:  # usgscsm: radial about the offset (c[3], c[4])
+        sx, sy = x - c[3], y - c[4]
+        rr = sx * sx + sy * sy
+        dr = c[0] + rr * (c[1] + rr * c[2])
+        return sx * (1.0 - dr) + c[3], sy * (1.0 - dr) + c[4]
+    if model == DIST_LUNARORBITER:  # ISIS LoHighDistortionMap::SetFocalPlane: perspective, then radial about (x0, y0)
+        pf = 1.0 + c[0] * x + c[1] * y
+        pcx, pcy = x * pf, y * pf
+        sx, sy = pcx - c[2], pcy - c[3]
+        rr = sx * sx + sy * sy
+        dr = c[4] + c[5] * rr
+        return pcx - dr * sx, pcy - dr * sy
+    if model == DIST_RADTAN:  # usgscsm / OpenCV on coordinates normalised by the focal length c[5]
+        f = c[5]
+        u, v = x / f, y / f
+        rr = u * u + v * v
+        radial = 1.0 + rr * (c[0] + rr * (c[1] + rr * c[4]))
+        du = u * radial + 2.0 * c[2] * u * v + c[3] * (rr + 2.0 * u * u)
+        dv = v * radial + c[2] * (rr + 2.0 * v * v) + 2.0 * c[3] * u * v
+        return du * f, dv * f
+    if model == DIST_KPLOSHADOWCAM:  # usgscsm: y only, uy = dy (1 + k dy^2)
+        return x, y * (1.0 + c[0] * y * y)
+    if model == DIST_LEGENDRE:  # ISIS NewHorizonsMvicTdiCameraDistortionMap::SetFocalPlane (x only, y scaled 0)
+        half = c[0]
+        s = -x / half
+        s2 = s * s
+        p0, p1, p2 = 1.0, s, 0.5 * (3.0 * s2 - 1.0)
+        p3 = 0.5 * s * (5.0 * s2 - 3.0)
+        p4 = (35.0 * s2 * s2 - 30.0 * s2 + 3.0) / 8.0
+        p5 = s * (63.0 * s2 * s2 - 70.0 * s2 + 15.0) / 8.0
+        q0, q2, q4 = 1.0, -0.5, 0.375  # P_n(0); P_1, P_3, P_5 vanish at 0
+        # terms (i, j) of P_i(x) P_j(y): (0,1) (1,0) (0,2) (1,1) (2,0) (0,3) (1,2) (2,1) (3,0) (0,4) (1,3) (2,2)
+        # (3,1) (4,0) (0,5) (1,4) (2,3) (3,2) (4,1) (5,0); coefficients c[1 + k]
+        d = c[2] * p1 * q0 + c[3] * p0 * q2 + c[5] * p2 * q0 + c[7] * p1 * q2 + c[9] * p3 * q0 \
+            + c[10] * p0 * q4 + c[12] * p2 * q2 + c[14] * p4 * q0 + c[16] * p1 * q4 + c[18] * p3 * q2 \
+            + c[20] * p5 * q0
+        return -(s + d) * half, y
+    if model == DIST_THEMISIR:  # ISIS ThemisIrDistortionMap::SetFocalPlane
+        rad = (1.0 + c[1]) * (1.0 + c[1]) + 4.0 * c[2] * y
+        if rad < 0.0:
+            return np.nan, np.nan
+        return x / c[0], 2.0 * y / (1.0 + c[1] + np.sqrt(rad))
     return x, y
 
 
 @njit(cache=True)
 def closed_form_is_removal(model):
-    """True where the closed form maps distorted -> undistorted (radial, Kaguya LISM, LRO NAC)."""
-    return model == DIST_RADIAL or model == DIST_KAGUYALISM or model == DIST_LROLROCNAC
+    """True where the closed form maps distorted -> undistorted (all but transverse, Dawn FC and radtan)."""
+    return not (model == DIST_TRANSVERSE or model == DIST_DAWNFC or model == DIST_RADTAN)
 
 
 @njit(cache=True)
