@@ -54,7 +54,6 @@ lie on the surface asked for; a silent wrong number is what this package never r
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,6 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from explorer.errors import InputError, SceneFileError, as_points, check_finite
+from explorer.io_input import load_json_file
 from explorer.real import csm_kernels as K
 from explorer.real.linescan import matrix_to_quaternion
 
@@ -763,16 +763,16 @@ def read_isd(path: str | Path, *, interpolation: str = "usgscsm") -> CsmCamera:
     Raises
     ------
     SceneFileError
-        Unreadable JSON, a missing key, NaN values, bad units, an unsupported distortion model or
-        a sensor model other than the line scanner.
+        A file that is not a regular, readable text file (FIFO, device, binary junk), not valid JSON
+        (nested deeper than :data:`explorer.io_input.MAX_JSON_DEPTH`, number literals longer than
+        :data:`explorer.io_input.MAX_NUMBER_DIGITS`), a missing key, NaN values, bad units, an
+        unsupported distortion model, a physically impossible camera (see :func:`camera_from_isd`)
+        or a sensor model other than the line scanner: one line naming the file (and the key).
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise SceneFileError(f"{path}: cannot read ISD ({exc})") from exc
-    except json.JSONDecodeError as exc:
-        raise SceneFileError(f"{path}: not valid JSON ({exc})") from exc
+    # a regular file only (never blocks on a FIFO or device), any text encoding (BOM, UTF-8, UTF-16,
+    # Latin-1), binary content, deep nesting and absurd number literals refused by name (explorer.io_input)
+    data = load_json_file(path, what="ISD")
     return camera_from_isd(data, source=str(path), interpolation=interpolation)
 
 
