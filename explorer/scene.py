@@ -30,6 +30,7 @@ from explorer.geometry.terrain import (
 )
 from explorer.io_atomic import write_text_atomic
 from explorer.io_input import load_json_file
+from explorer.sensor import Localization, Projection, inside_image
 
 SCENE_FILE_VERSION = 1
 RIGOROUS_SCENE_FORMAT = "pushbroom-explorer rigorous line-scan scene"
@@ -82,8 +83,15 @@ class Scene:
     #: Capability: the exterior orientation is MPC polynomials of time (+ jitter), so the compiled
     #: collinearity kernels (:mod:`explorer.geometry.kernels`) can pack this scene.
     has_polynomial_exterior: ClassVar[bool] = True
+    #: Capability (:class:`explorer.sensor.LineGeometrySensor`): physical scanlines.
+    has_line_geometry: ClassVar[bool] = True
 
     # ------------------------------------------------------------------ image
+    @property
+    def body(self):  # -> Ellipsoid (the frame's)
+        """The body the frame sits on (``frame.body``)."""
+        return self.frame.body
+
     @property
     def n_columns(self) -> int:
         return self.interior.n_columns
@@ -108,11 +116,25 @@ class Scene:
 
     def inside_image(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
         """True where (row, col) lies on the image, pixel edges included: -0.5 <= row <= rows - 0.5."""
-        row = np.asarray(row, dtype=np.float64)
-        col = np.asarray(col, dtype=np.float64)
-        return (
-            (row >= -0.5) & (row <= self.n_rows - 0.5) & (col >= -0.5) & (col <= self.n_columns - 0.5)
-        )
+        return inside_image(row, col, self.n_rows, self.n_columns)
+
+    # ------------------------------------------------------------ line geometry
+    def line_time(self, row: np.ndarray) -> np.ndarray:
+        """Exposure time (N,) of rows (N,), seconds on the sensor's clock (:class:`~explorer.sensor.LineGeometrySensor`;
+        here :meth:`scanline_time`)."""
+        return self.scanline_time(np.atleast_1d(np.asarray(row, dtype=np.float64)))
+
+    def perspective_centre(self, t: np.ndarray) -> np.ndarray:
+        """Perspective centres (N, 3), local ENU metres, at times (N,) seconds."""
+        return self.exterior.position(np.atleast_1d(np.asarray(t, dtype=np.float64)))
+
+    def attitude(self, t: np.ndarray) -> np.ndarray:
+        """Camera -> local ENU rotations (N, 3, 3) at times (N,) seconds."""
+        return self.exterior.rotation(np.atleast_1d(np.asarray(t, dtype=np.float64)))
+
+    def look_direction(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """Unit lines of sight (N, 3), local ENU, of detector ``col`` at the time of ``row`` (:meth:`rays`)."""
+        return self.rays(row, col)[1]
 
     # ------------------------------------------------------------ collinearity
     def focal_plane(self, ground: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -234,6 +256,13 @@ class Scene:
         points, flags = self.intersect_terrain(row, col, terrain, height=height)
         return (points, flags) if return_flags else points
 
+    def localize(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> Localization:
+        """Ground points and flags (:class:`explorer.sensor.Localization`) on the plane(s) ``Z = height``
+        or the scene's terrain (first hit on a DEM)."""
+        return Localization(*self.intersect_terrain(row, col, height=height))
+
     def intersect_terrain(
         self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
         height: np.ndarray | float | None = None,
@@ -290,6 +319,11 @@ class Scene:
         """
         row, col, _ = bracket_best_scanline(self, ground, row_guess=row_guess)
         return row, col
+
+    def project(self, ground: np.ndarray) -> Projection:
+        """:meth:`ground_to_image` with the validity flags (:class:`explorer.sensor.Projection`)."""
+        row, col = self.ground_to_image(ground)
+        return Projection(row, col, self.inside_image(row, col))
 
     def time_range(self) -> tuple[float, float]:
         """(earliest, latest) exposure time of the image, seconds: the first and last scanline's outer edges."""

@@ -1,7 +1,8 @@
 """The sensor interface: what every image geometry of the package offers.
 
 A :class:`Sensor` maps between an image of ``n_rows`` x ``n_columns`` pixels and the ground, expressed
-in local ENU metres of its :class:`~explorer.geometry.frames.LocalFrame` (``docs/conventions.md``):
+in local ENU metres of its :class:`~explorer.geometry.frames.LocalFrame` on the sensor's ``body`` (the
+ellipsoid of the file: WGS84, Mars, the Moon ...; ``docs/conventions.md``):
 
 ========================================  ======================================================
 implementation                            where
@@ -9,47 +10,118 @@ implementation                            where
 MPC scene (presets, files, resection)     :class:`explorer.scene.Scene`
 rigorous line-scan model (WorldView,      :class:`explorer.real.linescan.RigorousLineScanScene`
 Pleiades DIMAP)
+USGS CSM line-scan camera (ISD)           :class:`explorer.real.csm_sensor.CsmScene` (wraps a
+                                          :class:`~explorer.real.csm_camera.CsmCamera`)
 RPC model                                 :class:`explorer.rpc.sensor.RPCSensor` (wraps a
                                           :class:`~explorer.rpc.RationalFunctionModel`)
 ========================================  ======================================================
 
+What every sensor offers:
+
+* ``ground_to_image(ground) -> (row, col)`` and ``project(ground) -> Projection(row, col, valid)``
+  (``valid``: the model solved the point and it lies on the image, pixel edges included);
+* ``image_to_ground(row, col, height=...)`` on the plane(s) ``Z = height``, or on the sensor's own
+  terrain (plane or DEM; first hit from the sensor); ``localize(row, col, height=...) -> Localization
+  (ground, flags)`` says per point why there is no ground point (outside the DEM, no-data, no hit);
+* ``n_rows``, ``n_columns``, ``footprint(height)``, ``time_range()``, ``frame`` and ``body``.
+
+Optional capabilities are declared explicitly as class attributes, never discovered by catching
+``AttributeError``:
+
+* :class:`LineGeometrySensor` (``has_line_geometry = True``): the model has physical scanlines --
+  the time of a line, the perspective centre and attitude at a time, the look direction of a detector
+  position -- so the best-scanline *search* methods (ss, bws, nr, exact, csm-secant ...) run on it.
+  Declared by the scenes (MPC, rigorous DIMAP / DG, CSM); an RPC has no lines (False);
+* :class:`PolynomialExteriorSensor` (``has_polynomial_exterior = True``): the exterior orientation is
+  MPC polynomials of time, which the compiled collinearity kernels (:mod:`explorer.geometry.kernels`)
+  pack.
+
 Code that only needs to project, localise or outline an image (building an MPC scene from any model
 by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in the explorer) takes a
 :class:`Sensor` and works with all of them.  ``isinstance(obj, Sensor)`` checks the methods exist.
-
-Optional capabilities are declared explicitly as class attributes, never discovered by catching
-``AttributeError``: :class:`PolynomialExteriorSensor` (``has_polynomial_exterior = True``) says the
-exterior orientation is MPC polynomials of time, which the compiled collinearity kernels
-(:mod:`explorer.geometry.kernels`) pack.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
 if TYPE_CHECKING:  # typing only
-    from explorer.geometry.frames import LocalFrame
+    from explorer.geometry.frames import Ellipsoid, LocalFrame
+
+#: ``Localization.flags`` codes (as :mod:`explorer.geometry.dem_intersection`).
+FLAG_OK, FLAG_OUTSIDE_DEM, FLAG_NO_DATA, FLAG_NO_HIT = 0, 1, 2, 3
+FLAG_NAMES = {FLAG_OK: "ok", FLAG_OUTSIDE_DEM: "outside the DEM", FLAG_NO_DATA: "DEM no-data",
+              FLAG_NO_HIT: "no intersection"}
+
+
+class Projection(NamedTuple):
+    """Result of :meth:`Sensor.project`.
+
+    row, col : ndarray (N,)
+        Fractional image coordinates (0-based, pixel centre; ``docs/conventions.md#pixels``); NaN where
+        the model has no image point.
+    valid : ndarray of bool (N,)
+        The model solved the point and (row, col) lies on the image, pixel edges included
+        (``-0.5 <= row <= n_rows - 0.5``, same for columns).
+    """
+
+    row: np.ndarray
+    col: np.ndarray
+    valid: np.ndarray
+
+
+class Localization(NamedTuple):
+    """Result of :meth:`Sensor.localize`.
+
+    ground : ndarray (N, 3)
+        Local ENU metres; NaN rows where there is no ground point.
+    flags : ndarray of int8 (N,)
+        :data:`FLAG_OK` (0), :data:`FLAG_OUTSIDE_DEM` (1), :data:`FLAG_NO_DATA` (2), :data:`FLAG_NO_HIT` (3).
+    """
+
+    ground: np.ndarray
+    flags: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """True where a ground point was found."""
+        return self.flags == FLAG_OK
+
+
+def inside_image(row: np.ndarray, col: np.ndarray, n_rows: int, n_columns: int) -> np.ndarray:
+    """True where (row, col) lies on an ``n_rows`` x ``n_columns`` image, pixel edges included (NaN: False)."""
+    row = np.asarray(row, dtype=np.float64)
+    col = np.asarray(col, dtype=np.float64)
+    return (row >= -0.5) & (row <= n_rows - 0.5) & (col >= -0.5) & (col <= n_columns - 0.5)
 
 
 @runtime_checkable
 class Sensor(Protocol):
-    """Ground <-> image of one image, in local ENU metres of ``frame``.
+    """Ground <-> image of one image, in local ENU metres of ``frame`` on ``body``.
 
     Attributes
     ----------
     name : str
     frame : LocalFrame
-        Where the local ENU frame of the ground coordinates sits on the WGS84 ellipsoid.
+        Where the local ENU frame of the ground coordinates sits on the body's ellipsoid.
+    body : Ellipsoid
+        The body (``frame.body``): WGS84 for Earth images, the file's radii for a CSM camera.
     n_rows, n_columns : int
         Image size, pixels (rows are scanlines).
+    has_line_geometry : bool (class attribute)
+        The :class:`LineGeometrySensor` capability.
     """
 
     name: str
+    has_line_geometry: ClassVar[bool]
 
     @property
     def frame(self) -> LocalFrame: ...
+
+    @property
+    def body(self) -> Ellipsoid: ...
 
     @property
     def n_rows(self) -> int: ...
@@ -62,11 +134,22 @@ class Sensor(Protocol):
         pixel centre); NaN where the model has no image point."""
         ...
 
+    def project(self, ground: np.ndarray) -> Projection:
+        """:meth:`ground_to_image` with the validity flags (:class:`Projection`)."""
+        ...
+
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
     ) -> np.ndarray:
         """Image points (N,) -> ground points (N, 3), local ENU metres: on the plane(s) ``Z = height``
         when given, else on the sensor's own terrain; NaN rows where the line of sight misses it."""
+        ...
+
+    def localize(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> Localization:
+        """:meth:`image_to_ground` with a flag per point (:class:`Localization`): on a DEM the first
+        intersection from the sensor."""
         ...
 
     def footprint(self, height: float | None = None) -> np.ndarray:
@@ -76,6 +159,32 @@ class Sensor(Protocol):
 
     def time_range(self) -> tuple[float, float]:
         """(earliest, latest) exposure time of the image, seconds on the sensor's own time axis."""
+        ...
+
+
+@runtime_checkable
+class LineGeometrySensor(Sensor, Protocol):
+    """Capability: physical scanlines (declared by ``has_line_geometry = True``).
+
+    Times are seconds on the sensor's own clock (``line_time``); rotations map camera axes to local ENU
+    (``docs/conventions.md#rotations``: the camera looks along its ``-z`` axis).
+    """
+
+    def line_time(self, row: np.ndarray) -> np.ndarray:
+        """Exposure time (N,) of (fractional) rows (N,), seconds."""
+        ...
+
+    def perspective_centre(self, t: np.ndarray) -> np.ndarray:
+        """Perspective centres (N, 3), local ENU metres, at times (N,) seconds."""
+        ...
+
+    def attitude(self, t: np.ndarray) -> np.ndarray:
+        """Camera -> local ENU rotations (N, 3, 3) at times (N,) seconds."""
+        ...
+
+    def look_direction(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """Unit lines of sight (N, 3), local ENU, of detector position ``col`` at the time of ``row``
+        (everything the model applies: distortion, detector layout, aberration ...)."""
         ...
 
 
@@ -96,4 +205,23 @@ def has_polynomial_exterior(sensor: object) -> bool:
     return bool(getattr(type(sensor), "has_polynomial_exterior", False))
 
 
-__all__ = ["PolynomialExteriorSensor", "Sensor", "has_polynomial_exterior"]
+def has_line_geometry(sensor: object) -> bool:
+    """True where ``sensor`` declares the :class:`LineGeometrySensor` capability."""
+    return bool(getattr(type(sensor), "has_line_geometry", False))
+
+
+__all__ = [
+    "FLAG_NAMES",
+    "FLAG_NO_DATA",
+    "FLAG_NO_HIT",
+    "FLAG_OK",
+    "FLAG_OUTSIDE_DEM",
+    "LineGeometrySensor",
+    "Localization",
+    "PolynomialExteriorSensor",
+    "Projection",
+    "Sensor",
+    "has_line_geometry",
+    "has_polynomial_exterior",
+    "inside_image",
+]

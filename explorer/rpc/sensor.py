@@ -11,12 +11,14 @@ the local and the ellipsoid normals, 1 to 1e-5 over an image).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from explorer.errors import InputError, check_finite
 from explorer.geometry.frames import LocalFrame
 from explorer.rpc.model import RationalFunctionModel
+from explorer.sensor import FLAG_NO_HIT, FLAG_OK, Localization, Projection, inside_image
 
 #: Fixed-point steps of :meth:`RPCSensor.image_to_ground` at most, and the height change that stops them (m).
 PLANE_ITERATIONS = 8
@@ -42,6 +44,11 @@ class RPCSensor:
     line_period_s: float | None = None
     name: str = "rpc"
 
+    #: An RPC has no physical scanlines (:class:`explorer.sensor.LineGeometrySensor` is not offered):
+    #: the search methods need line geometry and are unavailable on it.
+    has_line_geometry: ClassVar[bool] = False
+    has_polynomial_exterior: ClassVar[bool] = False
+
     def __post_init__(self) -> None:
         if self.frame is None:
             self.frame = LocalFrame(float(self.rpc.lat_offset), float(self.rpc.lon_offset), 0.0)
@@ -58,6 +65,11 @@ class RPCSensor:
         return int(size[1]) if size is not None else int(round(2 * self.rpc.col_offset + 1))
 
     @property
+    def body(self):  # -> Ellipsoid
+        """The body of the frame (an RPC's geodetic coordinates are WGS84)."""
+        return self.frame.body
+
+    @property
     def mean_height(self) -> float:
         """The RPC's height offset as a local height at the frame origin, metres."""
         return float(self.rpc.height_offset) - self.frame.h0_m
@@ -70,6 +82,23 @@ class RPCSensor:
         lon, lat, h = self.frame.enu_to_geodetic(ground)
         row, col = self.rpc.projection(lon, lat, h)[:2]
         return row, col
+
+    def project(self, ground: np.ndarray) -> Projection:
+        """:meth:`ground_to_image` with validity flags: the RPC's own validity (ground inside its
+        normalisation domain, image point inside its image domain) and the point on the image."""
+        ground = np.atleast_2d(check_finite(ground, "ground"))
+        if ground.ndim != 2 or ground.shape[1] != 3:
+            raise InputError(f"ground must have shape (N, 3), got {ground.shape}")
+        lon, lat, h = self.frame.enu_to_geodetic(ground)
+        row, col, ok = self.rpc.projection(lon, lat, h, return_valid=True)
+        return Projection(row, col, ok & inside_image(row, col, self.n_rows, self.n_columns))
+
+    def localize(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> Localization:
+        """:meth:`image_to_ground` with flags (0 found, 3 the RPC does not localise the point)."""
+        ground = self.image_to_ground(row, col, height=height)
+        return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
 
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
