@@ -19,7 +19,7 @@ from explorer.errors import SceneFileError, as_points, check_finite
 from explorer.geometry.bracket import bracket_best_scanline
 from explorer.geometry.collinearity import ideal_focal_plane
 from explorer.geometry.exterior import ExteriorOrientation, LineTiming
-from explorer.geometry.frames import LocalFrame
+from explorer.geometry.frames import Ellipsoid, LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.terrain import (
     FlatTerrain,
@@ -88,7 +88,7 @@ class Scene:
 
     # ------------------------------------------------------------------ image
     @property
-    def body(self):  # -> Ellipsoid (the frame's)
+    def body(self) -> Ellipsoid:
         """The body the frame sits on (``frame.body``)."""
         return self.frame.body
 

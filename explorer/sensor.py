@@ -87,7 +87,7 @@ class Localization(NamedTuple):
     @property
     def valid(self) -> np.ndarray:
         """True where a ground point was found."""
-        return self.flags == FLAG_OK
+        return np.asarray(self.flags == FLAG_OK, dtype=bool)
 
 
 def inside_image(row: np.ndarray, col: np.ndarray, n_rows: int, n_columns: int) -> np.ndarray:

@@ -25,6 +25,7 @@ from explorer.geometry.kernels import CollinearityParams, collinearity_params_or
 from explorer.methods._compiled import inside_flags
 from explorer.points import PointSet
 from explorer.scene import Scene
+from explorer.sensor import has_line_geometry
 
 _REGISTRY: dict[str, type[BestScanlineMethod]] = {}
 _DISCOVERED = False
@@ -180,6 +181,15 @@ class BestScanlineMethod(ABC):
         ok = np.isfinite(row)
         col[ok] = self.scene.column_at_row(ground[ok], row[ok])
         return col
+
+
+def require_line_geometry(name: str, sensor: object) -> None:
+    """Raise ``ValueError`` naming the method and the sensor unless the sensor declares line geometry
+    (:class:`explorer.sensor.LineGeometrySensor`): a search method needs physical scanlines."""
+    if not has_line_geometry(sensor):
+        raise ValueError(f"method {name!r} searches the scanlines of a line-scan sensor; "
+                         f"{getattr(sensor, 'name', type(sensor).__name__)!r} has none (an RPC: use its resected "
+                         "MPC, --as-mpc, a stand-in)")
 
 
 def concatenate_results(parts: list[ScanlineResult]) -> ScanlineResult:

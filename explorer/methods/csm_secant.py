@@ -42,9 +42,11 @@ from __future__ import annotations
 import numpy as np
 
 from explorer.geometry.kernels import CollinearityParams, solve_secant
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
+from explorer.methods._line_geometry import solve_usgscsm_secant
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
 from explorer.methods.exact import check_device
 from explorer.scene import Scene
+from explorer.sensor import has_polynomial_exterior
 
 PROJECTIVE_FACTORS = (0.0, 0.5, 1.0)  # usgscsm u_factors / v_factors
 PROJECTIVE_DELTA_Z = 100.0  # usgscsm delta_z, metres
@@ -124,14 +126,30 @@ class CsmSecant(BestScanlineMethod):
         self.max_count = int(max_count)
         self.first_step = float(first_step)
         self.backend = backend
-        self.kernel_params = CollinearityParams.from_scene(scene)
+        require_line_geometry(self.name, scene)
+        # MPC polynomials: the compiled kernel; interpolated tables (rigorous, CSM): the same iteration
+        # vectorised over points on the sensor's own residual (explorer.methods._line_geometry)
+        self.kernel_params = CollinearityParams.from_scene(scene) if has_polynomial_exterior(scene) else None
         self.proj, self.setup_ce = fit_projective_line(scene)
 
+    def _seed_rows(self, ground: np.ndarray) -> np.ndarray:
+        """The projective seed clamped to the image (as the kernel does)."""
+        p = self.proj
+        u = (ground - p[8:11]) / p[11:14]
+        line = (p[0] + u @ p[1:4]) / (1.0 + u @ p[4:7])
+        return np.clip(line, -0.5, self.scene.n_rows - 0.5)
+
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
-        row, col, ok, ce, rows_trace = solve_secant(
-            self.kernel_params, ground, self.proj, precision=self.desired_precision, first_step=self.first_step,
-            max_count=self.max_count, trace=trace, backend=self.backend,
-        )
+        if self.kernel_params is None:
+            row, col, ok, ce = solve_usgscsm_secant(
+                self.scene, ground, self._seed_rows(ground), precision=self.desired_precision,
+                first_step=self.first_step, max_count=self.max_count)
+            rows_trace = None
+        else:
+            row, col, ok, ce, rows_trace = solve_secant(
+                self.kernel_params, ground, self.proj, precision=self.desired_precision, first_step=self.first_step,
+                max_count=self.max_count, trace=trace, backend=self.backend,
+            )
         estimate = row
         row = np.where(ok, row, np.nan)
         col = np.where(ok, col, np.nan)

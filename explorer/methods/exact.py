@@ -80,9 +80,11 @@ from explorer.geometry.kernels import (
     seed_features,
     solve_exact,
 )
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
+from explorer.methods._line_geometry import residual_slope, solve_bracketed_secant
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
 from explorer.points import image_grid
 from explorer.scene import Scene
+from explorer.sensor import has_polynomial_exterior
 
 CURVATURE_OFFSETS = np.linspace(-2.0, 2.0, 9)  # rows around each grid root where C is probed
 CURVATURE_SAFETY = 4.0
@@ -178,11 +180,34 @@ class Exact(BestScanlineMethod):
         self.margin_rows = float(margin_rows)
         self.backend = backend
         self.host_backend = "auto" if backend == "torch" else backend  # setup, traces, safeguarded points
-        self.kernel_params = CollinearityParams.from_scene(scene)
+        require_line_geometry(self.name, scene)
         self.window = (-0.5 - self.margin_rows, scene.n_rows - 0.5 + self.margin_rows)
         self.setup_ce = 0
         gx, gy, gz = (int(v) for v in seed_grid)
-        self._setup((gx, gy, gz))
+        self.kernel_params: CollinearityParams | None = None
+        if has_polynomial_exterior(scene):
+            self.kernel_params = CollinearityParams.from_scene(scene)
+            self._setup((gx, gy, gz))
+        else:  # interpolated tables (rigorous DIMAP / DG, CSM camera): the line-geometry solver
+            self._setup_lines((gx, gy, gz))
+
+    def _setup_lines(self, seed_grid: tuple[int, int, int]) -> None:
+        """Seed polynomial and residual slope for :func:`explorer.methods._line_geometry.solve_bracketed_secant`."""
+        scene = self.scene
+        grid = image_grid(scene, seed_grid[0] * seed_grid[1], layers=seed_grid[2])
+        ground = grid.ground
+        mean = ground.mean(axis=0)
+        scale = ground.std(axis=0)
+        scale[scale == 0] = 1.0
+        design = seed_features((ground - mean) / scale, self.seed_degree)
+        if len(grid) < design.shape[1]:
+            raise ValueError(f"seed_grid gives {len(grid)} points, fewer than the {design.shape[1]} seed coefficients")
+        coef, *_ = np.linalg.lstsq(design, grid.row, rcond=None)
+        self.seed_fit_rms_rows = float(np.sqrt(np.mean((design @ coef - grid.row) ** 2)))
+        self._line_seed = (mean, scale, coef)
+        self.slope = residual_slope(scene, ground, grid.row)
+        self.orient = float(np.sign(self.slope))
+        self.setup_ce += len(grid) * 3
 
     # ------------------------------------------------------------------ setup
     def _setup(self, seed_grid: tuple[int, int, int]) -> None:
@@ -202,6 +227,7 @@ class Exact(BestScanlineMethod):
         poly = SeedModel(mean, scale, coef)
         # orientation of the residual and Newton's curvature constant around the roots
         p = self.kernel_params
+        assert p is not None
         n = len(grid)
         rows = (grid.row[None, :] + CURVATURE_OFFSETS[:, None]).ravel()
         pts = np.tile(ground, (CURVATURE_OFFSETS.size, 1))
@@ -252,6 +278,8 @@ class Exact(BestScanlineMethod):
 
     # ------------------------------------------------------------------ locate
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
+        if self.kernel_params is None:
+            return self._locate_lines(ground)
         kw: dict[str, Any] = {"window": self.window, "orient": self.orient, "tol": self.tol,
                               "accept_step": self.accept_step, "max_iter": self.max_iter,
                               "first_evaluations": self.first_evaluations}
@@ -269,3 +297,14 @@ class Exact(BestScanlineMethod):
         info = {"status": status, "status_counts": counts, "setup_ce": self.setup_ce,
                 "accept_step_rows": self.accept_step, "curvature_c": self.curvature_c}
         return self._result(ground, row, converged, ce, col=col, trace=rows_trace, info=info)
+
+    def _locate_lines(self, ground: np.ndarray) -> ScanlineResult:
+        """Seed + bracketed secant on the sensor's own residual (:mod:`explorer.methods._line_geometry`)."""
+        mean, scale, coef = self._line_seed
+        seed = seed_features((ground - mean) / scale, self.seed_degree) @ coef
+        row, col, status, ce = solve_bracketed_secant(self.scene, ground, seed, window=self.window, slope=self.slope,
+                                                      tol=min(1e-10, self.tol * 100), max_iter=self.max_iter)
+        counts = {STATUS_NAMES[k]: int(np.count_nonzero(status == k)) for k in STATUS_NAMES}
+        info = {"status": status, "status_counts": counts, "setup_ce": self.setup_ce,
+                "solver": "line-geometry bracketed secant"}
+        return self._result(ground, row, status == STATUS_CONVERGED, ce, col=col, info=info)

@@ -16,7 +16,10 @@ explorer -- runs on the camera's own geometry:
 * **the collinearity residual** the search methods evaluate (:meth:`CsmScene.focal_plane`) is usgscsm's
   detector-line residual (one compiled evaluation per point, :meth:`CsmCamera.detector_residual`),
   expressed in the focal plane of the scene's interior: the detector point of the sample plus the residual
-  times the pitch along track.  Its root and its column are the camera's exactly; its scale is lines;
+  times the pitch along track.  Its root and its column are the camera's exactly; its scale is lines.
+  Far from the root (thousands of lines), where a focal-plane point lies so far off the detector that
+  usgscsm's distortion cannot be applied (its Newton diverges), the residual is taken without the
+  distortion: only its sign matters to a search there;
 * **time**: ``scanline_time`` is linear in the row (the methods' parameter); with one line rate it is the
   camera's clock (seconds from ``center_ephemeris_time``), with several it is a linear stand-in and
   :meth:`CsmScene.line_time` gives the camera's time of a row.  ``exterior`` evaluates the camera's
@@ -195,15 +198,15 @@ class CsmScene(Scene):
     """A USGS CSM line-scan camera as a :class:`~explorer.scene.Scene` (see the module docstring).
 
     Build it with :func:`csm_scene`.  Extra attributes: ``camera`` (the :class:`CsmCamera`) and
-    ``residual_sign`` (+-1: usgscsm's detector-line residual turned into the scene convention, positive
-    before the best scanline).
+    ``residual_sign`` (+-1: usgscsm's detector-line residual turned into the sign of the physical
+    along-track offset ``x - x_det(y)`` in the scene's sensor axes).
     """
 
     camera: Any = field(default=None, repr=False, compare=False)
     residual_sign: float = 1.0
     exterior: CsmExterior  # type: ignore[assignment]
 
-    #: Interpolated tables, not MPC polynomials.
+    #: Interpolated tables, not MPC polynomials; the camera's own lines of sight.
     has_polynomial_exterior: ClassVar[bool] = False
 
     # ------------------------------------------------------------ frames
@@ -242,7 +245,11 @@ class CsmScene(Scene):
         ground = np.asarray(ground, dtype=np.float64)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), ground.shape[:1])
         line = self.timing.row_at_time(t) + 0.5
-        res, sample = self.camera.detector_residual(self.frame.enu_to_ecef(ground), line)
+        xyz = self.frame.enu_to_ecef(ground)
+        res, sample = self.camera.detector_residual(xyz, line)
+        lost = np.flatnonzero(~np.isfinite(res))
+        if lost.size:  # usgscsm's distortion is not applicable that far off the detector: its sign without it
+            res[lost], sample[lost] = _undistorted_residual(self.camera, xyz[lost], line[lost])
         xd, yd = self.interior.detector_focal_plane(sample - 0.5)
         return xd + self.residual_sign * res * self.interior.detector_pitch_m, yd
 
@@ -273,6 +280,17 @@ class CsmScene(Scene):
         return replace(self, terrain=terrain)
 
 
+def _undistorted_residual(camera: CsmCamera, xyz: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """usgscsm's detector-line residual and sample without the optical distortion (NaN behind the camera)."""
+    from explorer.real import csm_kernels as K
+
+    cam, rl, rt, rp, ext, _, _ = camera._all_args()
+    res, sample = np.empty(line.size), np.empty(line.size)
+    K.residual_many(np.ascontiguousarray(xyz), np.ascontiguousarray(line), cam, rl, rt, rp, ext,  # type: ignore[call-arg]
+                    int(K.DIST_NONE), np.zeros(1), res, sample)
+    return res, sample
+
+
 def csm_scene(camera: CsmCamera, *, terrain: Any = None, interior_degree: int = 7) -> CsmScene:
     """The :class:`CsmScene` of a camera (default terrain: the local plane ``Z = 0``)."""
     frame = csm_frame(camera)
@@ -285,12 +303,17 @@ def csm_scene(camera: CsmCamera, *, terrain: Any = None, interior_degree: int = 
     scene = CsmScene(name=camera.name, interior=interior, exterior=exterior, timing=timing, n_rows=camera.n_lines,
                      terrain=FlatTerrain(0.0) if terrain is None else terrain, frame=frame, metadata=meta,
                      camera=camera)
-    # the scene convention: the residual is positive before the best scanline (decreasing in the row)
+    # the residual's sign: that of the physical along-track focal-plane offset x - x_det(y) in the scene's
+    # sensor axes (Scene.focal_plane on the exterior and interior), so that methods that build their own
+    # perspective planes from them (cpp) and the residual agree on the direction of flight
     rc, cc = 0.5 * (camera.n_lines - 1), 0.5 * (camera.n_samples - 1)
-    g = scene.image_to_ground(np.array([rc]), np.array([cc]), height=0.0)
-    res, _ = camera.detector_residual(frame.enu_to_ecef(g), np.array([rc + 0.5 - 1.0]))
-    if not np.isfinite(res[0]) or res[0] == 0.0:
+    g = scene.image_to_ground(np.array([rc + 2.0]), np.array([cc]), height=0.0)
+    t = scene.scanline_time(np.array([rc]))
+    res, _ = camera.detector_residual(frame.enu_to_ecef(g), np.array([rc + 0.5]))
+    x, y = Scene.focal_plane(scene, g, t)
+    physical = float((x - interior.detector_x(y))[0])
+    if not (np.isfinite(res[0]) and res[0] != 0.0 and np.isfinite(physical) and physical != 0.0):
         raise SceneFileError(f"{camera.source}: the detector-line residual does not change with the line "
                              "at the image centre")
-    scene.residual_sign = 1.0 if res[0] > 0 else -1.0
+    scene.residual_sign = 1.0 if (res[0] > 0) == (physical > 0) else -1.0
     return scene

@@ -16,7 +16,7 @@ from typing import ClassVar
 import numpy as np
 
 from explorer.errors import InputError, check_finite
-from explorer.geometry.frames import LocalFrame
+from explorer.geometry.frames import Ellipsoid, LocalFrame
 from explorer.rpc.model import RationalFunctionModel
 from explorer.sensor import FLAG_NO_HIT, FLAG_OK, Localization, Projection, inside_image
 
@@ -65,7 +65,7 @@ class RPCSensor:
         return int(size[1]) if size is not None else int(round(2 * self.rpc.col_offset + 1))
 
     @property
-    def body(self):  # -> Ellipsoid
+    def body(self) -> Ellipsoid:
         """The body of the frame (an RPC's geodetic coordinates are WGS84)."""
         return self.frame.body
 

@@ -139,7 +139,8 @@ def phr():
 
 @pytest.mark.parametrize(
     ("which", "name"),
-    [("wv1", "bws-interp"), ("wv1", "hybrid"), ("phr", "bws-interp"), ("phr", "hybrid"), ("phr", "cpp")],
+    [("wv1", "bws-interp"), ("wv1", "hybrid"), ("phr", "bws-interp"), ("phr", "hybrid"), ("phr", "cpp"),
+     ("wv1", "exact"), ("phr", "exact"), ("wv1", "csm-secant"), ("phr", "csm-secant")],
 )
 def test_registered_methods_run_unchanged_on_rigorous_scenes(request, which, name):
     """Methods that evaluate the collinearity through the scene are exact on a rigorous scene.
