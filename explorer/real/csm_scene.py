@@ -37,10 +37,10 @@ import numpy as np
 from explorer.errors import SceneFileError
 from explorer.geometry.exterior import ExteriorOrientation, Jitter, LineTiming
 from explorer.geometry.frames import LocalFrame
-from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain
 from explorer.real.csm_camera import CsmCamera, read_isd
+from explorer.real.csm_sensor import csm_interior
 from explorer.scene import Scene
 
 __all__ = ["body_fixed_to_enu", "enu_to_body_fixed", "scene_from_camera", "scene_from_isd"]
@@ -128,46 +128,8 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
         raise SceneFileError(f"{cam.source}: the image centre does not see the body")
     origin = centre.ground[0]
     axes, lat0, lon0 = _enu_axes(origin, cam.semi_major_m, cam.semi_minor_m)
-    # ---- interior: the detector line, undistorted, in the project's sensor axes
-    cols = np.linspace(-0.5, n_cols - 0.5, 513)
-    samples = cols + 0.5
-    fl, fs = cam.focal2pixel_lines, cam.focal2pixel_samples
-    t1 = np.full(cols.shape, cam.starting_line - cam.line_origin - fl[0])
-    t2 = samples * cam.sample_summing + cam.starting_sample - cam.sample_origin - fs[0]
-    det = fl[1] * fs[2] - fl[2] * fs[1]
-    xd = (fs[2] * t1 - fl[2] * t2) / det
-    yd = (-fs[1] * t1 + fl[1] * t2) / det
-    xc, yc = cam.remove_distortion(xd, yd)
-    # turn the camera frame about its boresight so that the detector runs along its y axis (any
-    # focal2pixel matrix: the detector may run along the focal plane's x axis or at any angle)
-    phi = float(np.arctan2(-(xc[-1] - xc[0]), yc[-1] - yc[0]))
-    cphi, sphi = np.cos(phi), np.sin(phi)
-    xu, yu = cphi * xc + sphi * yc, -sphi * xc + cphi * yc
-    turn = np.array([[cphi, -sphi, 0.0], [sphi, cphi, 0.0], [0.0, 0.0, 1.0]])  # turned -> camera axes
-    sign = cam.look_sign
-    sy = -sign * np.sign(yu[-1] - yu[0])
-    sz = sign
-    sx = sy * sz
-    s_matrix = turn @ np.diag([sx, sy, sz])  # project sensor axes -> CSM camera axes
-    x_p = -sx * sign * xu * 1e-3  # metres
-    y_p = -sy * sign * yu * 1e-3
-    if np.any(np.diff(y_p) <= 0):
-        raise SceneFileError(f"{cam.source}: the undistorted detector line is not monotonic across track")
-    half = 0.5 * n_cols
-    pc = float(np.interp(0.0, y_p, cols))  # principal column: y = 0 (refined below)
-    for _ in range(3):
-        cu = _scaled_fit(cols - pc, y_p, interior_degree, half)
-        pc -= float(cu[0] / cu[1])
-    cu = _scaled_fit(cols - pc, y_p, interior_degree, half)
-    pitch = float(cu[1])
-    column_poly = tuple(float(c / pitch) for c in cu[2:])
-    cx = _scaled_fit(y_p, x_p, interior_degree, float(np.max(np.abs(y_p))))
-    focal_m = cam.focal_length_mm * 1e-3
-    interior = InteriorOrientation(
-        focal_length_m=focal_m, detector_pitch_m=pitch, n_columns=n_cols, principal_column=pc,
-        along_track_offset_m=float(cx[0]), line_curvature=tuple(float(c) for c in cx[1:]),
-        column_polynomial=column_poly,
-    )
+    # ---- interior: the detector line, undistorted, in the project's sensor axes (shared with CsmScene)
+    interior, s_matrix = csm_interior(cam, interior_degree)
     # ---- timing: mean line period, reference row at the centre
     t_first, t_last = cam.line_time(np.array([0.5, n_rows - 0.5]))
     period = float((t_last - t_first) / (n_rows - 1))

@@ -80,7 +80,8 @@ def csm_interior(camera: CsmCamera, degree: int = 7) -> tuple[InteriorOrientatio
     interior : InteriorOrientation
         Focal length, pitch, principal column, detector offset / curvature and column spacing.
     s_matrix : ndarray (3, 3)
-        Diagonal +-1: project sensor axes -> CSM camera axes.
+        Project sensor axes -> CSM camera axes (a turn about the boresight that puts the detector along y,
+        and axis flips).
     """
     cam = camera
     n_cols = cam.n_samples
@@ -92,12 +93,18 @@ def csm_interior(camera: CsmCamera, degree: int = 7) -> tuple[InteriorOrientatio
     det = fl[1] * fs[2] - fl[2] * fs[1]
     xd = (fs[2] * t1 - fl[2] * t2) / det
     yd = (-fs[1] * t1 + fl[1] * t2) / det
-    xu, yu = cam.remove_distortion(xd, yd)
+    xc, yc = cam.remove_distortion(xd, yd)
+    # turn the camera frame about its boresight so that the detector runs along its y axis (any
+    # focal2pixel matrix: the detector may run along the focal plane's x axis or at any angle)
+    phi = float(np.arctan2(-(xc[-1] - xc[0]), yc[-1] - yc[0]))
+    cphi, sphi = np.cos(phi), np.sin(phi)
+    xu, yu = cphi * xc + sphi * yc, -sphi * xc + cphi * yc
+    turn = np.array([[cphi, -sphi, 0.0], [sphi, cphi, 0.0], [0.0, 0.0, 1.0]])  # turned -> camera axes
     sign = cam.look_sign
     sy = -sign * np.sign(yu[-1] - yu[0])
     sz = sign
     sx = sy * sz
-    s_matrix = np.diag([sx, sy, sz])
+    s_matrix = turn @ np.diag([sx, sy, sz])
     x_p = -sx * sign * xu * 1e-3  # metres
     y_p = -sy * sign * yu * 1e-3
     if np.any(np.diff(y_p) <= 0):
