@@ -26,7 +26,7 @@ LAYERS = [
     ["explorer.geometry"],
     ["explorer.sensor", "explorer.scene"],
     ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],
-    ["explorer.real", "explorer.methods"],
+    ["explorer.real", "explorer.methods", "explorer.stereo"],
     ["explorer.evaluate", "explorer.bench_defaults", "explorer.bench", "explorer.ortho", "explorer.warmup",
      "explorer.kernel_cache", "explorer.refine"],
     ["explorer.panels", "explorer.scene3d"],
