@@ -471,7 +471,8 @@ class CsmCamera:
 
     def exterior(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Perspective centres (N, 3) body-fixed metres and camera -> body rotations (N, 3, 3) at times (N,)
-        (seconds from ``center_ephemeris_time``).
+        (seconds from ``center_ephemeris_time``); beyond the tables' ends (:meth:`time_covered` False) the
+        tables are extrapolated linearly.
 
         The camera frame is usgscsm's: a focal-plane point ``(x, y)`` looks along ``(-x, -y, -f)``.
         """
@@ -533,14 +534,29 @@ class CsmCamera:
         return ground, status == K.STATUS_OK
 
     def rays(self, line: ArrayLike, sample: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Perspective centres (N, 3) and unit look directions (N, 3), body-fixed, of image points."""
+        """Perspective centres (N, 3) and unit look directions (N, 3), body-fixed, of image points.
+
+        NaN rows for lines whose time is outside the ephemeris tables (:meth:`line_covered`): flagged,
+        never extrapolated."""
         line, sample, height = self._broadcast(line, sample, 0.0)
         n = line.size
         ground, status = np.empty((n, 3)), np.empty(n, np.int8)
         centre, look = np.empty((n, 3)), np.empty((n, 3))
         K.image_to_ground_nb(line, sample, height, *self._all_args(), ground, status, centre,  # type: ignore[call-arg]
                              look)
+        outside = ~self.line_covered(line)
+        centre[outside] = np.nan
+        look[outside] = np.nan
         return centre, look
+
+    def time_covered(self, t: ArrayLike) -> np.ndarray:
+        """True (N,) where times (N,) (seconds from ``center_ephemeris_time``) lie inside every ephemeris
+        table (``table_span``, no slack): :meth:`exterior` and :meth:`detector_residual` compute anywhere
+        (the tables extrapolated linearly, for searches), and this says where their numbers are the tables'."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        lo, hi = self.table_span
+        with np.errstate(invalid="ignore"):
+            return (t >= lo) & (t <= hi)
 
     @staticmethod
     def _broadcast(line, sample, height) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -663,7 +679,9 @@ class CsmCamera:
 
     def detector_residual(self, ground: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """usgscsm's detector-line residual (image lines, zero at the best line) and the sample of
-        ground points (N, 3) seen at lines (N,); NaN behind the camera."""
+        ground points (N, 3) seen at lines (N,); NaN behind the camera.  Computed at any line (the tables
+        extrapolated linearly beyond their ends, so that a search can cross them): check a solved line with
+        :meth:`line_covered`, as :meth:`ground_to_image` does."""
         ground = np.ascontiguousarray(as_points(ground))
         line = np.ascontiguousarray(np.broadcast_to(np.asarray(line, dtype=np.float64), ground.shape[:1]))
         res, samp = np.empty(line.size), np.empty(line.size)

@@ -81,6 +81,11 @@ def test_hrsc_like_lines_past_the_tables_are_flagged(hrsc):
     g = hrsc.image_to_ground(lines, np.full(5, 600.0), 0.0)
     np.testing.assert_array_equal(g.hit, [True, True, False, False, False])
     assert np.isnan(g.ground[2:]).all()
+    centre, look = hrsc.rays(lines, np.full(5, 600.0))
+    np.testing.assert_array_equal(np.isnan(centre).all(axis=1), [False, False, True, True, True])
+    np.testing.assert_array_equal(np.isnan(look).all(axis=1), [False, False, True, True, True])
+    t = hrsc.line_time(lines)
+    np.testing.assert_array_equal(hrsc.time_covered(t), [True, True, False, False, False])
     # ground points the camera would see there if its tables were extrapolated: flagged, not returned valid
     past = np.linspace(2360.0, 2815.0, 40)
     ground, hit = hrsc._image_to_ground_raw(past, np.full(past.size, 600.0), 0.0)
