@@ -4,6 +4,7 @@
 #   ./run.sh test [pytest args]                     the whole test suite
 #   ./run.sh setup                                  set-up only (venv, packages from the lock, warm kernels)
 #   ./run.sh course [DIR]                           execute the course notebooks and write HTML to DIR
+#   ./run.sh lab                                    JupyterLab on notebooks/ (a double click opens a notebook)
 #   ./run.sh lock                                   refresh requirements/lock.txt from a fresh resolve
 #   ./run.sh bench [...]  /  ./run.sh pushbroom ...  any CLI command
 set -euo pipefail
@@ -42,6 +43,24 @@ python_packages() {
   touch "$stamp"
 }
 
+lab_settings() {
+  # the repository's JupyterLab opens a course .py (jupytext percent file) as a notebook on a double click:
+  # notebooks/jupyterlab_overrides.json merged into this venv's JupyterLab settings overrides (this venv only;
+  # notebooks/jupytext.toml keeps every save from changing the tracked .py)
+  "$PY" - notebooks/jupyterlab_overrides.json "$VENV/share/jupyter/lab/settings/overrides.json" <<'PYCODE'
+import json, os, sys
+src, dest = sys.argv[1], sys.argv[2]
+merged = json.load(open(dest)) if os.path.exists(dest) else {}
+for plugin, settings in json.load(open(src)).items():
+    for key, value in settings.items():
+        old = merged.setdefault(plugin, {}).get(key)
+        merged[plugin][key] = {**old, **value} if isinstance(old, dict) and isinstance(value, dict) else value
+os.makedirs(os.path.dirname(dest), exist_ok=True)
+with open(dest, "w") as f:
+    json.dump(merged, f, indent=2)
+PYCODE
+}
+
 refresh_lock() {
   # resolve the newest versions the project admits in a scratch venv, run nothing, write the lock
   local tmp; tmp=$(mktemp -d)
@@ -66,9 +85,12 @@ case "$job" in
     python_packages
     exec "$VENV/bin/pushbroom" explore "$@" ;;
   setup)
-    system_packages; python_packages ;;
+    system_packages; python_packages; lab_settings ;;
+  lab)
+    python_packages; lab_settings
+    exec "$VENV/bin/jupyter" lab notebooks/ "$@" ;;
   course)
-    python_packages
+    python_packages; lab_settings
     exec "$PY" notebooks/build_course.py "$@" ;;
   lock)
     refresh_lock ;;

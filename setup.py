@@ -5,8 +5,9 @@ editable install."""
 from setuptools import find_packages, setup
 
 setup(
-    packages=[*find_packages(include=["explorer", "explorer.*"]), "explorer.assets", "explorer.assets.dem"],
+    packages=[*find_packages(include=["explorer", "explorer.*"]), "explorer.assets", "explorer.assets.dem",
+              "explorer.assets.rpc"],
     package_dir={"explorer.assets": "assets"},
     package_data={"explorer": ["py.typed", "kernel_manifest.json"], "explorer.assets": ["*.json", "*.md"],
-                  "explorer.assets.dem": ["*"]},
+                  "explorer.assets.dem": ["*"], "explorer.assets.rpc": ["*"]},
 )

@@ -22,6 +22,18 @@ echo "[wheel] installed at $("$work/venv/bin/python" -c 'import explorer, os; pr
 test -s pts.npz
 "$pb" rpc info "$work/rpc_WV2.xml" >/dev/null
 "$work/venv/bin/python" -m explorer --help >/dev/null
+# the data the course notebooks read from the installed package (notebook 08, notebook 10's paper tables)
+"$work/venv/bin/python" - <<'PY'
+from importlib.resources import files
+
+from explorer import paper_tables
+
+rpc = files("explorer.assets") / "rpc"
+for name in ("rpc_PLEIADES.xml", "PHRDIMAP_P1BP--2018122638935449CP.XML", "PHRDIMAP_P1BP--2017030824934340CP.XML",
+             "PROVENANCE.md"):
+    assert (rpc / name).is_file(), f"the wheel lacks assets/rpc/{name}"
+assert paper_tables.LRM_TABLE3["rows"]
+PY
 exported="explore --export: not available"
 if "$pb" explore --help 2>/dev/null | grep -q -- "--export"; then
   exported="explore --export: ok"

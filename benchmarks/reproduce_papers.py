@@ -9,7 +9,7 @@ Usage::
 
 Every number of "ours" comes from :func:`explorer.bench.run_bench` / :func:`explorer.bench.bench_scene`, i.e. the
 method registry and :func:`explorer.evaluate.evaluate_method`; the papers' numbers come from
-``benchmarks/paper_tables.py``.  Methods missing from the registry when this runs are reported as such.
+``explorer/paper_tables.py``.  Methods missing from the registry when this runs are reported as such.
 """
 
 from __future__ import annotations
@@ -32,8 +32,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import paper_tables as pt  # noqa: E402
-
+from explorer import paper_tables as pt  # noqa: E402
 from explorer.bench import bench_scene, fmt  # noqa: E402
 from explorer.methods import available, registry  # noqa: E402
 from explorer.presets import build_scene, preset_ids, preset_spec  # noqa: E402
@@ -543,7 +542,7 @@ def section_bss2020(runner: Runner) -> str:
                        + " vs 6000, 15, 4, 3")
     out += v
     out += ["", "Tables 3 and 5 use real control points (the RMSE includes the points' own errors) and are not "
-            "reproducible by simulation; they are transcribed in `benchmarks/paper_tables.py`.",
+            "reproducible by simulation; they are transcribed in `explorer/paper_tables.py`.",
             missing_note(runner, methods)]
     return "\n".join(out)
 
@@ -740,7 +739,7 @@ def header(args, runner: Runner, elapsed: float) -> str:
         "",
         "Metrics (`explorer.evaluate`): RMSE and dr_max of the row (papers' Eqs. 4-5) over the valid points, "
         "column RMSE, collinearity evaluations (CE) per point. The papers' numbers are transcribed in "
-        "`benchmarks/paper_tables.py` (table, page, and every garbled or inconsistent number flagged there).",
+        "`explorer/paper_tables.py` (table, page, and every garbled or inconsistent number flagged there).",
         "",
         "Methods in the registry when this ran: "
         + ", ".join(f"`{m}` ({reg[m].label})" for m in methods) + ".",

@@ -76,6 +76,8 @@ class SceneView:
         Rows the chosen method visited, in order (None without a method).
     height : int
         Display height, CSS pixels.
+    camera : CameraFraming, optional
+        The initial camera (frames the footprint and the track).
     """
 
     html: str = field(repr=False)
@@ -83,6 +85,7 @@ class SceneView:
     best_row: float
     trace_rows: np.ndarray | None = None
     height: int = 480
+    camera: CameraFraming | None = None
 
     def _repr_html_(self) -> str:
         doc = html.escape(self.html, quote=True)
@@ -93,6 +96,93 @@ class SceneView:
         """Write the standalone HTML document (open it in any browser)."""
         with open(path, "w", encoding="utf-8") as f:
             f.write(self.html)
+
+
+@dataclass(frozen=True)
+class CameraFraming:
+    """An initial camera that shows a set of points whole.
+
+    Attributes
+    ----------
+    position, look_at : ndarray, shape (3,)
+        Display coordinates (km).
+    fov_rad : float
+        Vertical field of view, radians.
+    near, far : float
+        Clipping distances, km.
+    """
+
+    position: np.ndarray
+    look_at: np.ndarray
+    fov_rad: float
+    near: float
+    far: float
+
+
+def frame_points(points_km: np.ndarray, *, view_direction: np.ndarray, fov_rad: float = np.radians(50.0),
+                 fill: float = 0.8) -> CameraFraming:
+    """The camera looking along ``-view_direction`` at the centre of the points' bounding box, from the distance
+    at which the points' perspective image spans ``fill`` of the view's half-height (up = +Z): every point is in
+    view, with a margin, for any viewport at least as wide as it is tall.
+
+    Parameters
+    ----------
+    points_km : ndarray, shape (N, 3)
+        What must be seen (display km), e.g. the footprint outline and the track.
+    view_direction : ndarray, shape (3,)
+        From the target towards the camera (need not be unit length).
+    fov_rad : float
+        Vertical field of view, radians.
+    fill : float
+        Largest distance of a projected point from the view centre, as a fraction of the half-height (0, 1).
+    """
+    p = np.asarray(points_km, dtype=np.float64).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if not len(p):
+        raise InputError("nothing to frame: no finite point")
+    centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    radius = max(float(np.linalg.norm(p - centre, axis=1).max()), 1e-6)
+    if not 0.0 < fill < 1.0:
+        raise InputError(f"fill must be in (0, 1), got {fill}")
+    v = np.asarray(view_direction, dtype=np.float64)
+    v = v / np.linalg.norm(v)
+    right = np.cross(-v, [0.0, 0.0, 1.0])
+    if np.linalg.norm(right) < 1e-9:  # looking straight down: any horizontal "right"
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -v)
+    tan_half = np.tan(0.5 * fov_rad)
+
+    def extent(d: float) -> float:  # largest |normalised image coordinate| of the points seen from distance d
+        rel = p - (centre + d * v)
+        depth = rel @ -v
+        if np.any(depth <= 0.0):
+            return float("inf")
+        return float(np.max(np.abs(np.c_[rel @ right, rel @ up]) / depth[:, None]) / tan_half)
+
+    lo, hi = radius * 1.0001, radius / np.sin(0.5 * fov_rad) / fill  # the sphere fits at hi; in front beyond lo
+    for _ in range(60):  # extent decreases with distance: bisect for extent(d) = fill
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if extent(mid) > fill else (lo, mid)
+    dist = hi
+    return CameraFraming(centre + dist * v, centre, float(fov_rad), max(1e-3, 0.01 * (dist - radius)),
+                         2.0 * (dist + radius))
+
+
+def _view_framing(sc: Scene, frame: Any) -> CameraFraming:
+    """Frame the footprint outline and the displayed track, seen from beside the track and above."""
+    from explorer.scene3d import builders as B  # noqa: N812
+
+    outline = frame.ground(B.footprint_outline(sc, per_edge=8).reshape(-1, 3))
+    _, pos = B.track_positions(sc, 24)
+    track = frame.sensor(pos)
+    flight = track[-1] - track[0]
+    flight[2] = 0.0
+    if np.linalg.norm(flight) < 1e-9:
+        flight = np.array([0.0, 1.0, 0.0])
+    flight /= np.linalg.norm(flight)
+    side = np.cross(flight, [0.0, 0.0, 1.0])
+    return frame_points(np.vstack([outline, track]), view_direction=side - 0.45 * flight + 0.55 * np.array([0, 0, 1.0]))
 
 
 def _scene_of(scene: Scene | str) -> Scene:
@@ -243,14 +333,18 @@ def scene_view(
         if trace_rows is not None:
             label += f" ({len(trace_rows)} rows visited)"
         nodes.update(B.add_selection(api, sc, frame, ground, row, trace_rows, label=label))
-        diag = frame.diagonal_km
-        server.initial_camera.position = (-1.6 * diag, -1.9 * diag, 1.5 * diag)
-        server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        cam = _view_framing(sc, frame)
+        server.initial_camera.fov = cam.fov_rad
+        server.initial_camera.near = cam.near
+        server.initial_camera.far = cam.far
+        server.initial_camera.up = (0.0, 0.0, 1.0)
+        server.initial_camera.look_at = cam.look_at
+        server.initial_camera.position = cam.position
         doc = api.as_html()
     finally:
         with _quiet():
             server.stop()
-    return SceneView(doc, sorted(nodes), row, trace_rows, int(height))
+    return SceneView(doc, sorted(nodes), row, trace_rows, int(height), cam)
 
 
 # ===================================================================== residual panel
@@ -534,32 +628,32 @@ def residual_panel(
 
 # ===================================================================== static fallbacks
 def static_figure_html(figure: Any) -> str:
-    """A Plotly figure as an HTML fragment that draws itself without a kernel.
+    """A Plotly figure as an HTML fragment that draws itself without a kernel and without the network.
 
-    Uses the page's plotly.js when there is one (``window.Plotly``, or the ``plotly`` module the
-    Jupyter ``notebook`` renderer registers with require.js -- what a notebook exported by
-    ``notebooks/build_course.py`` holds), else loads plotly.js from its CDN.
+    Draws with the page's plotly.js: ``window.Plotly`` (a page of ``notebooks/build_course.py`` embeds it
+    once in its head), or the ``plotly`` module that plotly's ``notebook`` renderer registers with require.js.
+    Nothing is fetched: without a plotly.js on the page the fragment says so in place of the figure.
     """
     import json
     import uuid
 
     import plotly.graph_objects as go
     import plotly.io as pio
-    from plotly.offline import get_plotlyjs_version
 
-    plotly_js_version = get_plotlyjs_version()
     fig = go.Figure(figure)
     div = f"pbx-{uuid.uuid4().hex}"
-    spec = pio.to_json(fig, validate=False)
+    spec = pio.to_json(fig, validate=False).replace("</", "<\\/")
     height = fig.layout.height or 450
+    missing = ("<p style='color:#b00'>This figure needs plotly.js on the page (an exported course page has it; "
+               "in a live notebook the widget above draws it).</p>")
     return (
-        f'<div id="{div}" style="height:{int(height)}px;width:100%"></div><script type="text/javascript">'
+        f'<div id="{div}" class="pbx-figure" style="height:{int(height)}px;width:100%"></div>'
+        '<script type="text/javascript">'
         f"(function(){{var s={spec};var draw=function(P){{P.newPlot({json.dumps(div)},s.data,s.layout,"
         "{responsive:true});};"
         "if(window.Plotly){draw(window.Plotly);}"
         "else if(window.requirejs&&requirejs.defined&&requirejs.defined('plotly')){require(['plotly'],draw);}"
-        f"else{{var t=document.createElement('script');t.src='https://cdn.plot.ly/plotly-{plotly_js_version}.min.js';"
-        "t.onload=function(){draw(window.Plotly);};document.head.appendChild(t);}"
+        f"else{{document.getElementById({json.dumps(div)}).innerHTML={json.dumps(missing)};}}"
         "})();</script>"
     )
 
@@ -664,5 +758,6 @@ def interactive_figure(make_figure: Any, **controls: Any) -> InteractiveFigure:
     return out
 
 
-__all__ = ["COLOUR_LIMITS_PX", "COLOUR_MODES", "SCOP_MARKS", "InteractiveFigure", "PanelState", "ResidualPanel",
-           "SceneView", "interactive_figure", "residual_panel", "scene_view", "static_figure_html"]
+__all__ = ["COLOUR_LIMITS_PX", "COLOUR_MODES", "SCOP_MARKS", "CameraFraming", "InteractiveFigure", "PanelState",
+           "ResidualPanel", "SceneView", "frame_points", "interactive_figure", "residual_panel", "scene_view",
+           "static_figure_html"]

@@ -1,16 +1,3 @@
-# ---
-# jupyter:
-#   jupytext:
-#     formats: ipynb,py:percent
-#     text_representation:
-#       extension: .py
-#       format_name: percent
-#   kernelspec:
-#     display_name: Python 3
-#     language: python
-#     name: python3
-# ---
-
 # %% [markdown]
 # # 10 · Reproducing the papers
 #
@@ -28,7 +15,7 @@
 # **Estimated time.** 45 minutes (the full protocol takes hours: `FULL_PROTOCOL = True`).
 #
 # The full discussion (verdicts, where we disagree and why) is `docs/results.md`; the published
-# numbers are transcribed as data in `benchmarks/paper_tables.py`.
+# numbers are transcribed as data in `explorer/paper_tables.py`.
 
 # %% tags=["parameters"]
 import os
@@ -41,20 +28,15 @@ SCOPS = [10, 30, 50, 100]
 N_SCPS = 5_000_000 if FULL_PROTOCOL else (2000 if SMALL else 200_000)
 
 # %%
-import sys
-from pathlib import Path
-
 import numpy as np
 import plotly.graph_objects as go
 
+from explorer import paper_tables  # the published tables, as data
 from explorer.bench import run_bench
 from explorer.methods import available
 from explorer.notebook import interactive_figure
 from explorer.points import simulate_points
 from explorer.presets import build_scene
-
-sys.path.insert(0, str(Path.cwd().parent / "benchmarks"))
-import paper_tables  # noqa: E402  (the published tables, as data)
 
 methods = [m for m in METHODS if m in available()]
 report = run_bench(presets=PRESETS, methods=methods, scops=SCOPS, n_scps=N_SCPS, seed=0, progress=False)

@@ -208,14 +208,9 @@ def test_failing_method_is_recorded_not_fatal(doubles, monkeypatch, caplog):
 
 # ----------------------------------------------------------------------------- the transcribed paper tables
 def _paper_tables():
-    import importlib.util
-    from pathlib import Path
+    from explorer import paper_tables
 
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / "paper_tables.py"
-    spec = importlib.util.spec_from_file_location("paper_tables", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return paper_tables
 
 
 def test_paper_tables_are_self_consistent():

@@ -181,3 +181,37 @@ def test_interactive_figure_follows_its_controls():
     assert ".newPlot(" in static_figure_html(fig.figure)
     with pytest.raises(InputError):
         interactive_figure(make)
+
+
+# ------------------------------------------------------------------------------------------ 3D view framing
+def _pinhole(cam, points):
+    """Normalised image coordinates (x, y in units of tan(fov/2)) and depths of points, up = +Z."""
+    forward = cam.look_at - cam.position
+    forward = forward / np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = np.asarray(points) - cam.position
+    depth = rel @ forward
+    t = np.tan(cam.fov_rad / 2)
+    return np.c_[(rel @ right) / depth / t, (rel @ up) / depth / t], depth
+
+
+@pytest.mark.parametrize("preset", ["WSU", "agile", "SCB"])
+def test_the_inline_3d_view_frames_the_footprint_and_the_whole_track(preset):
+    """The initial camera of scene_view sees every footprint corner and both track ends inside the view (a square
+    viewport, the narrowest case) within its clipping range, and the footprint is not a speck."""
+    from explorer.scene3d import builders as B  # noqa: N812
+
+    scene = build_scene(preset)
+    view = scene_view(scene)
+    frame = B.DisplayFrame.for_scene(scene)
+    footprint = frame.ground(B.footprint_outline(scene, per_edge=4).reshape(-1, 3))
+    _, positions = B.track_positions(scene, 50)
+    track = frame.sensor(positions)
+    for name, pts in (("footprint", footprint), ("track", track)):
+        xy, depth = _pinhole(view.camera, pts)
+        assert np.all(np.abs(xy) < 0.95), f"{preset}: {name} leaves the view ({np.abs(xy).max():.2f})"
+        assert np.all((depth > view.camera.near) & (depth < view.camera.far)), f"{preset}: {name} clipped"
+    xy, _ = _pinhole(view.camera, footprint)
+    assert (xy[:, 0].max() - xy[:, 0].min()) > 0.3, "the footprint spans at least 15% of the view's width"

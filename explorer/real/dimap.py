@@ -194,6 +194,7 @@ def rigorous_scene_from_dimap(
     n_check: int = 400,
     seed: int = 0,
     name: str | None = None,
+    control_rows: tuple[float, float] | None = None,
 ) -> tuple[RigorousLineScanScene, DimapCalibration]:
     """Rigorous Pleiades scene: DIMAP ephemeris and attitude, interior calibrated on its RPC.
 
@@ -220,6 +221,10 @@ def rigorous_scene_from_dimap(
         Independent check points (offset grid, random heights).
     seed : int
     name : str, optional
+    control_rows : (float, float), optional
+        Calibrate on the control points with rows in ``[first, last]`` only (default: the whole image).
+        The rows outside are then a hold-out: there only the DIMAP ephemeris and attitude carry the
+        model, and its agreement with the RPC tests them (notebook 08).
 
     Returns
     -------
@@ -277,6 +282,15 @@ def rigorous_scene_from_dimap(
     # ---- control and check points from the RPC
     heights = np.linspace(*rpc.height_range(1.0), max(layers, 2))
     g_row, g_col, g_lon, g_lat, g_h = gcps_from_rpc(rpc, n_gcps, heights=heights)
+    if control_rows is not None:
+        first, last = (float(v) for v in control_rows)
+        if not (np.isfinite(first) and np.isfinite(last) and first <= last):
+            raise InputError(f"control_rows must be finite (first, last) with first <= last, got {control_rows}")
+        keep = (g_row >= first) & (g_row <= last)
+        if int(keep.sum()) < 20:
+            raise InputError(f"control_rows {control_rows} hold {int(keep.sum())} control points; at least 20 "
+                             "are needed (widen the rows or raise n_gcps)")
+        g_row, g_col, g_lon, g_lat, g_h = g_row[keep], g_col[keep], g_lon[keep], g_lat[keep], g_h[keep]
     ground = frame.geodetic_to_enu(g_lon, g_lat, g_h)
 
     # ---- initial timing: times at which the centre row's points cross the detector plane

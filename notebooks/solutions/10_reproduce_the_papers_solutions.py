@@ -1,16 +1,3 @@
-# ---
-# jupyter:
-#   jupytext:
-#     formats: ipynb,py:percent
-#     text_representation:
-#       extension: .py
-#       format_name: percent
-#   kernelspec:
-#     display_name: Python 3
-#     language: python
-#     name: python3
-# ---
-
 # %% [markdown]
 # # 10 · Solutions: reproducing the papers
 #
@@ -19,8 +6,6 @@
 
 # %% tags=["parameters"]
 import os
-import sys
-from pathlib import Path
 
 SMALL = os.environ.get("PUSHBROOM_NB_SMALL", "0") == "1"
 N_SCPS = 5000 if SMALL else 200_000
@@ -28,13 +13,11 @@ N_SCPS = 5000 if SMALL else 200_000
 # %%
 import time
 
+from explorer import paper_tables  # the published tables, as data
 from explorer.evaluate import evaluate_method
 from explorer.methods import create
 from explorer.points import simulate_points
 from explorer.presets import build_scene
-
-sys.path.insert(0, str(Path.cwd().parent.parent / "benchmarks"))
-import paper_tables  # noqa: E402  (the published tables, as data)
 
 mlp4 = {row[0]: row for row in paper_tables.MLP_TABLE4["datasets"]["ISB"]}
 

@@ -78,3 +78,28 @@ def test_conversion_to_mpc_and_json(tmp_path):
     assert report.rmse_px < 0.005 and report.check_rmse_px < 0.005  # measured 0.0007 / 0.0006
     mpc.save(tmp_path / "phr.json")
     assert Scene.load(tmp_path / "phr.json").n_rows == 38248
+
+
+def test_calibrated_on_the_top_half_it_agrees_with_the_rpc_on_the_held_out_bottom_half():
+    """The interior is fitted to RPC points of rows 0..N/2 only; on the other rows only the DIMAP ephemeris and
+    attitude carry the model, and the vendor RPC (CNES's fit to its own rigorous model) checks them there."""
+    n_rows = read_dimap_v1_geometry(PHR_2018)["rows"]
+    half = (n_rows - 1) / 2.0
+    full, cal_full = rigorous_scene_from_dimap(PHR_2018, n_gcps=200, n_check=50)
+    scene, cal = rigorous_scene_from_dimap(PHR_2018, n_gcps=200, n_check=50, control_rows=(0.0, half))
+    assert cal.n_gcps < 0.6 * cal_full.n_gcps  # only the top half's control points were used
+    rr, cc = np.meshgrid(np.linspace(half + 1, n_rows - 1, 9), np.linspace(0, scene.n_columns - 1, 9), indexing="ij")
+    g = scene.image_to_ground(rr.ravel(), cc.ravel(), height=scene.rpc.height_offset)
+    lon, lat, h = scene.frame.enu_to_geodetic(g)
+    r, c = scene.rpc.projection(lon, lat, h)
+    d = np.hypot(r - rr.ravel(), c - cc.ravel())
+    assert np.sqrt(np.mean(d**2)) < 0.002 and d.max() < 0.005
+    assert cal.line_period_s == pytest.approx(0.0735e-3, rel=1e-6)  # never given to the fit
+
+
+@pytest.mark.parametrize("rows", [(100.0, 50.0), (0.0, np.nan), (5.0, 10.0)])
+def test_control_rows_without_enough_points_or_malformed_is_an_input_error(rows):
+    from explorer.errors import InputError
+
+    with pytest.raises(InputError, match="control_rows"):
+        rigorous_scene_from_dimap(PHR_2018, n_gcps=50, n_check=10, control_rows=rows)

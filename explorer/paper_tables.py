@@ -1,4 +1,5 @@
-"""The papers' published numbers, as data, for ``benchmarks/reproduce_papers.py`` and ``docs/results.md``.
+"""The papers' published numbers, as data, for ``benchmarks/reproduce_papers.py``, ``docs/results.md`` and the
+course (notebook 10, which reads them from the installed package).
 
 Transcribed from text extractions of the five papers (cited by title and year with each table).  Every table cites
 its paper, table number and page.  The Remote Sensing paper's extraction keeps page anchors
