@@ -14,7 +14,9 @@ unknown) by :func:`explorer.refine.bundle.bundle_adjust`, and returns a :class:`
 Check points are kept apart from control: with one image they take no part in the adjustment and are
 projected by the adjusted model; with several images, a check point measured in two images or more
 enters as a tie point (its pixels help, its ground coordinates do not), and its triangulated ground
-position is compared with the surveyed one against the propagated sigma of the adjustment.
+position is compared with the surveyed one against the propagated sigma of the adjustment
+(``report["check_ground"]``).  The check RMSE in pixels is always that of the surveyed ground projected
+by the adjusted model (a tie point's own residuals would hide a ground error).
 
 :meth:`Refinement.write` writes ``report.json``, ``points.csv``, ``parameters.csv`` and the adjusted RPC
 files (RPC00B text) into a folder.
@@ -133,6 +135,8 @@ class Refinement:
         obs = self.observations
         res = self.result
         for i in range(res.outlier.size):
+            if obs["role"][i] == "check":
+                continue  # listed below, with residuals from the surveyed ground
             before, after = res.residuals_before[i], res.residuals_after[i]
             rows.append({"id": obs["id"][i], "role": obs["role"][i], "image": self.image_names[obs["image"][i]],
                          "row": obs["row"][i], "col": obs["col"][i],
@@ -141,13 +145,13 @@ class Refinement:
                          "outlier": int(res.outlier[i])})
         ck = self.extra.get("check_only")
         if ck is not None:
+            before, after = self.extra["check_residuals"]
             for i in range(len(ck["id"])):
                 rows.append({"id": ck["id"][i], "role": "check", "image": self.image_names[ck["image"][i]],
                              "row": ck["row"][i], "col": ck["col"][i],
-                             "residual_row_before": self.check_residuals_before[i, 0],
-                             "residual_col_before": self.check_residuals_before[i, 1],
-                             "residual_row_after": self.check_residuals_after[i, 0],
-                             "residual_col_after": self.check_residuals_after[i, 1], "outlier": 0})
+                             "residual_row_before": before[i, 0], "residual_col_before": before[i, 1],
+                             "residual_row_after": after[i, 0], "residual_col_after": after[i, 1],
+                             "outlier": ck["outlier"][i]})
         return rows
 
     def write(self, out_dir: str | os.PathLike[str]) -> list[Path]:
@@ -212,12 +216,20 @@ def _check_inside(table: PointTable, image: np.ndarray, rpcs: list[RationalFunct
 
 def _initial_ground(rpcs: list[RationalFunctionModel], image: np.ndarray, row: np.ndarray,
                     col: np.ndarray) -> np.ndarray:
-    """A start (lon, lat, h) of a tie point: localised in its first image at the RPC's height offset."""
-    rpc = rpcs[int(image[0])]
-    lon, lat, ok = rpc.localization(row[:1], col[:1], np.array([rpc.height_offset]))[:3]
-    if not ok[0]:
-        raise InputError(f"a tie point at row {row[0]:g}, col {col[0]:g} does not localise in its image")
-    return np.array([lon[0], lat[0], rpc.height_offset])
+    """Start (lon, lat, h) (N, 3) of tie points: each localised in its first image (``image``, (N,)) at that
+    RPC's height offset (vectorised per image)."""
+    out = np.empty((image.size, 3))
+    for k, rpc in enumerate(rpcs):
+        sel = np.flatnonzero(image == k)
+        if not sel.size:
+            continue
+        h = np.full(sel.size, rpc.height_offset)
+        lon, lat, ok = rpc.localization(row[sel], col[sel], h)[:3]
+        if not ok.all():
+            i = int(sel[~ok][0])
+            raise InputError(f"a tie point at row {row[i]:g}, col {col[i]:g} does not localise in its image")
+        out[sel] = np.stack([lon, lat, h], axis=1)
+    return out
 
 
 def refine_rpcs(
@@ -291,6 +303,7 @@ def refine_rpcs(
     sigma_g: list[float] = []
     obs: dict[str, list[Any]] = {"id": [], "role": [], "image": [], "row": [], "col": [], "point": []}
     check_only: dict[str, list[Any]] = {"id": [], "image": [], "row": [], "col": [], "ground": []}
+    pending: list[tuple[int, int, float, float]] = []  # tie points: (ground index, first image, row, col)
 
     def add(table: PointTable, role: str, as_tie: bool) -> None:
         image = _image_of(table, names)
@@ -302,21 +315,14 @@ def refine_rpcs(
             if as_tie and len(rows) < 2:
                 if role == "tie":
                     raise InputError(f"{table.path}: tie point {pid!r} is measured in one image only")
-                for i in rows:  # a check point seen once: projected only
-                    check_only["id"].append(pid)
-                    check_only["image"].append(int(image[i]))
-                    check_only["row"].append(table.row[i])
-                    check_only["col"].append(table.col[i])
-                    assert table.lon is not None and table.lat is not None and table.h is not None
-                    check_only["ground"].append((table.lon[i], table.lat[i], table.h[i]))
-                continue
+                continue  # a check point seen in one image: projected only (below)
             key = (role, pid)
             if key in point_key:
                 raise InputError(f"{table.path}: point id {pid!r} repeated")
             point_key[key] = len(ground)
             if as_tie:
-                idx = np.asarray(rows)
-                ground.append(_initial_ground(rpcs, image[idx], table.row[idx], table.col[idx]))
+                ground.append(np.full(3, np.nan))  # localised below, all tie points at once
+                pending.append((point_key[key], int(image[rows[0]]), table.row[rows[0]], table.col[rows[0]]))
                 sigma_g.append(np.inf)
             else:
                 assert table.lon is not None and table.lat is not None and table.h is not None
@@ -335,14 +341,22 @@ def refine_rpcs(
         add(control, "control", False)
     if ties is not None:
         add(ties, "tie", True)
-    if check is not None and multi:
-        add(check, "check", True)
-    elif check is not None:  # one image: projected by the adjusted model, never adjusted to
+    if check is not None:
+        # every check measurement is projected from its surveyed ground by the adjusted model; with several
+        # images, those seen in two images or more also enter the adjustment as tie points
         assert check.lon is not None and check.lat is not None and check.h is not None
         image = _image_of(check, names)
-        _check_inside(check, image, rpcs, "check")
+        if multi:
+            add(check, "check", True)
+        else:
+            _check_inside(check, image, rpcs, "check")
         check_only.update(id=list(check.ids), image=image.tolist(), row=check.row.tolist(), col=check.col.tolist(),
                           ground=list(zip(check.lon, check.lat, check.h, strict=True)))
+    if pending:
+        idx, first, t_row, t_col = (np.asarray(v) for v in zip(*pending, strict=True))
+        starts = _initial_ground(rpcs, first.astype(np.int64), t_row.astype(float), t_col.astype(float))
+        for j, g in zip(idx, starts, strict=True):
+            ground[int(j)] = g
     if not obs["id"]:
         raise InputError("no usable observation (every check point is measured in one image only)")
     n_control = sum(1 for r in obs["role"] if r == "control")
@@ -383,15 +397,15 @@ def refine_rpcs(
             row, col = rpc.projection(g[sel, 0], g[sel, 1], g[sel, 2])
             before[sel] = np.stack([row, col], axis=1)
             after[sel] = np.stack(apply_correction(model, result.parameters[k], row, col), axis=1)
-        ck_before, ck_after = measured - before, measured - after
+        flagged = {(pid, k) for pid, k, r, o in zip(obs["id"], obs["image"], obs["role"], result.outlier,
+                                                    strict=True) if r == "check" and o}
+        check_only["outlier"] = [int((pid, k) in flagged) for pid, k in zip(check_only["id"], check_only["image"],
+                                                                              strict=True)]
+        keep = ~np.asarray(check_only["outlier"], dtype=bool)
+        ck_before, ck_after = (measured - before)[keep], (measured - after)[keep]
         extra["check_only"] = check_only
-    check_ground = None
-    if multi and check is not None:
-        check_ground = _check_ground(check, obs, result)
-        is_check = np.asarray([r == "check" for r in obs["role"]])
-        keep = is_check & ~result.outlier
-        ck_before = np.concatenate([ck_before, result.residuals_before[keep]])
-        ck_after = np.concatenate([ck_after, result.residuals_after[keep]])
+        extra["check_residuals"] = (measured - before, measured - after)
+    check_ground = _check_ground(check, obs, result) if multi and check is not None else None
     settings = {"sigma_px": sigma_px, "sigma_ground_m": sigma_ground_m, "loss": loss, "loss_scale_sigma": loss_scale,
                 "outlier_probability": outlier_probability,
                 "outlier_threshold_sigma": float(np.sqrt(-2.0 * np.log(1.0 - outlier_probability)))}

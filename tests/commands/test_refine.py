@@ -45,3 +45,28 @@ def test_refine_bad_input_is_one_line(gcps, tmp_path, capsys, extra, message):
     assert main(args + [a.format(gcps=control) for a in extra]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_refine_images_with_ties(tmp_path, capsys):
+    import numpy as np
+
+    from explorer.rpc import read_rpc
+    from tests.refine.cases import PAIR, simulate_pair_points
+
+    rpcs = [read_rpc(p) for p in PAIR]
+    rng = np.random.default_rng(9)
+    ties = simulate_pair_points(rpcs, 40, ground_known=False, prefix="t", rng=rng)
+    gcps = simulate_pair_points(rpcs, 5, ground_known=True, prefix="g", rng=rng)
+    (tmp_path / "ties.csv").write_text("id,image,row,col\n" + "".join(
+        f"{i},{PAIR[int(k)].name},{r:.4f},{c:.4f}\n" for i, k, r, c in zip(ties.ids, ties.image, ties.row, ties.col,
+                                                                          strict=True)))
+    write_points_csv(tmp_path / "gcps.csv", gcps, image=gcps.image)
+    out = tmp_path / "ba"
+    assert main(["refine", "--images", *map(str, PAIR), "--ties", str(tmp_path / "ties.csv"), "--gcps",
+                 str(tmp_path / "gcps.csv"), "--sigma-px", "0.3", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert len(report["parameters"]) == 12 and report["tie_rmse_px"] < 0.3
+    assert (out / "adjusted_rpc_0.txt").exists() and (out / "adjusted_rpc_1.txt").exists()
+    assert main(["refine", str(PAIR[0]), "--images", str(PAIR[1]), "--gcps", str(tmp_path / "gcps.csv"),
+                 "--out", str(out)]) == 2
+    assert "not both" in capsys.readouterr().err

@@ -61,3 +61,24 @@ def write_points_csv(path: Path, table: PointTable, image: list[str] | None = No
         lines.append(line + (f",{image[i]}" if image else ""))
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+#: Biases of the two images of the pair (different in each: shift, scale, rotation, shear)
+TRUE_PAIR = (np.array([3.0, 1.0e-4, -1.0e-4, -2.0, 1.0e-4, 1.0e-4]),
+             np.array([-2.5, -5.0e-5, 8.0e-5, 4.0, -8.0e-5, 5.0e-5]))
+
+
+def simulate_pair_points(rpcs: list[RationalFunctionModel], n: int, *, ground_known: bool, prefix: str,
+                         rng: np.random.Generator, params=TRUE_PAIR, noise_px: float = 0.3) -> PointTable:
+    """Points seen in both images of a pair: one row per image (``image`` 0 / 1), biased pixels + noise."""
+    g = random_ground(rpcs[0], n, rng, margin=0.05)
+    ids, rows, cols, image = [], [], [], []
+    for k, rpc in enumerate(rpcs):
+        r, c = measure(rpc, g, "affine", params[k], noise_px, rng)
+        ids += [f"{prefix}{i}" for i in range(n)]
+        rows.append(r)
+        cols.append(c)
+        image += [str(k)] * n
+    gg = np.concatenate([g, g])
+    return PointTable(ids, np.concatenate(rows), np.concatenate(cols), gg[:, 0] if ground_known else None,
+                      gg[:, 1] if ground_known else None, gg[:, 2] if ground_known else None, image=image)
