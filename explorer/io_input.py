@@ -160,15 +160,17 @@ def decode_text(data: bytes, path: str | os.PathLike[str], what: str = "input") 
         except UnicodeDecodeError as exc:
             raise SceneFileError(f"{name}: starts with a {encoding.upper()} byte-order mark but is not "
                                  f"{encoding.upper()} text (byte {exc.start})") from None
+    elif (utf16 := _looks_utf16(data)) is not None:  # before UTF-8: NUL bytes are valid UTF-8
+        try:
+            text = data.decode(utf16)
+        except UnicodeDecodeError:
+            raise SceneFileError(f"{name}: looks like UTF-16 text without a byte-order mark but is not "
+                                 f"valid {utf16.upper()}") from None
     else:
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
-            utf16 = _looks_utf16(data)
-            try:
-                text = data.decode(utf16) if utf16 else data.decode("latin-1")
-            except UnicodeDecodeError:
-                text = data.decode("latin-1")
+            text = data.decode("latin-1")  # every byte is a character: ISO-8859-1 / Windows-1252 files
     if "\x00" in text or len(_CONTROL.findall(text[:65536])) > 0.05 * min(len(text), 65536):
         raise SceneFileError(f"{name}: is binary, not a text {what}")
     return text

@@ -38,6 +38,14 @@ from explorer.rpc.polynomial import (  # noqa: F401 - re-exported: the model's p
     rpc00b_monomials,
 )
 
+#: Physical limits every read RPC meets (``docs/validation.md``): the half-extent of the image is at least
+#: half a pixel, the height range at least a millimetre, the ground half-extent at least ~1 m (1e-5 degree);
+#: the normalised Jacobian |d(row, col) / d(L, P)| (O(1) for every real image) at least 1e-6.
+MIN_PIXEL_SCALE = 0.5
+MIN_HEIGHT_SCALE_M = 1e-3
+MIN_DEGREE_SCALE = 1e-5
+MIN_JACOBIAN = 1e-6
+
 __all__ = [
     "LOCALIZATION_LIMIT",
     "VALIDITY_MARGIN",
@@ -180,7 +188,62 @@ class RationalFunctionModel:
                 where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
                 raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the normalised domain (near {where}): "
                                  "the projection is singular there")
+        self._check_scales()
+        self._check_ground_to_image_invertible()
         return self
+
+    def _check_scales(self) -> None:
+        """Scales of a physical image: the pixel and height scales positive (half the image size, half the height
+        range), at least half a pixel and a millimetre; the degree scales (negative in PlanetScope files: the
+        sign orients the axis) at least ~1 m in magnitude."""
+        for name, least, unit in (("row", MIN_PIXEL_SCALE, "px"), ("col", MIN_PIXEL_SCALE, "px"),
+                                  ("height", MIN_HEIGHT_SCALE_M, "m")):
+            scale = getattr(self, f"{name}_scale")
+            if scale <= 0.0:
+                raise InputError(f"{_FILE_KEYS[name]}_SCALE ({name}_scale) = {scale:g} {unit} is not positive: a scale "
+                                 "is half the extent of its axis")
+            if scale < least:
+                raise InputError(f"{_FILE_KEYS[name]}_SCALE ({name}_scale) = {scale:g} {unit} is below {least:g} "
+                                 f"{unit}: not the extent of a physical image")
+        if self.geodetic:
+            for name in ("lat", "lon"):
+                scale = getattr(self, f"{name}_scale")
+                if abs(scale) < MIN_DEGREE_SCALE:
+                    raise InputError(f"{_FILE_KEYS[name]}_SCALE ({name}_scale) = {scale:g} degrees is below "
+                                     f"{MIN_DEGREE_SCALE:g} degrees (~1 m) in magnitude: not the footprint of an image")
+
+    def _check_ground_to_image_invertible(self) -> None:
+        """The ground-to-image map is one-to-one on the normalised cube: the 2 x 2 Jacobian of (row, col) over
+        (L, P) neither vanishes nor changes sign (an all-zero numerator, or one that ignores the ground
+        position, makes every point project to one row or column)."""
+        step = 1e-4
+        base = _CUBE.copy()
+
+        def rc(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            r = evaluate_rpc00b_polynomial(self.row_num, *points) / evaluate_rpc00b_polynomial(self.row_den, *points)
+            c = evaluate_rpc00b_polynomial(self.col_num, *points) / evaluate_rpc00b_polynomial(self.col_den, *points)
+            return r, c
+
+        grads = []
+        for axis in (0, 1):
+            hi, lo = base.copy(), base.copy()
+            hi[axis] += step
+            lo[axis] -= step
+            (r1, c1), (r0, c0) = rc(hi), rc(lo)
+            grads.append(((r1 - r0) / (2 * step), (c1 - c0) / (2 * step)))
+        (dr_dl, dc_dl), (dr_dp, dc_dp) = grads
+        with np.errstate(over="ignore", invalid="ignore"):
+            det = dr_dl * dc_dp - dr_dp * dc_dl
+        k = int(np.argmin(np.abs(np.nan_to_num(det, nan=0.0))))
+        where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
+        if not np.all(np.isfinite(det)) or np.min(np.abs(det)) < MIN_JACOBIAN:
+            zero = [f"{_FILE_KEYS[n]}" for n in ("row_num", "col_num") if not np.any(getattr(self, n))]
+            why = f"{' and '.join(zero)} all zero" if zero else f"near {where}"
+            raise InputError(f"the ground-to-image map is degenerate ({why}): rows and columns do not both "
+                             "change with longitude and latitude, so ground points cannot be told apart")
+        if np.any(np.sign(det) != np.sign(det[0])):
+            raise InputError(f"the ground-to-image map folds over inside the normalised domain (near {where}): "
+                             "two ground points would project to one pixel")
 
     def _check_ranges(self) -> None:
         """Offsets and scales of a geodetic model in their physical ranges."""

@@ -20,6 +20,7 @@ from xml.etree import ElementTree
 import numpy as np
 
 from explorer.errors import InputError, SceneFileError
+from explorer.io_input import check_input_file, read_input_text
 from explorer.rpc.model import InverseRFM, RationalFunctionModel, ValidityDomain
 
 __all__ = [
@@ -40,6 +41,10 @@ _SCALAR_KEYS = (
     "LINE_SCALE", "SAMP_SCALE", "LAT_SCALE", "LONG_SCALE", "HEIGHT_SCALE",
 )  # fmt: skip
 _COEFF_KEYS = ("LINE_NUM_COEFF", "LINE_DEN_COEFF", "SAMP_NUM_COEFF", "SAMP_DEN_COEFF")
+
+
+#: Largest RPC file read (DIMAP v1.4 metadata files are ~1 MB).
+MAX_RPC_BYTES = 64 * 1024**2
 
 
 class RPCFormatError(SceneFileError):
@@ -129,18 +134,62 @@ def _collect_indexed(
 
 
 def _read_text(path: str | Path) -> str:
+    """The file's text (:func:`explorer.io_input.read_input_text`: regular file, BOM / UTF-8 / UTF-16 /
+    Latin-1, binary refused), or :class:`RPCFormatError` naming the file."""
     try:
-        return Path(path).read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise _fail(path, f"cannot be read ({exc.strerror})") from exc
+        return read_input_text(path, "RPC file", max_bytes=MAX_RPC_BYTES)
+    except SceneFileError as exc:
+        raise _fail(path, str(exc).removeprefix(f"{path}: ")) from None
+
+
+def _key_value_lines(path: str | Path, text: str, pattern: re.Pattern[str], used: Callable[[str], bool],
+                     fold_case: bool = False) -> dict[str, str]:
+    """``{key: value}`` of the ``key: value`` lines of ``text``, refusing what makes the file ambiguous or cut.
+
+    A key given twice with different values is refused (which one is meant?); so is a file that ends inside
+    the value of a key ``used`` by the model without a final newline (a truncated file: ``1.2345E-0`` is a
+    number too).
+    """
+    raw: dict[str, str] = {}
+    for line in text.splitlines():
+        match = pattern.match(line)
+        if not match:
+            continue
+        key = match.group(1).upper() if fold_case else match.group(1).strip()
+        value = match.group(2).strip()
+        if key in raw and raw[key].split()[:1] != value.split()[:1] and used(key):
+            raise _fail(path, f"{key} is given twice with different values ({raw[key][:30]!r}, {value[:30]!r})")
+        raw[key] = value
+    tail = text.rstrip("\r\n\t ").splitlines()[-1:] if not text.endswith(("\n", "\r")) else []
+    if tail:
+        match = pattern.match(tail[0])
+        if match and used(match.group(1).upper() if fold_case else match.group(1).strip()):
+            raise _fail(path, f"ends inside the value of {match.group(1).strip()} without a final newline: "
+                              "the file looks truncated")
+    return raw
+
+
+def _no_21st(path: str | Path, raw: Mapping[str, str], prefix: str, first_index: int, width: int = 0) -> None:
+    """Refuse a coefficient past the 20 of an RPC00B polynomial (a 21st term is not RPC00B)."""
+    last = first_index + 20
+    key = f"{prefix}_{last:0{width}d}" if width else f"{prefix}_{last}"
+    if key in raw:
+        raise _fail(path, f"has a 21st coefficient {key}: an RPC00B polynomial has exactly 20")
+
+
+_XML_DECLARATION = re.compile(r"^\s*<\?xml[^>]*\?>", re.S)
 
 
 def _parse_xml(path: str | Path, root_tag: str, kind: str = "") -> ElementTree.Element:
-    """The root element of an XML file, which must be ``<root_tag>`` (``kind`` names the format in the error)."""
+    """The root element of an XML file, which must be ``<root_tag>`` (``kind`` names the format in the error).
+
+    The text is decoded by :func:`_read_text` (any byte-order mark, UTF-8, UTF-16, Latin-1), so a file whose
+    declaration names another encoding than its bytes still reads when its content is valid."""
+    text = _XML_DECLARATION.sub("", _read_text(path), count=1)
     try:
-        root = ElementTree.parse(path).getroot()
-    except (ElementTree.ParseError, LookupError, ValueError) as exc:  # LookupError: a bad encoding name
-        raise _fail(path, f"is not well-formed XML ({exc})") from None
+        root = ElementTree.fromstring(text)
+    except (ElementTree.ParseError, LookupError, ValueError, RecursionError) as exc:
+        raise _fail(path, f"is not well-formed XML ({type(exc).__name__}: {str(exc)[:80]})") from None
     if root.tag != root_tag:
         raise _fail(path, f"root element <{root.tag}> is not {kind + ' ' if kind else ''}<{root_tag}>")
     return root
@@ -168,11 +217,9 @@ def read_rpc00b_text(path: str | Path) -> RationalFunctionModel:
     ``LON_NUM_COEFF_*``/``LAT_NUM_COEFF_*`` also get the image-to-ground functions.
     0-based pixel-centre convention: taken as is.
     """
-    raw: dict[str, str] = {}
-    for line in _read_text(path).splitlines():
-        match = _KEY_VALUE.match(line)
-        if match:
-            raw[match.group(1).upper()] = match.group(2)
+    raw = _key_value_lines(path, _read_text(path), _KEY_VALUE, _used_rpc00b_key, fold_case=True)
+    for key in _COEFF_KEYS + _INVERSE_KEYS:
+        _no_21st(path, raw, key, 1)
     values: dict[str, Any] = {}
     for key in _SCALAR_KEYS:
         if key in raw:
@@ -195,6 +242,13 @@ def read_rpc00b_text(path: str | Path) -> RationalFunctionModel:
         )
     meta = {k: raw[k].split()[0] for k in ("ERR_BIAS", "ERR_RAND") if k in raw and raw[k]}
     return _from_dict(path, values, source_format="rpc00b_txt", inverse=inverse, metadata=meta)
+
+
+_INVERSE_KEYS = ("LON_NUM_COEFF", "LON_DEN_COEFF", "LAT_NUM_COEFF", "LAT_DEN_COEFF")
+
+
+def _used_rpc00b_key(key: str) -> bool:
+    return key in _SCALAR_KEYS or key.startswith(_COEFF_KEYS + _INVERSE_KEYS)
 
 
 _RPB_LIST = re.compile(r"(\w+)\s*=\s*\(([^)]*)\)", re.S)
@@ -235,19 +289,23 @@ def read_dg_rpb(path: str | Path) -> RationalFunctionModel:
     return _from_dict(path, values, source_format="dg_rpb", metadata=meta)
 
 
+_OSSIM_LINE = re.compile(r"^([^:]+):(.*)$")
+
+
 def read_ossim_geom(path: str | Path) -> RationalFunctionModel:
     """OSSIM keyword list ``.geom`` (``line_num_coeff_00`` .. ``samp_den_coeff_19``).
 
     Only ``polynomial_format: B`` (RPC00B order) is accepted. OSSIM RPC models are 0-based
     pixel-centre: taken as is.
     """
-    raw: dict[str, str] = {}
-    for line in _read_text(path).splitlines():
-        key, sep, value = line.partition(":")
-        if sep:
-            raw[key.strip()] = value.strip()
+    raw = _key_value_lines(path, _read_text(path), _OSSIM_LINE,
+                           lambda k: k.upper() in _SCALAR_KEYS or k.upper().startswith(_COEFF_KEYS))
     if "line_num_coeff_00" not in raw and "type" not in raw:
         raise _fail(path, "no OSSIM keyword list with RPC coefficients")
+    if "type" not in raw:  # OSSIM writes it with every projection (ossimRpcModel, ossimPleiadesModel, ...)
+        raise _fail(path, "missing type (the OSSIM projection type): the keyword list is incomplete or truncated")
+    for key in _COEFF_KEYS:
+        _no_21st(path, raw, key.lower(), 0, width=2)
     poly_format = raw.get("polynomial_format", "B").strip().upper()
     if poly_format != "B":
         raise _fail(path, f"polynomial_format {poly_format} is not supported (only B, RPC00B)")
@@ -279,6 +337,8 @@ def _xml_text(path: str | Path, node: ElementTree.Element | None, tag: str) -> s
 def _xml_coeffs(
     path: str | Path, node: ElementTree.Element | None, prefix: str
 ) -> np.ndarray:
+    if node is not None and node.find(f"{prefix}_21") is not None:
+        raise _fail(path, f"has a 21st coefficient {prefix}_21: an RPC00B polynomial has exactly 20")
     return np.asarray(
         [_to_float(path, f"{prefix}_{i}", _xml_text(path, node, f"{prefix}_{i}")) for i in
          range(1, 21)]
@@ -491,18 +551,22 @@ def detect_format(path: str | Path) -> str:
     """
     path = Path(path)
     try:
+        check_input_file(path, "RPC file")  # a FIFO or a device is refused before it is opened
         with open(path, "rb") as handle:
             head = handle.read(4096)
+    except SceneFileError as exc:
+        raise _fail(path, str(exc).removeprefix(f"{path}: ")) from None
     except OSError as exc:
         raise _fail(path, f"cannot be read ({exc.strerror})") from exc
     if not head:
         raise _fail(path, "is empty")
     if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+", b"NITF", b"NSIF"):
         return "raster"
-    stripped = head.lstrip(b"\xef\xbb\xbf \t\r\n")
-    if stripped.startswith(b"<"):
-        match = re.search(rb"<([A-Za-z_][\w.-]*)[\s>/]", re.sub(rb"<[?!][^>]*>", b"", stripped))
-        root = match.group(1).decode() if match else ""
+    text = _read_text(path)[:4096]
+    stripped = text.lstrip(" \t\r\n")
+    if stripped.startswith("<"):
+        match = re.search(r"<([A-Za-z_][\w.-]*)[\s>/]", re.sub(r"<[?!][^>]*>", "", stripped))
+        root = match.group(1) if match else ""
         if root == "Dimap_Document":
             return "dimap_v2"
         if root == "PHR_Dimap_Document":
@@ -519,7 +583,6 @@ def detect_format(path: str | Path) -> str:
                 )
             return "gdal_vrt"
         raise _fail(path, f"XML root <{root or '?'}> is not a supported RPC format")
-    text = head.decode("utf-8", errors="replace")
     if "BEGIN_GROUP" in text or re.search(r"lineNumCoef\s*=", text):
         return "dg_rpb"
     if re.search(r"^\s*(line|samp)_(num|den)_coeff_\d\d\s*:", text, re.M) or re.search(
