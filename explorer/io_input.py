@@ -11,6 +11,10 @@ The rules (``docs/validation.md``):
   control characters is binary and refused;
 - JSON is nested at most :data:`MAX_JSON_DEPTH` deep and holds no number literal longer than
   :data:`MAX_NUMBER_DIGITS` characters (a 5,000-digit literal is refused by name, never cast);
+- a CSV of points has a header naming its columns (spaces and case ignored) and, in every row, a finite
+  number in each needed column within its physical range (:data:`COLUMN_RANGES`: latitudes -90 .. 90,
+  longitudes -360 .. 360, heights -12 km .. 100 km, pixel coordinates within +-1e9); the message gives the
+  line and the column;
 - every file read is noted (:func:`explorer.io_atomic.note_input`) so that the command line never writes an
   output over it.
 
@@ -31,6 +35,7 @@ from explorer.errors import SceneFileError
 from explorer.io_atomic import note_input
 
 __all__ = [
+    "COLUMN_RANGES",
     "MAX_JSON_DEPTH",
     "MAX_NUMBER_DIGITS",
     "MAX_TEXT_BYTES",
@@ -41,6 +46,7 @@ __all__ = [
     "loads_json",
     "read_input_bytes",
     "read_input_text",
+    "read_points_csv",
 ]
 
 #: Largest text input read (bytes): real RPC, ISD, scene and CSV files are far smaller.
@@ -255,3 +261,95 @@ def loads_json(text: str, source: str, what: str = "JSON file", parse_constant: 
 def load_json_file(path: str | os.PathLike[str], what: str = "JSON file", parse_constant: Any = None) -> Any:
     """Read and parse a JSON input file under every rule of this module (see :func:`loads_json`)."""
     return loads_json(read_input_text(path, what), str(path), what, parse_constant)
+
+
+#: Physical range of the point columns a CSV may hold (inclusive), with the unit for the messages.
+COLUMN_RANGES: dict[str, tuple[float, float, str]] = {
+    "lat": (-90.0, 90.0, "degrees"), "lon": (-360.0, 360.0, "degrees"), "h": (-12_000.0, 100_000.0, "m"),
+    "row": (-1e9, 1e9, "px"), "col": (-1e9, 1e9, "px"),
+}
+
+
+def read_points_csv(path: str | os.PathLike[str], columns: tuple[str, ...] | list[str],
+                    what: str = "CSV of points") -> tuple[list[dict[str, str]], dict[str, Any]]:
+    """The rows of a CSV file of points and its ``columns`` as float64 arrays, checked.
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV file (any encoding :func:`decode_text` reads; a UTF-8 byte-order mark is fine).
+    columns : sequence of str
+        The columns needed; each value must be a finite number within :data:`COLUMN_RANGES` (when the
+        column is listed there).
+    what : str
+        What the file is, for the messages.
+
+    Returns
+    -------
+    rows : list of dict
+        Every data row, keyed by the (stripped) header names.
+    arrays : dict of str to ndarray, shape (N,)
+        The needed columns.
+
+    Raises
+    ------
+    InputError
+        Naming the file, and the line and column of the first bad value.
+    """
+    import csv
+    import io
+
+    import numpy as np
+
+    from explorer.errors import InputError
+
+    text = read_input_text(path, what)
+    try:
+        reader = csv.reader(io.StringIO(text, newline=""))
+        table = [row for row in reader if any(cell.strip() for cell in row)]
+    except csv.Error as exc:
+        raise InputError(f"{path}: malformed CSV ({exc})") from None
+    if not table:
+        raise InputError(f"{path}: empty CSV (no header)")
+    header = [h.strip() for h in table[0]]
+    lower = [h.lower() for h in header]
+    if len(table) < 2:
+        raise InputError(f"{path}: no data rows")
+    missing = [c for c in columns if c.lower() not in lower]
+    if missing:
+        raise InputError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(header)})")
+    rows = []
+    for i, row in enumerate(table[1:]):
+        if len(row) != len(header):
+            raise InputError(f"{path}: line {i + 2} has {len(row)} fields, the header {len(header)}")
+        rows.append(dict(zip(header, row, strict=True)))
+    arrays = {}
+    for c in columns:
+        k = lower.index(c.lower())
+        texts = [row[k].strip() for row in table[1:]]
+        try:
+            values = np.asarray(texts, dtype=np.float64)
+        except (TypeError, ValueError):
+            i = next(i for i, t in enumerate(texts) if not _is_float(t))
+            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]!r} is not a finite number") from None
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]!r} is not a finite number")
+        if c.lower() in COLUMN_RANGES:
+            low, high, unit = COLUMN_RANGES[c.lower()]
+            out = np.flatnonzero((values < low) | (values > high))
+            if out.size:
+                i = int(out[0])
+                raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]} is outside {low:g} .. "
+                                 f"{high:g} {unit}")
+        arrays[c] = values
+    return rows, arrays
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -30,6 +30,7 @@ from explorer.geometry.terrain import (
 )
 from explorer.io_atomic import write_text_atomic
 from explorer.io_input import load_json_file
+from explorer.scene_checks import check_scene_physics
 from explorer.sensor import Localization, Projection, inside_image
 
 SCENE_FILE_VERSION = 1
@@ -407,7 +408,9 @@ class Scene:
             raise SceneFileError(
                 f"{path}: a rigorous line-scan scene; load it with explorer.load_scene (explorer.real.load_scene)"
             )
-        return cls.from_dict(d, source=str(path))
+        scene = cls.from_dict(d, source=str(path))
+        check_scene_physics(scene, str(path))  # a physical sensor, above its terrain (docs/validation.md)
+        return scene
 
 
 class _NonFinite(float):

@@ -24,6 +24,8 @@ from numpy.typing import ArrayLike, NDArray
 from explorer._resources import assets_dir
 from explorer.errors import InputError
 from explorer.geometry.dem_intersection import HeightGrid
+from explorer.io_input import check_input_file
+from explorer.memory import check_allocation
 
 __all__ = [
     "DEFAULT_ASSETS_DIR",
@@ -203,6 +205,10 @@ class GeoDEM:
         return cached
 
 
+#: Peak bytes per DEM cell while reading (the band in its type, the float64 copy, the mask, the filled grid).
+DEM_BYTES_PER_CELL = 32
+
+
 def read_geotiff_dem(
     path: str | Path, *, band: int = 1, vertical_reference: str = "unknown", to_geographic: bool = True
 ) -> GeoDEM:
@@ -247,6 +253,9 @@ def read_geotiff_dem(
         with dataset:
             if not 1 <= band <= dataset.count:
                 raise InputError(f"DEM {path} has {dataset.count} band(s), band {band} requested")
+            check_allocation(float(dataset.width) * dataset.height * DEM_BYTES_PER_CELL,
+                             f"DEM {path} ({dataset.width} x {dataset.height} cells)",
+                             "crop or resample it to the image area first (gdal_translate -projwin / -tr)")
             data = dataset.read(band, masked=True).astype(np.float64)
             heights = np.ma.filled(data, np.nan)
             if dataset.nodata is None and not np.ma.is_masked(data):
@@ -263,6 +272,13 @@ def read_geotiff_dem(
     if b_or_d_nonzero(transform):
         raise InputError(f"DEM {path}: rotated geotransforms are not supported")
     heights[~np.isfinite(heights)] = np.nan  # infinite heights are no-data, never numbers
+    low, high = DEM_HEIGHT_RANGE_M
+    with np.errstate(invalid="ignore"):
+        outside = (heights < low) | (heights > high)
+    if outside.any():
+        i, j = (int(v) for v in np.argwhere(outside)[0])
+        raise InputError(f"DEM {path}: height {heights[i, j]:.6g} m at row {i}, column {j} is outside {low:g} .. "
+                         f"{high:g} m: not a terrain height (an undeclared no-data value, other units?)")
     try:
         return GeoDEM(
             heights=heights,
@@ -371,6 +387,29 @@ def require_coverage(grid: HeightGrid, lon: ArrayLike, lat: ArrayLike, what: str
 _HGT_NAME = re.compile(r"([NS])(\d{1,2})([EW])(\d{1,3})", re.I)
 
 
+#: Heights a terrain of the Earth (SRTM) can have: the Dead Sea shore is at -430 m, Everest at 8,849 m.
+SRTM_HEIGHT_RANGE_M = (-1_000.0, 9_000.0)
+#: Heights any DEM read may hold (m): the deepest ocean trench to above Olympus Mons on Mars.
+DEM_HEIGHT_RANGE_M = (-12_000.0, 30_000.0)
+
+
+def _check_hgt_heights(path: Path, raw: np.ndarray) -> None:
+    """Refuse a tile whose samples are not Earth heights (a little-endian tile reads as ~+-30 km heights)."""
+    valid = raw[raw != SRTM_NODATA]
+    if valid.size == 0:
+        return
+    low, high = SRTM_HEIGHT_RANGE_M
+    outside = float(np.mean((valid < low) | (valid > high)))
+    if outside > 0.001:
+        swapped = valid.byteswap()
+        swapped = swapped[swapped != SRTM_NODATA]
+        hint = ""
+        if swapped.size and float(np.mean((swapped < low) | (swapped > high))) < 0.001:
+            hint = "; its bytes read little-endian give Earth heights: SRTM tiles are big-endian, convert it"
+        raise InputError(f"DEM {path}: {100 * outside:.1f} % of the samples are outside {low:g} .. {high:g} m "
+                         f"(up to {int(np.max(np.abs(valid.astype(np.int32))))} m): not SRTM heights{hint}")
+
+
 def read_hgt(path: str | Path) -> GeoDEM:
     """Read an SRTM ``.hgt`` tile (1201x1201 or 3601x3601 big-endian int16, -32768 = nodata).
 
@@ -381,13 +420,21 @@ def read_hgt(path: str | Path) -> GeoDEM:
     path = Path(path)
     match = _HGT_NAME.search(path.name)
     if match is None:
-        raise ValueError(f"{path.name}: SRTM tile name must look like N43E007.hgt")
+        raise InputError(f"DEM {path}: an SRTM .hgt tile is placed by its name, which must look like "
+                         "N43E007.hgt (rename it, or convert it to a GeoTIFF)")
     lat0 = int(match.group(2)) * (1 if match.group(1).upper() == "N" else -1)
     lon0 = int(match.group(4)) * (1 if match.group(3).upper() == "E" else -1)
-    raw = np.fromfile(path, dtype=">i2")
+    if not (-90 <= lat0 <= 89 and -180 <= lon0 <= 179):
+        raise InputError(f"DEM {path}: tile name {match.group(0)} is not a 1-degree tile on the Earth")
+    size = check_input_file(path, "SRTM .hgt DEM").stat().st_size
+    if size not in (2 * 1201**2, 2 * 3601**2):
+        raise InputError(f"DEM {path}: {size} bytes is not a 1201^2 or 3601^2 SRTM tile of 16-bit samples")
+    try:
+        raw = np.fromfile(path, dtype=">i2")
+    except OSError as exc:
+        raise InputError(f"DEM {path}: cannot be read ({exc.strerror})") from None
     side = int(round(np.sqrt(raw.size)))
-    if side * side != raw.size or side not in (1201, 3601):
-        raise ValueError(f"{path.name}: {raw.size} samples is not a 1201^2 or 3601^2 SRTM tile")
+    _check_hgt_heights(path, raw)
     heights = raw.reshape(side, side).astype(np.float64)
     heights[raw.reshape(side, side) == -32768] = np.nan
     step = 1.0 / (side - 1)

@@ -24,7 +24,7 @@ LAYERS = [
     ["explorer.errors", "explorer._numba", "explorer._threads", "explorer._lazy", "explorer._resources",
      "explorer._log", "explorer.io_atomic", "explorer.io_input", "explorer.memory"],
     ["explorer.geometry"],
-    ["explorer.sensor", "explorer.scene"],
+    ["explorer.sensor", "explorer.scene", "explorer.scene_checks"],
     ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],
     ["explorer.real", "explorer.methods", "explorer.stereo"],
     ["explorer.evaluate", "explorer.bench_defaults", "explorer.bench", "explorer.ortho", "explorer.warmup",

@@ -202,11 +202,16 @@ def raster_file(text: str) -> str:
     existing_file(text)
     if text.lower().endswith(".hgt"):
         return text
+    import warnings
+
     import rasterio  # only when a raster argument is given
     from rasterio.errors import RasterioError
 
     try:
-        with rasterio.open(text) as ds:
+        with warnings.catch_warnings():  # a raster without georeferencing: the DEM reader says so, in one line
+            warnings.simplefilter("ignore")
+            ds = rasterio.open(text)
+        with ds:
             if ds.count < 1 or ds.width < 1 or ds.height < 1:
                 raise argparse.ArgumentTypeError(f"{text!r} has no raster band")
     except RasterioError:

@@ -41,44 +41,10 @@ _CONVENTIONS = {
 
 
 def _read_csv(path: str, columns: Sequence[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:
-    """Rows of a CSV file and its ``columns`` as float arrays; InputError naming the file, line and column."""
-    import numpy as np
+    """Rows of a CSV file and its ``columns`` as float arrays (:func:`explorer.io_input.read_points_csv`)."""
+    from explorer.io_input import read_points_csv
 
-    from explorer.errors import InputError
-
-    try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            rows = list(csv.DictReader(handle))
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text CSV file") from None
-    except csv.Error as exc:
-        raise InputError(f"{path}: malformed CSV ({exc})") from None
-    if not rows:
-        raise InputError(f"{path}: no data rows")
-    missing = [c for c in columns if c not in rows[0]]
-    if missing:
-        raise InputError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(rows[0])})")
-    arrays = {}
-    for c in columns:
-        texts = [record[c] for record in rows]
-        try:
-            values = np.asarray(texts, dtype=np.float64)
-            bad: list[int] = np.flatnonzero(~np.isfinite(values)).tolist()
-        except (TypeError, ValueError):
-            bad = [next(i for i, t in enumerate(texts) if not _is_number(t))]
-        if bad:
-            i = bad[0]
-            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i]!r} is not a finite number")
-        arrays[c] = values
-    return rows, arrays
-
-
-def _is_number(text: object) -> bool:
-    try:
-        float(text)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return False
-    return True
+    return read_points_csv(path, tuple(columns))
 
 
 def _write_csv(

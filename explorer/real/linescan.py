@@ -44,6 +44,7 @@ from explorer.geometry.terrain import Terrain, intersect_heights, terrain_from_d
 from explorer.io_input import load_json_file
 from explorer.real.mpc_fit import mpc_scene_from_sensor
 from explorer.scene import RIGOROUS_SCENE_FORMAT, Scene
+from explorer.scene_checks import check_scene_physics
 
 __all__ = [
     "C_LIGHT",
@@ -642,5 +643,8 @@ def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     d = load_json_file(path, "scene file")
     if isinstance(d, dict) and d.get("format") == RIGOROUS_FORMAT:
-        return RigorousLineScanScene.from_dict(d, source=str(path))
-    return Scene.from_dict(d, source=str(path))
+        scene: Scene = RigorousLineScanScene.from_dict(d, source=str(path))
+    else:
+        scene = Scene.from_dict(d, source=str(path))
+    check_scene_physics(scene, str(path))  # a physical sensor, above its terrain (docs/validation.md)
+    return scene
