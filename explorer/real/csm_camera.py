@@ -436,17 +436,47 @@ class CsmCamera:
             return (t >= lo - slack) & (t <= hi + slack)
 
     def covered_line_ranges(self) -> list[tuple[float, float]]:
-        """The image's covered stretches as ``(first, last)`` CSM line pairs (whole lines, pixel edges)."""
-        centres = np.arange(self.n_lines) + 0.5
-        ok = self.line_covered(centres)
-        if not ok.any():
-            return []
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-        return [(float(a), float(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+        """The image's covered stretches as ``(first, last)`` CSM line pairs: the whole lines ``j`` (pixel
+        edges ``j`` to ``j + 1``) whose centre ``j + 0.5`` is covered (:meth:`line_covered`).
+
+        Solved per ``line_scan_rate`` segment in closed form (time is linear in the line there), then each
+        end checked against :meth:`line_covered` itself: no per-line arrays, whatever the image size."""
+        lo, hi = self.table_span
+        n = self.n_lines
+        rl, rt, rp = self.rate_lines, self.rate_times, self.rate_periods
+        slack = 0.5 + 1e-6
+        ranges: list[list[int]] = []
+        for k in range(rl.size):
+            seg_lo = -math.inf if k == 0 else float(rl[k])
+            seg_hi = math.inf if k == rl.size - 1 else float(rl[k + 1])
+            # t(L) = rt + rp (L - rl + 0.5) within [lo - slack rp, hi + slack rp]
+            a = float(rl[k] - 0.5 + (lo - rt[k]) / rp[k] - slack)
+            b = float(rl[k] - 0.5 + (hi - rt[k]) / rp[k] + slack)
+            c_lo = min(max(a, seg_lo, 0.0), float(n))
+            c_hi = max(min(b, seg_hi, float(n)), 0.0)
+            if not c_lo <= c_hi:
+                continue
+            j_lo, j_hi = max(math.ceil(c_lo - 0.5) - 2, 0), min(math.floor(c_hi - 0.5) + 2, n - 1)
+            # exact ends: the centres in this segment that line_covered accepts (a few evaluations)
+            while j_lo <= j_hi and not self._centre_in_segment(j_lo, k, seg_lo, seg_hi):
+                j_lo += 1
+            while j_hi >= j_lo and not self._centre_in_segment(j_hi, k, seg_lo, seg_hi):
+                j_hi -= 1
+            if j_lo > j_hi:
+                continue
+            if ranges and j_lo <= ranges[-1][1]:
+                ranges[-1][1] = max(ranges[-1][1], j_hi + 1)
+            else:
+                ranges.append([j_lo, j_hi + 1])
+        return [(float(a), float(b)) for a, b in ranges]
+
+    def _centre_in_segment(self, j: int, k: int, seg_lo: float, seg_hi: float) -> bool:
+        c = j + 0.5
+        return bool(seg_lo <= c < seg_hi and self.line_covered(np.array([c]))[0])
 
     def covered_fraction(self) -> float:
         """Fraction of the image's lines (their centres) covered by every ephemeris table."""
-        return float(np.mean(self.line_covered(np.arange(self.n_lines) + 0.5)))
+        return sum(b - a for a, b in self.covered_line_ranges()) / self.n_lines
 
     def _check_coverage(self) -> None:
         """Refuse a camera whose tables cover none of the image's lines, naming the table and the times."""

@@ -158,3 +158,35 @@ def test_impossible_isd_is_one_line_naming_file_and_key(edit, key, reason):
         camera_from_isd(isd, source="bad_ctx.json")
     msg = str(exc.value)
     assert msg.startswith("bad_ctx.json: ") and key in msg and reason in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    ("rates", "pointing_window"),
+    [
+        ([[0.5, -1.0, 0.005], [200.5, 0.0, 0.0025]], None),
+        ([[0.5, -1.0, 0.005], [100.5, -0.5, 0.01]], None),  # the second rate runs past the tables
+        ([[0.5, -0.9, 0.004], [50.5, -0.7, 0.009], [120.5, -0.07, 0.001]], None),
+        ([[0.5, -1.0, 0.005], [200.5, 0.0, 0.0025]], (-0.7, 0.6)),  # the pointing table starts mid-image
+        ([[0.5, -1.0, 0.005], [100.5, -0.5, 0.0025]], (-0.3, 0.2)),  # covered in the middle only
+    ],
+)
+def test_covered_ranges_are_the_lines_line_covered_accepts(rates, pointing_window):
+    """covered_line_ranges (closed form per rate segment) against line_covered evaluated at every line's
+    centre (brute force)."""
+    from tests.real.test_csm import flyby_isd
+
+    isd = flyby_isd(rates=rates)
+    if pointing_window is not None:
+        table = isd["instrument_pointing"]
+        keep = [k for k, t in enumerate(table["ephemeris_times"])
+                if pointing_window[0] <= t - isd["center_ephemeris_time"] <= pointing_window[1] + 1e-9]
+        table["ephemeris_times"] = [table["ephemeris_times"][k] for k in keep]
+        table["quaternions"] = [table["quaternions"][k] for k in keep]
+    cam = camera_from_isd(isd, source="rates")
+    ok = cam.line_covered(np.arange(cam.n_lines) + 0.5)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    brute = [(float(a), float(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    assert cam.covered_line_ranges() == brute
+    assert cam.covered_fraction() == pytest.approx(ok.mean(), abs=1e-15)
+    if pointing_window is not None:
+        assert ok.mean() < 1.0
