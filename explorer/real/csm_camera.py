@@ -760,6 +760,11 @@ class CsmCamera:
     def describe(self) -> str:
         """A few lines describing the camera."""
         span = self.line_time(np.array([0.0, float(self.n_lines)]))
+        ranges = self.covered_line_ranges()
+        fraction = sum(b - a for a, b in ranges) / self.n_lines
+        coverage = "" if fraction == 1.0 else (
+            f"\n  ephemeris tables cover {100 * fraction:.1f} % of the lines ("
+            + ", ".join(f"{a:.0f}-{b:.0f}" for a, b in ranges) + "); the other lines are flagged, not extrapolated")
         return (
             f"CSM line scanner {self.name}: {self.n_lines} lines x {self.n_samples} samples, "
             f"{self.rate_lines.size} line rate(s), imaging {span[1] - span[0]:.4f} s\n"
@@ -769,6 +774,7 @@ class CsmCamera:
             f"  {self.position_times.size} positions (Lagrange order {self.position_order}, "
             f"{'J2000' if self.position_in_j2000 else 'body-fixed'}), {self.pointing_times.size} pointing and "
             f"{self.body_times.size} body-rotation quaternions ({self.attitude_interpolation})"
+            + coverage
         )
 
 

@@ -77,6 +77,7 @@ def test_hrsc_like_lines_past_the_tables_are_flagged(hrsc):
     # the tables end with CTX's last line: 1408 + 5632 / 6 = 2346.67 HRSC-like lines, plus half a line
     assert hrsc.covered_line_ranges() == [(0.0, 2347.0)]
     assert hrsc.covered_fraction() == pytest.approx(2347 / 2816)
+    assert "tables cover 83.3 % of the lines (0-2347)" in hrsc.describe()
     lines = np.array([2340.0, 2346.5, 2348.5, 2400.0, 2815.5])
     g = hrsc.image_to_ground(lines, np.full(5, 600.0), 0.0)
     np.testing.assert_array_equal(g.hit, [True, True, False, False, False])
