@@ -40,7 +40,8 @@ import numpy as np
 
 from explorer.errors import ConvergenceError, InputError
 
-__all__ = ["BundleProblem", "BundleResult", "Projector", "bundle_adjust", "metres_per_degree", "robust_weights"]
+__all__ = ["BundleProblem", "BundleResult", "Projector", "bundle_adjust", "lm_iteration", "metres_per_degree",
+           "robust_weights"]
 
 WGS84_AXES = (6378137.0, 6356752.314245179)
 
@@ -387,6 +388,19 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
     return state, max_iterations, False
 
 
+def _start(problem: BundleProblem) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray], _State]:
+    """Free points (M,), prior weights (M, 3) 1/m^2, metres per degree, and the initial state."""
+    free = ~(problem.ground_sigma_m == 0.0).all(axis=1)
+    if ((problem.ground_sigma_m == 0.0).any(axis=1) & free).any():
+        raise InputError("a ground point's sigmas must be all 0 (fixed) or all > 0")
+    prior_weight = np.where(np.isinf(problem.ground_sigma_m), 0.0,
+                            1.0 / np.where(free[:, None], problem.ground_sigma_m, 1.0) ** 2)
+    prior_weight[~free] = 0.0
+    scale = metres_per_degree(problem.ground[:, 1], problem.ground[:, 2], problem.axes)
+    state = _State(np.concatenate(problem.initial_parameters), np.zeros((problem.ground.shape[0], 3)))
+    return free, prior_weight, scale, state
+
+
 def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: float = 1.5,
                   outlier_probability: float = 0.999, max_iterations: int = 50,
                   parameter_names: list[str] | None = None) -> BundleResult:
@@ -430,15 +444,7 @@ def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: fl
     names = parameter_names or [f"p{i}" for i in range(p_total)]
     n = problem.measured.shape[0]
     m = problem.ground.shape[0]
-    free = ~(problem.ground_sigma_m == 0.0).all(axis=1)
-    partly = (problem.ground_sigma_m == 0.0).any(axis=1) & free
-    if partly.any():
-        raise InputError("a ground point's sigmas must be all 0 (fixed) or all > 0")
-    prior_weight = np.where(np.isinf(problem.ground_sigma_m), 0.0, 1.0 / np.where(free[:, None],
-                            problem.ground_sigma_m, 1.0) ** 2)
-    prior_weight[~free] = 0.0
-    scale = metres_per_degree(problem.ground[:, 1], problem.ground[:, 2], problem.axes)
-    state = _State(np.concatenate(problem.initial_parameters), np.zeros((m, 3)))
+    free, prior_weight, scale, state = _start(problem)
 
     tie = free & np.isinf(problem.ground_sigma_m).any(axis=1)
 
@@ -509,3 +515,22 @@ def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: fl
 def projected_after(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _State) -> np.ndarray:
     """Projections (N, 2) at ``state``."""
     return _evaluate(problem, scale, state, False)[0]
+
+
+def lm_iteration(problem: BundleProblem, *, loss: str = "huber", loss_scale: float = 1.5) -> np.ndarray:
+    """One Levenberg-Marquardt iteration from the initial values (for benchmarks and teaching).
+
+    Linearises (torch autograd), builds and reduces the normal equations, solves, evaluates the trial
+    step (more damping until the cost drops) and linearises again at the new point, as every iteration
+    of :func:`bundle_adjust` does (plus its first linearisation).
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        The stacked image parameters after the iteration.
+    """
+    free, prior_weight, scale, state = _start(problem)
+    names = [f"p{i}" for i in range(int(problem.offsets[-1]))]
+    use = np.ones(problem.measured.shape[0], dtype=bool)
+    state, _, _ = _lm(problem, scale, state, use, free, prior_weight, loss, loss_scale, 1, names, [])
+    return state.theta
