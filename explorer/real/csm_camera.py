@@ -37,8 +37,8 @@ What is read (every key is checked; a missing key, a NaN or a bad unit raises
 * ``optical_distortion``: usgscsm's ``radial``, ``transverse``, ``kaguyalism``, ``lrolrocnac``, ``dawnfc``,
   ``cahvor`` (``coefficients``: k0, k1, k2, x and y offsets), ``radtan`` (k1, k2, p1, p2, k3 on
   coordinates divided by the focal length), ``kplo_shadowcam`` (one coefficient) and ``lunarorbiter``
-  (``perspective_x``/``_y``, ``center_point_x``/``_y``, ``coefficients`` k0, k1: ISIS's
-  ``LoHighDistortionMap``), and the models ALE writes for line scanners that usgscsm does not read:
+  (``perspective_x``/``_y``, ``center_point_x``/``_y``, optional ``coefficients`` k0, k1 -- no
+  other key -- ISIS's ``LoHighDistortionMap``), and the models ALE writes for line scanners that usgscsm does not read:
   ``legendre`` (New Horizons MVIC TDI, ``x_coefficients``/``y_coefficients`` of 20 terms: ISIS's
   ``NewHorizonsMvicTdiCameraDistortionMap``, x only, over half of ``image_samples`` x the pixel pitch of
   ``focal2pixel_samples``) and ``themisir`` (Mars Odyssey THEMIS IR, ISIS's ``ThemisIrDistortionMap``:
@@ -249,7 +249,12 @@ def _distortion(isd: _Isd) -> tuple[str, int, np.ndarray]:
         if name == "radtan":  # on coordinates normalised by the focal length (usgscsm)
             coef = np.append(coef, isd.number("focal_length_model", "focal_length", positive=True))
     elif name == "lunarorbiter":  # ISIS LoHighDistortionMap: perspective factors, point of symmetry, k0, k1
-        k = isd.array(*key, "coefficients", shape=(None,))
+        known = ("perspective_x", "perspective_y", "center_point_x", "center_point_y", "coefficients")
+        extra = sorted(set(params) - set(known)) if isinstance(params, dict) else []
+        if extra:  # a radial term under another name must not be dropped in silence
+            raise isd.fail(f"optical_distortion.{name}", f"has unknown key(s) {', '.join(extra)}; "
+                           f"read are {', '.join(known)}")
+        k = isd.array(*key, "coefficients", shape=(None,), default=[0.0, 0.0])  # usgscsm reads only the first 4
         if not 1 <= k.size <= 2:
             raise isd.fail(f"optical_distortion.{name}.coefficients", f"must hold 1 or 2 values, got {k.size}")
         coef = np.array([isd.number(*key, "perspective_x"), isd.number(*key, "perspective_y"),

@@ -447,6 +447,8 @@ def test_themis_ir_apply_is_isis_forward_map(band):
          "optical_distortion.legendre.x_coefficients"),
         ({"lunarorbiter": {"perspective_x": 0.0, "center_point_x": 0.0, "center_point_y": 0.0,
                            "coefficients": [1e-4]}}, "optical_distortion.lunarorbiter.perspective_y"),
+        ({"lunarorbiter": {"perspective_x": 0.0, "perspective_y": 0.0, "center_point_x": 0.0,
+                           "center_point_y": 0.0, "odk": [1e-4]}}, "optical_distortion.lunarorbiter.*odk"),
         ({"themisir": {"band": 11}}, "optical_distortion.themisir.band"),
         ({"themisir": {}}, "optical_distortion.themisir.k"),
         ({"kplo_shadowcam": {"coefficients": [1e-5, 2e-5]}}, "optical_distortion.kplo_shadowcam.coefficients"),
