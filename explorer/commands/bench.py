@@ -69,8 +69,11 @@ FILE_SOURCES = tuple(FILE_SOURCE_HELP)
 def cmd_bench(args: argparse.Namespace) -> int:
     from explorer.bench import format_table, run_bench
     from explorer.io_atomic import write_text_atomic
+    from explorer.memory import check_allocation
+    from explorer.points import BYTES_PER_POINT
 
     params = parse_params(args.param)  # checked before the bench runs
+    check_allocation(float(args.scps) * 2 * BYTES_PER_POINT, f"--scps {args.scps}", "lower --scps")
     file_kinds = [k for k in FILE_SOURCES if getattr(args, k, None)]
     if args.dem and not file_kinds:
         from explorer.errors import InputError

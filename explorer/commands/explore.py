@@ -20,9 +20,20 @@ from explorer.commands._args import (
 
 def cmd_explore(args: argparse.Namespace) -> int:
     """Handler of ``explore``: validate the source and address, then export or serve."""
+    from explorer.memory import check_allocation
+    from explorer.points import BYTES_PER_POINT
+
+    n_methods = len(args.methods.split(",")) if args.methods else 4
+    check_allocation(float(args.scps) * (BYTES_PER_POINT + EXPLORE_BYTES_PER_SCP_METHOD * n_methods),
+                     f"--scps {args.scps} with {n_methods} method(s)", "lower --scps")
     from explorer.app.server import run_explore  # viser and plotly load only for this command
 
     return run_explore(args)
+
+
+#: Memory per check point and method of the explorer (residuals, status, the residuals.csv text and the
+#: panels' arrays), a generous figure: the guard refuses what cannot fit, it does not promise what can.
+EXPLORE_BYTES_PER_SCP_METHOD = 400
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -84,8 +84,12 @@ def summarize_scene(scene: Scene) -> str:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from explorer.points import simulate_points
+    from explorer.memory import check_allocation
+    from explorer.points import BYTES_PER_POINT, simulate_points
 
+    n = int(args.n) * int(args.layers)
+    check_allocation(n * BYTES_PER_POINT, f"--n {args.n} x --layers {args.layers} ({n:,} points)",
+                     "lower --n or --layers")
     scene = scene_from_args(args)
     t0 = time.perf_counter()
     pts = simulate_points(scene, args.n, layers=args.layers, kind=args.kind, seed=args.seed)
