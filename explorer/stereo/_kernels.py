@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from explorer._numba import kernel, prange
+from explorer._numba import kernel, prange, serial_twin
 
 _A = 6378137.0
 _F = 1.0 / 298.257223563
@@ -167,8 +167,7 @@ def _closest(px, py, pz, ux, uy, uz, qx, qy, qz, vx, vy, vz):
     return 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * (az + bz), dist, sin2, s, t
 
 
-@kernel(parallel=True)
-def closest_approach(p, u, q, v):
+def _closest_approach_py(p, u, q, v):
     """Lines ``p + s u`` and ``q + t v`` (each (N, 3)) -> midpoint (N, 3), distance (N,), sin^2 angle (N,),
     s (N,), t (N,)."""
     n = p.shape[0]
@@ -208,8 +207,7 @@ def _solve3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
     return x0, x1, x2
 
 
-@kernel(parallel=True)
-def solve_normal_3(jac, res):
+def _solve_normal_3_py(jac, res):
     """Gauss-Newton steps: ``jac`` (N, 4, 3), ``res`` (N, 4) -> the least-squares step (N, 3) of each point."""
     n = jac.shape[0]
     out = np.empty((n, 3))
@@ -241,8 +239,7 @@ def solve_normal_3(jac, res):
     return out
 
 
-@kernel(parallel=True)
-def rpc_localise(coef, norm, row, col, h, max_iter):
+def _rpc_localise_py(coef, norm, row, col, h, max_iter):
     """Exact localisation of pixels (N,) at ellipsoidal heights (N,) -> lon (N,), lat (N,), ok (N,)."""
     n = row.shape[0]
     lon = np.empty(n)
@@ -266,8 +263,7 @@ def _ray_ecef(coef, norm, row, col, h0, h1, lon0, lat0, max_iter):
     return x0, y0, z0, x1 - x0, y1 - y0, z1 - z0, ok0 and ok1
 
 
-@kernel(parallel=True)
-def rpc_pair_triangulate(coef_l, norm_l, coef_r, norm_r, lrow, lcol, rrow, rcol, h0, h1, min_sin2, max_iter,
+def _rpc_pair_triangulate_py(coef_l, norm_l, coef_r, norm_r, lrow, lcol, rrow, rcol, h0, h1, min_sin2, max_iter,
                          tol_m, tangent_dh, out_geo, out_ecef, out_ray, out_rep, out_flags):
     """Triangulate matches of an RPC pair (see the module docstring); outputs are filled in place.
 
@@ -367,3 +363,47 @@ def rpc_pair_triangulate(coef_l, norm_l, coef_r, norm_r, lrow, lcol, rrow, rcol,
             out_ray[i] = math.nan
             flags |= NOT_CONVERGED
         out_flags[i] = flags
+
+
+#: Below this many points the serial variant of a kernel runs: waking the second thread of a ``prange`` loop
+#: costs milliseconds on a busy 2-core machine (explorer.rpc._kernels.PARALLEL_MIN_POINTS measured it).
+PARALLEL_MIN_POINTS = 100_000
+
+
+def _pick(fn):
+    """A dispatcher running ``fn`` compiled with ``prange`` (large inputs) or serially (small ones), by the length
+    of its first array argument (the package's numba cache keeps one entry per variant, ``serial_twin``)."""
+    parallel = kernel(parallel=True)(fn)
+    serial = kernel()(serial_twin(fn))
+
+    def run(first, *args):
+        return (parallel if first.shape[0] >= PARALLEL_MIN_POINTS else serial)(first, *args)
+
+    run.__name__ = fn.__name__.removeprefix("_").removesuffix("_py")
+    run.__doc__ = fn.__doc__
+    return run, parallel, serial
+
+
+closest_approach, _closest_approach_parallel, _closest_approach_serial = _pick(_closest_approach_py)
+solve_normal_3, _solve_normal_3_parallel, _solve_normal_3_serial = _pick(_solve_normal_3_py)
+
+
+def _by_size(parallel, serial, n):
+    return parallel if n >= PARALLEL_MIN_POINTS else serial
+
+
+_rpc_localise_parallel = kernel(parallel=True)(_rpc_localise_py)
+_rpc_localise_serial = kernel()(serial_twin(_rpc_localise_py))
+_rpc_pair_parallel = kernel(parallel=True)(_rpc_pair_triangulate_py)
+_rpc_pair_serial = kernel()(serial_twin(_rpc_pair_triangulate_py))
+
+
+def rpc_localise(coef, norm, row, col, h, max_iter):
+    """Exact localisation of pixels (N,) at ellipsoidal heights (N,) -> lon (N,), lat (N,), ok (N,)."""
+    return _by_size(_rpc_localise_parallel, _rpc_localise_serial, row.shape[0])(coef, norm, row, col, h, max_iter)
+
+
+def rpc_pair_triangulate(coef_l, norm_l, coef_r, norm_r, lrow, *args):
+    """Triangulate matches of an RPC pair (:func:`_rpc_pair_triangulate_py`), parallel from
+    :data:`PARALLEL_MIN_POINTS` matches."""
+    return _by_size(_rpc_pair_parallel, _rpc_pair_serial, lrow.shape[0])(coef_l, norm_l, coef_r, norm_r, lrow, *args)

@@ -115,6 +115,36 @@ def localise(sensor: Sensor, row: np.ndarray, col: np.ndarray, h: np.ndarray) ->
     return ecef, ok
 
 
+def localise_geodetic(sensor: Sensor, row: np.ndarray, col: np.ndarray, h: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`localise` as (lon_deg, lat_deg, ok) on the sensor's body (RPC: no Cartesian round trip); NaN where
+    not ok."""
+    row, col, h = (np.ascontiguousarray(a, dtype=np.float64).ravel() for a in np.broadcast_arrays(row, col, h))
+    model = rpc_model(sensor)
+    if model is not None:
+        coef, norm = rpc_arrays(model)
+        return _kernels.rpc_localise(coef, norm, row, col, h, RPC_MAX_ITER)
+    ecef, ok = localise(sensor, row, col, h)
+    lon, lat, _ = ecef_to_geodetic(sensor, ecef)
+    return np.where(ok, lon, np.nan), np.where(ok, lat, np.nan), ok
+
+
+def project_geodetic(sensor: Sensor, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project` of geodetic points (degrees, ellipsoidal metres; NaN in, NaN out)."""
+    lon, lat, h = (np.asarray(a, dtype=np.float64).ravel() for a in np.broadcast_arrays(lon, lat, h))
+    model = rpc_model(sensor)
+    ok = np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)
+    if model is not None:
+        out = np.full((2, lon.size), np.nan)
+        if ok.any():
+            out[0, ok], out[1, ok] = model.projection(lon[ok], lat[ok], h[ok])
+        return out[0], out[1]
+    ecef = np.full((lon.size, 3), np.nan)
+    ecef[ok] = geodetic_to_ecef(sensor, lon[ok], lat[ok], h[ok])
+    return project(sensor, ecef)
+
+
 def project(sensor: Sensor, ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """ECEF points (N, 3) -> (row, col) in the sensor's image (NaN where the model has no image point)."""
     ecef = np.asarray(ecef, dtype=np.float64)
@@ -150,5 +180,5 @@ def perspective_centres(sensor: Sensor, row: np.ndarray, col: np.ndarray) -> np.
     return sensor.frame.enu_to_ecef(origin)
 
 
-__all__ = ["as_sensor", "ecef_to_geodetic", "geodetic_to_ecef", "inside_image", "localise", "mean_height",
-           "perspective_centres", "project", "rpc_arrays", "rpc_model"]
+__all__ = ["as_sensor", "ecef_to_geodetic", "geodetic_to_ecef", "inside_image", "localise", "localise_geodetic",
+           "mean_height", "perspective_centres", "project", "project_geodetic", "rpc_arrays", "rpc_model"]
