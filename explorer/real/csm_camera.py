@@ -918,6 +918,14 @@ def camera_from_isd(data: dict, *, source: str = "<isd>", interpolation: str = "
         h_hi = isd.number("reference_height", "maxheight") * hu
         if not h_hi > h_lo:
             raise isd.fail("reference_height", "maxheight must exceed minheight")
+        small = min(a, b)
+        if not (-0.5 * small < h_lo and h_hi < 0.5 * small):
+            raise isd.fail("reference_height", f"minheight {h_lo:.6g} m / maxheight {h_hi:.6g} m must lie within "
+                           f"half the body's smaller semi-axis ({0.5 * small:.6g} m) of its surface")
+        lowest = float(np.min(np.linalg.norm(pos_m, axis=1))) - small  # the most lenient altitude estimate
+        if h_hi >= lowest:
+            raise isd.fail("reference_height", f"maxheight {h_hi:.6g} m is not below the sensor (lowest position "
+                           f"at most {lowest:.6g} m above the surface)")
     return CsmCamera(
         source=source,
         name=str(isd.get("image_identifier", default=isd.get("name_sensor", default=Path(source).stem))),

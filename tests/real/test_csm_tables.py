@@ -146,11 +146,15 @@ def test_pointing_table_starting_mid_image_flags_the_lines_before():
         (lambda d: d["instrument_position"].__setitem__(
             "ephemeris_times", [t + 100.0 for t in d["instrument_position"]["ephemeris_times"]]),
          "instrument_position", "do not cover the image"),
+        (lambda d: d["reference_height"].__setitem__("minheight", -2e6), "reference_height", "half the body"),
+        (lambda d: d["reference_height"].__setitem__("maxheight", 1e9), "reference_height", "half the body"),
+        (lambda d: d.__setitem__("radii", {"semimajor": 3669.6, "semiminor": 3669.5, "unit": "km"}),
+         "reference_height", "not below the sensor"),
         (lambda d: d.__setitem__("image_lines", 1e-300), "image_lines", "whole number"),
         (lambda d: d.__setitem__("image_samples", 5000.5), "image_samples", "whole number"),
     ],
     ids=["body-centre", "one-inside", "reflection", "non-unit", "zero-quaternion", "ephemeris-after",
-         "tiny-lines", "half-sample"],
+         "terrain-below-half-body", "terrain-above-half-body", "sensor-below-terrain", "tiny-lines", "half-sample"],
 )
 def test_impossible_isd_is_one_line_naming_file_and_key(edit, key, reason):
     isd = copy.deepcopy(CTX)
