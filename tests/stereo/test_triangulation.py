@@ -57,20 +57,9 @@ def test_rpc_sensors_and_generic_path_agree_with_rpcm():
 
         def __init__(self, sensor):
             self._s = sensor
-            self.name = "wrapped"
-            self.frame, self.n_rows, self.n_columns = sensor.frame, sensor.n_rows, sensor.n_columns
 
-        def ground_to_image(self, ground):
-            return self._s.ground_to_image(ground)
-
-        def image_to_ground(self, row, col, *, height=None):
-            return self._s.image_to_ground(row, col, height=height)
-
-        def footprint(self, height=None):
-            return self._s.footprint(height)
-
-        def time_range(self):
-            return (0.0, 1.0)
+        def __getattr__(self, name):
+            return getattr(self._s, name)
 
     from explorer.geometry.frames import LocalFrame
 
