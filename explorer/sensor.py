@@ -43,6 +43,7 @@ by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
@@ -200,6 +201,34 @@ class PolynomialExteriorSensor(Sensor, Protocol):
     has_polynomial_exterior: ClassVar[bool]
 
 
+@dataclass
+class StandIn:
+    """A model that stands in for a sensor (an MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
+    model, the resected MPC of an RPC): what a user measuring against it instead of the sensor would see.
+
+    Parameters
+    ----------
+    label : str
+        What it is, e.g. ``"MPC degree 3 fitted to the CSM camera"``.
+    sensor : Sensor
+        The stand-in model (its own local frame, on the same body).
+    truth_frame : LocalFrame
+        The frame of the ground points given to :meth:`ground_to_image` (the true sensor's).
+    """
+
+    label: str
+    sensor: Sensor
+    truth_frame: LocalFrame
+
+    def ground_to_image(self, ground: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) (N,) of the stand-in for ground points (N, 3) in local ENU metres of ``truth_frame``
+        (converted through body-fixed coordinates when the stand-in has another frame)."""
+        frame = self.sensor.frame
+        if frame != self.truth_frame:
+            ground = frame.ecef_to_enu(self.truth_frame.enu_to_ecef(ground))
+        return self.sensor.ground_to_image(ground)
+
+
 def has_polynomial_exterior(sensor: object) -> bool:
     """True where ``sensor`` declares the :class:`PolynomialExteriorSensor` capability."""
     return bool(getattr(type(sensor), "has_polynomial_exterior", False))
@@ -221,6 +250,7 @@ __all__ = [
     "PolynomialExteriorSensor",
     "Projection",
     "Sensor",
+    "StandIn",
     "has_line_geometry",
     "has_polynomial_exterior",
     "inside_image",

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from explorer.errors import InputError, SceneFileError
+from explorer.sensor import StandIn
 
 SOURCE_KINDS = ("preset", "scene", "rpc", "dimap", "dg", "isd")
 """The source options of ``pushbroom explore`` (``--<kind>``)."""
@@ -44,7 +45,9 @@ MPC_DEGREE = 3
 """Degree of the MPC fitted to an RPC (``scene from-rpc --degree 3``) or to a rigorous DIMAP / DG model
 (as ``scene from-dimap --degree``)."""
 COVERAGE_GRID = 21
-"""Image points per side checked against the DEM (the footprint must be covered)."""
+"""Image points per side checked against the DEM."""
+MIN_DEM_COVERAGE = 0.5
+"""Least fraction of the image grid a ``--dimap`` / ``--dg`` DEM must cover (less is refused with the figure)."""
 
 
 @dataclass
@@ -66,6 +69,9 @@ class Source:
         JSON-ready description (sensor, fit residuals, ...), written into the export.
     report : object or None
         The fit report of a file source (resection or MPC fit), with ``summary()`` for the terminal.
+    stand_in : StandIn or None
+        The model a user might measure against instead of the sensor (the MPC fit of a CSM camera, the vendor
+        RPC of a rigorous DIMAP / DG model): its error against the sensor is the *stand-in map*.
     """
 
     kind: str
@@ -75,6 +81,7 @@ class Source:
     dem: str | None = None
     info: dict = field(default_factory=dict)
     report: Any = None
+    stand_in: StandIn | None = None
 
     @property
     def preset(self) -> str | None:
@@ -138,12 +145,16 @@ def check_dem_covers(scene: Any, dem_path: str, n: int = COVERAGE_GRID) -> None:
             f"points (footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f})")
 
 
-def _dem_terrain(scene: Any, dem_path: str) -> Any:
-    """``scene`` with the DEM resampled onto its local frame over the footprint (+5 %)."""
+def _dem_terrain(scene: Any, dem_path: str) -> tuple[Any, dict]:
+    """``scene`` with the DEM resampled onto its local frame over the footprint (+5 %), and the DEM's coverage.
+
+    A DEM that covers at least :data:`MIN_DEM_COVERAGE` of the image is used: the SCOPs and SCPs are simulated
+    where it has heights (the lines of sight that miss it are flagged and dropped, never given a height it does
+    not have), and the covered fraction is stated (``coverage["fraction"]``: of an ``n`` x ``n`` image grid,
+    pixel edges included).  Less is refused with the figure.
+    """
     from explorer.real.from_rpc import load_dem, terrain_from_dem
 
-    if scene.frame is None:
-        raise InputError(f"--dem {dem_path!r}: the scene has no geodetic frame to place the DEM in")
     height_source = load_dem(dem_path)
     lo_h, hi_h = float(height_source.min), float(height_source.max)
     n = COVERAGE_GRID
@@ -151,19 +162,24 @@ def _dem_terrain(scene: Any, dem_path: str) -> Any:
     cols = np.linspace(-0.5, scene.n_columns - 0.5, n)
     g = scene.image_to_ground(np.repeat(rows, n), np.tile(cols, n), height=0.5 * (lo_h + hi_h))
     lon, lat, _ = scene.frame.enu_to_geodetic(g)
-    missing = int((~np.isfinite(np.asarray(height_source.height(lon, lat), dtype=np.float64))).sum())
-    if missing:
+    covered = np.isfinite(np.asarray(height_source.height(lon, lat), dtype=np.float64))
+    fraction = float(np.mean(covered))
+    where = f"footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f}"
+    if fraction < MIN_DEM_COVERAGE:
         raise InputError(
-            f"DEM {dem_path!r} does not cover the image footprint: no height at {missing} of {n * n} image "
-            f"points (footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f})")
+            f"DEM {dem_path!r} covers too little of the image footprint: heights at {int(covered.sum())} of {n * n} "
+            f"image points ({100 * fraction:.1f} %, at least {100 * MIN_DEM_COVERAGE:.0f} % needed; {where})")
     corners = np.vstack([scene.footprint(lo_h), scene.footprint(hi_h)])
     lo, hi = corners[:, :2].min(0), corners[:, :2].max(0)
     pad = 0.05 * (hi - lo)
     terrain = terrain_from_dem(height_source, scene.frame, (lo[0] - pad[0], hi[0] + pad[0], lo[1] - pad[1],
                                                             hi[1] + pad[1]))
     if not np.isfinite(terrain.heights).any():
-        raise InputError(f"DEM {dem_path!r} does not cover the image footprint at all")
-    return scene.with_terrain(terrain)
+        raise InputError(f"DEM {dem_path!r} does not cover the image footprint at all ({where})")
+    coverage = {"fraction": fraction, "grid_points": n * n, "covered_points": int(covered.sum()),
+                "note": "SCOPs and SCPs are simulated where the DEM has heights; lines of sight that miss it "
+                        "are flagged and left out"}
+    return scene.with_terrain(terrain), coverage
 
 
 def _dimap_sensor(path: Path) -> str:
@@ -214,6 +230,7 @@ def load_source(
         readable_file(dem, "DEM")
     info: dict[str, Any] = {}
     report: Any = None
+    stand_in: StandIn | None = None
     if kind == "scene":
         from explorer.real.linescan import load_scene
 
@@ -235,7 +252,8 @@ def load_source(
                 raise
             raise InputError(f"--rpc {str(path)!r} with DEM {dem!r}: {exc}") from exc
         sensor = f"RPC {report.info.get('rpc_format', '')}".strip()
-        info.update(sensor=sensor, model="MPC by space resection", resection=report.to_dict())
+        info.update(sensor=sensor, model="MPC by space resection of the RPC (a stand-in: an RPC has no scanlines)",
+                    stand_in_model=True, resection=report.to_dict())
     elif kind in ("dimap", "dg"):
         if kind == "dimap":
             from explorer.real.dimap import rigorous_scene_from_dimap
@@ -247,26 +265,34 @@ def load_source(
 
             rigorous = rigorous_scene_from_dg(path)
             sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
-        scene, report = rigorous.to_mpc_scene(degree=degree)
-        fit = report
-        info.update(sensor=sensor, model=f"MPC degree {degree} fitted to the rigorous model",
-                    mpc_fit=fit.to_dict())
+        scene = rigorous  # the truth: the rigorous model itself (its line geometry runs every search method)
+        info.update(sensor=sensor, model=f"rigorous line-scan model of the {kind.upper()} metadata")
+        if rigorous.rpc is not None:
+            from explorer.rpc.sensor import RPCSensor
+
+            stand_in = StandIn("vendor RPC of the same image", RPCSensor(rigorous.rpc, frame=rigorous.frame,
+                                                                        name="vendor RPC"), rigorous.frame)
     else:  # isd
-        try:
-            from explorer.real.csm import scene_from_isd
-        except ImportError as exc:
-            raise InputError(f"--isd {str(path)!r}: reading USGS CSM ISDs needs explorer.real.csm, "
-                             f"which this installation lacks ({exc})") from exc
-        scene = scene_from_isd(path)
-        info.update(sensor=f"CSM {scene.metadata.get('sensor', 'line scan')}"
-                    if isinstance(scene.metadata, dict) else "CSM line scan", model=type(scene).__name__)
+        from explorer.real.csm_camera import read_isd
+        from explorer.real.csm_scene import scene_from_camera
+        from explorer.real.csm_sensor import csm_scene
+
+        camera = read_isd(path)
+        scene = csm_scene(camera)  # the truth: the camera itself (usgscsm's model)
+        info.update(sensor=f"CSM {camera.metadata.get('sensor') or 'line scan'}",
+                    model="USGS CSM line-scan camera (usgscsm's model)", body=scene.body.to_dict())
+        mpc = scene_from_camera(camera, degree=degree, n_check=0)
+        stand_in = StandIn(f"MPC degree {degree} fitted to the CSM camera", mpc, scene.frame)
     if dem is not None and kind in ("dimap", "dg"):
-        scene = _dem_terrain(scene, dem)
-    if dem is not None:
+        scene, coverage = _dem_terrain(scene, dem)
+        info.update(dem_coverage=coverage)
+    elif dem is not None:
         check_dem_covers(scene, dem)
     label = f"{path.name} ({info['sensor']})"
-    info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns))
-    return Source(kind, label, scene, str(path), dem, info, report)
+    info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns), truth=info["model"])
+    if stand_in is not None:
+        info.update(stand_in=stand_in.label)
+    return Source(kind, label, scene, str(path), dem, info, report, stand_in)
 
 
 def source_from_args(args: Any, **options: Any) -> Source:

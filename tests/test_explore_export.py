@@ -103,7 +103,7 @@ def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):
         (["--preset", "wsu"], "did you mean 'WSU'"),
         (["--scene", str(tmp_path / "missing.json")], "no such file"),
         (["--dimap", str(RPC_DIR / "PHRDIMAP_P1BP--2018122638935449CP.XML"), "--dem", str(DEM_2017)],
-         "does not cover the image footprint"),
+         "covers too little of the image footprint"),
         (["--preset", "WSU", "--port", "70000"], "70000"),
         (["--preset", "WSU", "--host", "192.0.2.1", "--port", "0"], "192.0.2.1"),
         (["--preset", "WSU", "--scene", "x.json"], "argument"),
@@ -125,3 +125,44 @@ def test_isd_exports_byte_identical_residuals(tmp_path, capsys):
     isd = RPC_DIR.parent / "usgscsm" / "orbitalLineScan.json"  # usgscsm's public-domain fixture
     a = _export_twice_identical(tmp_path, ["--isd", str(isd)], capsys)
     assert json.loads(a["summary.json"])["source"]["kind"] == "isd"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("isd", ["ctxLineScan.json", "orbitalLineScan.json"])
+def test_isd_export_is_measured_against_the_camera_itself(tmp_path, capsys, isd):
+    """The acceptance of issue 23 on the real usgscsm ISDs: the exported check points are where the export says
+    (read_isd(file).ground_to_image at x_m, y_m, z_m gives line, sample), exact and csm-secant agree with the
+    camera to 1e-6 px, the learned methods and the stand-in map are present, and a second export is the same."""
+    from explorer.real.csm_camera import read_isd
+
+    path = RPC_DIR.parent / "usgscsm" / isd
+    outs = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        assert main(["explore", "--isd", str(path), "--scops", "50", "--scps", "600", "--export", str(out)]) == 0
+        capsys.readouterr()
+        outs.append({f: (out / f).read_bytes() for f in ("summary.json", "residuals.csv")})
+    a, b = outs
+    assert a["residuals.csv"] == b["residuals.csv"]
+    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    summary = json.loads(a["summary.json"])
+    assert summary["truth"]["model"].startswith("USGS CSM") and summary["stand_in"]["model"].startswith("MPC")
+    assert summary["stand_in"]["n_valid"] == summary["settings"]["scps_used"]
+    assert {"lrm", "prm", "mlp", "ann", "exact", "csm-secant"} <= set(summary["methods"])
+    rows = list(csv.DictReader(a["residuals.csv"].decode().splitlines()))
+    cam = read_isd(path)
+    for method in ("exact", "csm-secant", "stand-in", "lrm"):
+        mine = [r for r in rows if r["method"] == method]
+        assert len(mine) == summary["settings"]["scps_used"]
+        xyz = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in mine])
+        line, sample = (np.array([float(r[k]) for r in mine]) for k in ("line", "sample"))
+        truth = cam.ground_to_image(xyz)
+        assert truth.valid.all()
+        np.testing.assert_allclose(line, truth.line, atol=1e-9)
+        np.testing.assert_allclose(sample, truth.sample, atol=1e-9)
+        if method in ("exact", "csm-secant"):
+            dr = np.array([float(r["row_residual_px"]) for r in mine])
+            dc = np.array([float(r["col_residual_px"]) for r in mine])
+            assert np.max(np.abs(line + dr - truth.line)) < 1e-6
+            assert np.max(np.abs(sample + dc - truth.sample)) < 1e-6
+

@@ -101,11 +101,21 @@ def test_dimap_with_its_dem_is_named_by_file_and_sensor():
     g = src.scene.image_to_ground(np.array([0.0, 24912.5, 49825.0]), np.array([0.0, 19975.0, 39950.0]))
     assert np.isfinite(g).all()
     assert 50.0 < g[:, 2].min() and g[:, 2].max() < 400.0  # ellipsoidal heights of the Omani coast scene
-    assert src.info["mpc_fit"]["check_rmse_px"] < 0.01
+    # the truth is the rigorous model itself; its vendor RPC is the stand-in, placed in the same frame
+    from explorer.real.linescan import RigorousLineScanScene
+
+    assert isinstance(src.scene, RigorousLineScanScene) and src.info["truth"].startswith("rigorous")
+    assert src.stand_in is not None and src.stand_in.truth_frame == src.scene.frame
+    assert src.info["dem_coverage"]["fraction"] == 1.0
+    # the vendor RPC agrees with the rigorous model to well under a pixel on this product (CNES: ~0.01 px)
+    row, col = src.stand_in.ground_to_image(g)
+    exact_row, exact_col = src.scene.ground_to_image(g)
+    assert np.max(np.abs(row - exact_row)) < 0.5 and np.max(np.abs(col - exact_col)) < 0.5
 
 
 def test_dem_not_covering_the_footprint_is_rejected():
-    with pytest.raises(InputError, match=r"DEM .* does not cover the image footprint: no height at 441 of 441"):
+    with pytest.raises(InputError, match=r"DEM .* covers too little of the image footprint: heights at 0 of 441 "
+                                         r"image points \(0.0 %, at least 50 % needed"):
         load_source("dimap", str(PHR_2018), dem=str(DEM_2017))
     with pytest.raises(InputError, match="DEM"):
         load_source("rpc", str(RPC_PHR), dem=str(DEM_2017))
@@ -117,6 +127,24 @@ def test_rpc_without_dem_is_an_mpc_scene_on_the_rpc_grid():
     # docs/real_images.md: degree 3 on this file, 400 check points: 0.0008 px
     assert src.info["resection"]["check_rmse_px"] < 0.01 and src.info["resection"]["degree"] == 3
     assert src.scene.n_rows > 10_000 and src.scene.n_columns > 10_000
+
+
+def test_dem_covering_most_of_the_footprint_is_used_and_its_coverage_stated():
+    """The public 2018 Pleiades DIMAP with its own DEM, which misses a few image corners: the DEM is used, the
+    SCPs are simulated where it has heights (each on the DEM surface), and the covered fraction is stated."""
+    from explorer.points import simulate_points
+
+    src = load_source("dimap", str(PHR_2018), dem=str(DEM_DIR / "MNT_P1BP--2018122638935449CP.tif"))
+    cov = src.info["dem_coverage"]
+    assert 0.5 <= cov["fraction"] < 1.0 and cov["grid_points"] == 441
+    assert cov["covered_points"] == round(cov["fraction"] * 441)
+    scps = simulate_points(src.scene, 400, kind="scp")
+    assert 0 < len(scps) < 400 * 1.2
+    z = src.scene.terrain.height(scps.ground[:, 0], scps.ground[:, 1])
+    np.testing.assert_allclose(scps.ground[:, 2], z, atol=1e-3)  # on the DEM, nowhere else
+    row, col = src.scene.ground_to_image(scps.ground)  # and the rigorous model's own image points
+    np.testing.assert_allclose(row, scps.row, atol=1e-6)
+    np.testing.assert_allclose(col, scps.col, atol=1e-6)
 
 
 def test_isd_needs_the_csm_reader_or_loads_a_scene():
@@ -134,6 +162,11 @@ def test_isd_needs_the_csm_reader_or_loads_a_scene():
     src = load_source("isd", str(files[0]))
     ref = scene_from_isd(files[0])
     assert (src.scene.n_rows, src.scene.n_columns) == (ref.n_rows, ref.n_columns)
+    # the truth is the camera itself; the fitted MPC is the stand-in, on the same body
+    from explorer.real.csm_sensor import CsmScene
+
+    assert isinstance(src.scene, CsmScene) and src.stand_in is not None
+    assert src.stand_in.sensor.frame.body == src.scene.body
 
 
 # ------------------------------------------------------------------------ address

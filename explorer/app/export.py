@@ -34,8 +34,15 @@ from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings,
 from explorer.evaluate import Evaluation, evaluate_method
 from explorer.io_atomic import atomic_folder
 from explorer.methods.base import BestScanlineMethod
+from explorer.points import PointSet
+from explorer.sensor import StandIn
 
-CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status")
+CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status",
+               "x_m", "y_m", "z_m")
+"""Columns of ``residuals.csv``; an ISD source adds ``line, sample`` (:data:`NATIVE_PIXEL_COLUMNS`)."""
+NATIVE_PIXEL_COLUMNS = ("line", "sample")
+STAND_IN_METHOD = "stand-in"
+"""``residuals.csv`` method name of the stand-in's rows (its error against the sensor)."""
 
 
 def _num(a: np.ndarray) -> np.ndarray:
@@ -48,19 +55,58 @@ def _finite_or_none(v: float) -> float | None:
     return float(v) if v is not None and math.isfinite(v) else None
 
 
-def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarray], scps: Any) -> bytes:
-    """The CSV text (bytes, LF line ends) of every evaluated point of every method (vectorised)."""
-    lines = [",".join(CSV_COLUMNS)]
+def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarray], scps: Any,
+                  body_fixed: np.ndarray | None = None, native_pixels: bool = False) -> bytes:
+    """The CSV text (bytes, LF line ends) of every evaluated point of every method (vectorised).
+
+    ``row_px, col_px`` are the sensor's own ground to image of the check point, ``x_m, y_m, z_m`` its
+    body-fixed coordinates (``body_fixed``, (N, 3)); with ``native_pixels`` (a USGS CSM camera) also
+    ``line, sample`` = ``row + 0.5, col + 0.5`` (usgscsm's convention: the camera's own image position).
+    """
+    columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
+    lines = [",".join(columns)]
     names = np.array(STATUS_NAMES)
+    xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
     for name, ev in evaluations.items():
         idx = np.asarray(ev.evaluated_index)
         cols = [np.full(idx.size, name), idx.astype(str), _num(scps.row[idx]), _num(scps.col[idx]),
-                _num(ev.residual_row), _num(ev.residual_col), names[status[name]]]
+                _num(ev.residual_row), _num(ev.residual_col), names[status[name]],
+                _num(xyz[idx, 0]), _num(xyz[idx, 1]), _num(xyz[idx, 2])]
+        if native_pixels:
+            cols += [_num(scps.row[idx] + 0.5), _num(scps.col[idx] + 0.5)]
         block = cols[0]
         for c in cols[1:]:
             block = np.char.add(np.char.add(block, ","), c)
         lines.extend(block.tolist())
     return ("\n".join(lines) + "\n").encode()
+
+
+def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
+    """The check points with the sensor's own ground to image as their exact (row, col) (the truth every
+    residual is measured against); points the sensor does not project onto its image are left out."""
+    proj = scene.project(scps.ground)
+    keep = np.flatnonzero(proj.valid)
+    return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
+
+
+def stand_in_evaluation(stand_in: StandIn, scps: PointSet) -> tuple[Evaluation, np.ndarray]:
+    """The stand-in's error against the sensor at the check points (an :class:`Evaluation` named
+    :data:`STAND_IN_METHOD`, and its status: 0 where the stand-in gives a point on the image, else 3)."""
+    t0 = time.perf_counter()
+    row, col = stand_in.ground_to_image(scps.ground)
+    dt = time.perf_counter() - t0
+    dr, dc = row - scps.row, col - scps.col
+    ok = np.isfinite(dr) & np.isfinite(dc)
+    dr, dc = np.where(ok, dr, np.nan), np.where(ok, dc, np.nan)
+    n = len(scps)
+    ev = Evaluation(method=STAND_IN_METHOD, n_scops=0, n_scps=n, n_evaluated=n,
+                    rmse_px=float(np.sqrt(np.mean(dr[ok] ** 2))) if ok.any() else math.nan,
+                    dr_max_px=float(np.max(np.abs(dr[ok]))) if ok.any() else math.nan,
+                    col_rmse_px=float(np.sqrt(np.mean(dc[ok] ** 2))) if ok.any() else math.nan,
+                    fit_s=0.0, locate_s=dt, ce_evals_per_point=0.0, converged_frac=float(ok.mean()) if n else 0.0,
+                    valid_frac=float(ok.mean()) if n else 0.0, residual_row=dr, residual_col=dc,
+                    evaluated_index=np.arange(n))
+    return ev, np.where(ok, 0, 3).astype(np.int8)
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
@@ -84,12 +130,14 @@ def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRec
 
 
 def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
-                 fits: dict[str, FitRecord] | None = None) -> dict[str, bytes]:
+                 fits: dict[str, FitRecord] | None = None, stand_in: StandIn | None = None,
+                 native_pixels: bool = False) -> dict[str, bytes]:
     """Compute the export of ``s`` on ``scene`` (every SCP) and return ``{file name: bytes}``.
 
     Parameters
     ----------
-    scene : Scene
+    scene : Sensor
+        The sensor: the truth every residual is measured against (its own ``project``).
     s : Settings
         ``methods``, ``scop_density``, ``scp_count`` (and the MLP controls) are used.
     source : dict
@@ -98,11 +146,17 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         Seed of the SCOP / SCP heights.
     fits : dict, optional
         Fits already made for these settings (the GUI's), by method; others are fitted here.
+    stand_in : StandIn, optional
+        Its error against the sensor is written as ``summary.json["stand_in"]``, as ``residuals.csv`` rows of
+        method :data:`STAND_IN_METHOD` and as a map beside the methods'.
+    native_pixels : bool
+        Add the camera's ``line, sample`` columns (a USGS CSM source).
     """
     from explorer.panels import figures as F  # noqa: N812
 
     model = ExplorerModel(locate_budget_s=None, seed=seed, scenes={s.preset: scene})
-    scops, scps = model.scops(s), model.scps(s)
+    scops = model.scops(s)
+    scps = sensor_truth(scene, model.scps(s))
     evaluations: dict[str, Evaluation] = {}
     status: dict[str, np.ndarray] = {}
     summary: dict[str, Any] = {}
@@ -121,23 +175,57 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         if ev is not None and st is not None:
             evaluations[name], status[name] = ev, st
         summary[name] = method_summary(ev, st, rec, err)
+    maps = dict(evaluations)
+    map_status = dict(status)
+    stand_in_summary: dict[str, Any] | None = None
+    if stand_in is not None:
+        ev_s, st_s = stand_in_evaluation(stand_in, scps)
+        maps[STAND_IN_METHOD], map_status[STAND_IN_METHOD] = ev_s, st_s
+        stand_in_summary = {"model": stand_in.label, "against": source.get("truth"),
+                            **method_summary(ev_s, st_s, FitRecord(None, 0.0, 0, {}), None)}
+        for k in ("n_scops", "ce_per_point", "fit_s", "eval_s", "warnings", "n_refused", "n_not_converged"):
+            stand_in_summary.pop(k, None)
     settings = {"methods": list(s.methods), "scops": int(s.scop_density), "scops_used": len(scops),
                 "scps": int(s.scp_count), "scps_used": len(scps), "seed": int(seed),
                 "mlp_layers": int(s.mlp_layers), "mlp_neurons": int(s.mlp_neurons),
                 "image_rows": int(scene.n_rows), "image_columns": int(scene.n_columns), "subsampled": False}
-    payload = {"source": source, "settings": settings, "methods": summary}
+    truth = {"model": source.get("truth", type(scene).__name__), "body": scene.body.to_dict(),
+             "residuals": "estimated minus the sensor's own ground_to_image at each check point",
+             "check_points": "simulated by the sensor's own image_to_ground on its terrain"}
+    payload = {"source": source, "settings": settings, "truth": truth, "methods": summary,
+               "stand_in": stand_in_summary}
+    body_fixed = scene.frame.enu_to_ecef(scps.ground)
     files = {"summary.json": (json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n").encode(),
-             "residuals.csv": residuals_csv(evaluations, status, scps)}
+             "residuals.csv": residuals_csv(maps, map_status, scps, body_fixed, native_pixels)}
     figs = []
+    if maps:
+        labels = {STAND_IN_METHOD: f"stand-in: {stand_in.label}"} if stand_in is not None else None
+        figs.append(("Residual maps (row and column; every check point drawn)" + (
+            "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
+            F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
+                            component="row and column", status=map_status, max_points=None, labels=labels)))
     if evaluations:
-        figs.append(("Residual maps (row and column; every check point drawn)", F.residual_maps(
-            evaluations, scps, control=scops, shape=scene.shape, mode="per method", component="row and column",
-            status=status, max_points=None)))
         figs.append(("Timing", F.timing_bars(evaluations)))
-    notes = [f"source: {source.get('label', '')}", f"{len(scps):,} check points (SCPs), {len(scops):,} SCOPs, "
+    notes = [f"source: {source.get('label', '')}", f"truth: {truth['model']}",
+             f"{len(scps):,} check points (SCPs), {len(scops):,} SCOPs, "
              f"seed {seed}; every method evaluated on every SCP (no subsample)."]
+    if stand_in is not None:
+        notes.append(f"stand-in: {stand_in.label} (its error against the sensor is the map named stand-in)")
+    coverage = source.get("dem_coverage")
+    if coverage:
+        notes.append(f"DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}")
     files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes).encode()
     return files
+
+
+def default_file_methods() -> list[str]:
+    """Methods an export of a file source evaluates by default: every learned and generalized method (they
+    need only ground / image pairs) and every search method that is exact (``exactness == "exact"``); the
+    pixel-level and interpolated scanline walks are left to ``--methods`` (their cost grows with the image's
+    rows)."""
+    from explorer.methods import registry
+
+    return [n for n, c in registry().items() if c.family != "search" or c.exactness == "exact"]
 
 
 def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = None, scops: int = 100,
@@ -172,6 +260,8 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     from explorer.methods import available
 
     names = available()
+    if not methods and source.scene is not None:  # a file: measure every method that answers exactly or learns
+        methods = default_file_methods()
     methods = list(methods) if methods else [m for m in DEFAULT_METHODS if m in names]
     unknown = [m for m in methods if m not in names]
     if unknown:
@@ -187,7 +277,8 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     s = Settings(preset=label, scop_density=int(scops), scp_count=int(scps), methods=tuple(methods),
                  color_method=methods[0] if methods else None)
     t0 = time.perf_counter()
-    files = export_files(scene, s, source=source.to_dict(), seed=seed)
+    files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,
+                         native_pixels=source.kind == "isd")
     out = Path(out_dir)
     written = {}
     # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a

@@ -117,7 +117,13 @@ class CentralPerspectivePlane(BestScanlineMethod):
         self.line_step_m = float(d[1] - d[0])
         if not (np.isfinite(self.line_step_m) and self.line_step_m != 0.0):
             raise InputError("the central perspective planes of adjacent lines coincide at the image centre")
-        self.setup_ce = 3
+        # the residual's orientation relative to the plane distance's (+1 for a physical residual; -1 where the
+        # scene's residual is the convention's and the camera's image is mirrored against its sensor axes)
+        e = residual_px(scene, np.repeat(centre, 2, axis=0), np.array([rc - 0.5, rc + 0.5]))
+        _, vz_c = self.plane_distance(centre, np.array([rc]))
+        physical = -self._norm * self.line_step_m / (vz_c[0] * scene.pixel_size_m)
+        self.residual_orient = 1.0 if (e[1] - e[0]) * physical > 0 else -1.0
+        self.setup_ce = 6
 
     def plane_distance(self, ground: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance of ground points from the central perspective plane of their rows.
@@ -187,7 +193,7 @@ class CentralPerspectivePlane(BestScanlineMethod):
         # ---- collinearity refinement (curved detector line / distortion)
         if self.refine:
             with np.errstate(divide="ignore", invalid="ignore"):
-                slope_px = -self._norm * slope / (vz * sc.pixel_size_m)  # residual px per row
+                slope_px = -self.residual_orient * self._norm * slope / (vz * sc.pixel_size_m)  # residual px/row
             todo = converged.copy()
             converged[:] = False
             prev_row[:] = np.nan

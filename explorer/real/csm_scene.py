@@ -7,9 +7,8 @@ method, the bench, the 3D view and the residual maps run on it:
 
 * frame: a local east-north-up frame at the body-fixed point under the image centre (on the
   file's ellipsoid, planetodetic normal); ``metadata["csm"]`` keeps the body radii, that origin
-  and the axes (:func:`enu_to_body_fixed`, :func:`body_fixed_to_enu`).  ``scene.frame`` is a
-  stand-in with the same latitude/longitude (its axes are right; its WGS84 origin and geodetic
-  conversions do not apply to another body);
+  and the axes (:func:`enu_to_body_fixed`, :func:`body_fixed_to_enu`); ``scene.frame`` is the same
+  frame on the ISD's ellipsoid (``frame.body``, :func:`explorer.real.csm_sensor.csm_body`);
 * pixels: scene ``(row, col)`` = CSM ``(line - 0.5, sample - 0.5)``
   (``docs/conventions.md#usgs-csm-line-scan-isds``);
 * time: ``t = (row - reference_row) * line_period`` with the image's mean line period;
@@ -23,7 +22,8 @@ method, the bench, the 3D view and the residual maps run on it:
   optionally plus ``harmonics`` sinusoids per attitude angle (the project's jitter terms) for the
   attitude wander the polynomials cannot follow.
 
-The conversion is an approximation of the CSM camera by the MPC model; ``metadata["csm_fit"]``
+The conversion is an approximation of the CSM camera by the MPC model -- a *stand-in*: the camera itself is
+:class:`explorer.real.csm_sensor.CsmScene`, the truth of the explorer and the bench; ``metadata["csm_fit"]``
 reports its size in pixels on check points the CSM camera generates (row: along-track
 residual / pitch; column: difference), and so does the log of ``pushbroom scene from-isd``.
 """
@@ -40,7 +40,7 @@ from explorer.geometry.frames import LocalFrame
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain
 from explorer.real.csm_camera import CsmCamera, read_isd
-from explorer.real.csm_sensor import csm_interior
+from explorer.real.csm_sensor import csm_body, csm_interior
 from explorer.scene import Scene
 
 __all__ = ["body_fixed_to_enu", "enu_to_body_fixed", "scene_from_camera", "scene_from_isd"]
@@ -172,7 +172,8 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
                 "pixel_convention": "scene (row, col) = CSM (line - 0.5, sample - 0.5)"},
     }
     scene = Scene(name=str(Path(cam.source).stem), interior=interior, exterior=exterior, timing=timing,
-                  n_rows=n_rows, terrain=FlatTerrain(0.0), frame=LocalFrame(lat0, lon0, 0.0), metadata=meta)
+                  n_rows=n_rows, terrain=FlatTerrain(0.0), frame=LocalFrame(lat0, lon0, 0.0, body=csm_body(cam)),
+                  metadata=meta)
     if n_check:
         scene.metadata["csm_fit"] = fit_report(scene, cam, n_check, seed)
     return scene

@@ -205,8 +205,9 @@ class CsmScene(Scene):
     """A USGS CSM line-scan camera as a :class:`~explorer.scene.Scene` (see the module docstring).
 
     Build it with :func:`csm_scene`.  Extra attributes: ``camera`` (the :class:`CsmCamera`) and
-    ``residual_sign`` (+-1: usgscsm's detector-line residual turned into the sign of the physical
-    along-track offset ``x - x_det(y)`` in the scene's sensor axes).
+    ``residual_sign`` (+-1: usgscsm's detector-line residual turned into the scene convention, positive
+    before the best scanline; where the camera's image is mirrored against the scene's sensor axes this is
+    the opposite of the physical ``x - x_det(y)``, which methods that build their own planes allow for).
     """
 
     camera: Any = field(default=None, repr=False, compare=False)
@@ -310,17 +311,13 @@ def csm_scene(camera: CsmCamera, *, terrain: Any = None, interior_degree: int = 
     scene = CsmScene(name=camera.name, interior=interior, exterior=exterior, timing=timing, n_rows=camera.n_lines,
                      terrain=FlatTerrain(0.0) if terrain is None else terrain, frame=frame, metadata=meta,
                      camera=camera)
-    # the residual's sign: that of the physical along-track focal-plane offset x - x_det(y) in the scene's
-    # sensor axes (Scene.focal_plane on the exterior and interior), so that methods that build their own
-    # perspective planes from them (cpp) and the residual agree on the direction of flight
+    # the scene convention (docs/conventions.md#best-scanline): the residual is positive before the best scanline
+    # (it predicts how many lines ahead the root lies, as GDP reads it), whatever the camera's axes
     rc, cc = 0.5 * (camera.n_lines - 1), 0.5 * (camera.n_samples - 1)
-    g = scene.image_to_ground(np.array([rc + 2.0]), np.array([cc]), height=0.0)
-    t = scene.scanline_time(np.array([rc]))
-    res, _ = camera.detector_residual(frame.enu_to_ecef(g), np.array([rc + 0.5]))
-    x, y = Scene.focal_plane(scene, g, t)
-    physical = float((x - interior.detector_x(y))[0])
-    if not (np.isfinite(res[0]) and res[0] != 0.0 and np.isfinite(physical) and physical != 0.0):
+    g = scene.image_to_ground(np.array([rc]), np.array([cc]), height=0.0)
+    res, _ = camera.detector_residual(frame.enu_to_ecef(g), np.array([rc + 0.5 - 1.0]))
+    if not (np.isfinite(res[0]) and res[0] != 0.0):
         raise SceneFileError(f"{camera.source}: the detector-line residual does not change with the line "
                              "at the image centre")
-    scene.residual_sign = 1.0 if (res[0] > 0) == (physical > 0) else -1.0
+    scene.residual_sign = 1.0 if res[0] > 0 else -1.0
     return scene

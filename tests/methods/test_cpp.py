@@ -64,7 +64,7 @@ def test_ce_per_point_is_plausible(preset, max_ce):
     strong, varying rates of ``agile`` change the spacing by a few per cent (first step up to ~130
     rows off), costing 2 more secant steps: measured <= 6, bound 7 (+1 column)."""
     setup, ce = ce_counts("cpp", preset)
-    assert setup == 3 and ce.min() >= 2 and ce.max() <= max_ce
+    assert setup == 6 and ce.min() >= 2 and ce.max() <= max_ce  # 3 CE of planes + 3 of the residual orientation
 
 
 def test_trace_converges_to_exact_row():
