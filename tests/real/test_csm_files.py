@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 
-from explorer.errors import SceneFileError
+from explorer.errors import ExplorerError, SceneFileError
 from explorer.real.csm import read_isd
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "usgscsm"
@@ -81,3 +83,46 @@ def test_special_files_are_refused_without_blocking(tmp_path):
     with pytest.raises(SceneFileError) as exc:
         read_isd(tmp_path / "missing.json")
     _one_line_naming(exc, tmp_path / "missing.json", "no such file")
+
+
+# ----------------------------------------------------------------------------- fuzz
+ORBITAL = (DATA / "orbitalLineScan.json").read_bytes()
+FLIPS = settings(max_examples=300, derandomize=True, database=None, deadline=None,
+                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+def _read_or_package_error(path: Path) -> str:
+    """'camera' or 'refused' (a SceneFileError / InputError naming the file); anything else fails the test."""
+    try:
+        cam = read_isd(path)
+    except ExplorerError as exc:
+        msg = str(exc)
+        assert msg.startswith(str(path)) and "\n" not in msg, msg
+        return "refused"
+    # a camera that was built answers with finite numbers or flags, never raises
+    g = cam.image_to_ground(np.array([8.0]), np.array([8.0]), 0.0)
+    r = cam.ground_to_image(np.where(np.isfinite(g.ground), g.ground, 0.0))
+    assert r.valid.dtype == bool and (not r.valid[0] or np.isfinite(r.line[0]))
+    return "camera"
+
+
+@FLIPS
+@given(st.data())
+def test_isd_with_flipped_bytes_gives_a_camera_or_one_line_naming_the_file(tmp_path_factory, data):
+    raw = bytearray(ORBITAL)
+    for _ in range(data.draw(st.integers(1, 4))):
+        i = data.draw(st.integers(0, len(raw) - 1))
+        # half the flips write a character of a number, so that most files stay JSON and reach the checks
+        raw[i] = data.draw(st.one_of(st.integers(0, 255), st.sampled_from(list(b"0123456789-.eE"))))
+    p = tmp_path_factory.mktemp("flip") / "orbital_flipped.json"
+    p.write_bytes(bytes(raw))
+    event(_read_or_package_error(p))
+
+
+@pytest.mark.parametrize("tenth", range(1, 10))
+def test_isd_cut_at_every_tenth_is_refused(tmp_path, tenth):
+    p = tmp_path / "orbital_cut.json"
+    p.write_bytes(ORBITAL[: len(ORBITAL) * tenth // 10])
+    with pytest.raises(SceneFileError) as exc:
+        read_isd(p)
+    _one_line_naming(exc, p)
