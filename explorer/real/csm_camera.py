@@ -42,7 +42,7 @@ What is read (every key is checked; a missing key, a NaN or a bad unit raises
   ``legendre`` (New Horizons MVIC TDI, ``x_coefficients``/``y_coefficients`` of 20 terms: ISIS's
   ``NewHorizonsMvicTdiCameraDistortionMap``, x only, over half of ``image_samples`` x the pixel pitch of
   ``focal2pixel_samples``) and ``themisir`` (Mars Odyssey THEMIS IR, ISIS's ``ThemisIrDistortionMap``:
-  ``band`` 1-10 or ``k``, optional ``alpha1``, ``alpha2``); each closed form one way and solved by
+  ``p_k``, ``p_alpha1``, ``p_alpha2`` as ALE writes them); each closed form one way and solved by
   Newton the other (:mod:`explorer.real.csm_kernels`); any other model (usgscsm's ``cassis``, ...)
   raises :class:`~explorer.errors.SceneFileError` naming it;
 * ``radii`` (``semimajor``, ``semiminor``, ``unit`` m or km): any body.
@@ -82,9 +82,7 @@ SUPPORTED_DISTORTIONS = {
     "legendre": K.DIST_LEGENDRE,
     "themisir": K.DIST_THEMISIR,
 }
-# ISIS ThemisIrDistortionMap: the x scale k of each of THEMIS IR's 10 bands and the y terms alpha1, alpha2
-THEMIS_IR_BAND_K = (0.996005, 0.995358, 0.994260, 0.993290, 0.992389, 0.991474, 0.990505, 0.989611, 0.988653, 0.9877)
-THEMIS_IR_ALPHA = (0.00447623, 0.00107556)
+
 UNIT_TO_M = {"m": 1.0, "km": 1000.0}
 QUATERNION_NORM_TOL = 1e-5  # |norm - 1| above this is not a rounding of a unit quaternion
 STATUS_OUTSIDE_TABLES = 5  # GroundToImage.status: solved at a line the ephemeris tables do not cover
@@ -269,17 +267,9 @@ def _distortion(isd: _Isd) -> tuple[str, int, np.ndarray]:
         if not (math.isfinite(half) and half > 0):
             raise isd.fail("focal2pixel_samples", "gives no pixel pitch for the legendre model's half detector")
         coef = np.concatenate([[half], cx])
-    elif name == "themisir":  # ISIS ThemisIrDistortionMap: x / k, y from alpha1, alpha2
-        band = isd.get(*key, "band", default=None)
-        if band is not None:
-            if not isinstance(band, int) or isinstance(band, bool) or not 1 <= band <= 10:
-                raise isd.fail(f"optical_distortion.{name}.band", f"must be a THEMIS IR band 1 .. 10, got {band!r}")
-            k_default: Any = THEMIS_IR_BAND_K[band - 1]
-        else:
-            k_default = ...
-        coef = np.array([isd.number(*key, "k", default=k_default, positive=True),
-                         isd.number(*key, "alpha1", default=THEMIS_IR_ALPHA[0]),
-                         isd.number(*key, "alpha2", default=THEMIS_IR_ALPHA[1])])
+    elif name == "themisir":  # ALE: ISIS ThemisIrDistortionMap's p_k (x scale of the band), p_alpha1, p_alpha2
+        coef = np.array([isd.number(*key, "p_k", positive=True), isd.number(*key, "p_alpha1"),
+                         isd.number(*key, "p_alpha2")])
     else:  # dawnfc, lrolrocnac, kplo_shadowcam: one coefficient
         coef = _exact_size(isd, (*key, "coefficients"), 1)
     return name, SUPPORTED_DISTORTIONS[name], np.ascontiguousarray(coef, dtype=np.float64)

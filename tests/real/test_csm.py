@@ -355,7 +355,8 @@ MODELS.update({
     # MVIC's detector runs along the focal plane's x axis: the camera turned by 90 degrees, half = 100 px x 0.01 mm
     "legendre": ({"legendre": {"x_coefficients": LEGENDRE_X, "y_coefficients": [0.0] * 20}}, [1.0, *LEGENDRE_X],
                  _legendre_remove, True),
-    "themisir": ({"themisir": {"band": 4}}, [0.993290, 0.00447623, 0.00107556], _themis_ir_remove, True),
+    "themisir": ({"themisir": {"p_k": 0.993290, "p_alpha1": 0.00447623, "p_alpha2": 0.00107556}},
+                 [0.993290, 0.00447623, 0.00107556], _themis_ir_remove, True),
 })
 MODEL_CAMERA = {"legendre": {"detector_rotation_deg": 90.0}}
 MODEL_RANGE = {"legendre": 1.0}  # ISIS's Legendre map is defined over the detector, |x| <= half
@@ -431,7 +432,8 @@ def test_themis_ir_apply_is_isis_forward_map(band):
     alpha2 y^2, with ISIS's published k of each band; our application (Newton on ISIS's removal) gives it."""
     k = [0.996005, 0.995358, 0.994260, 0.993290, 0.992389, 0.991474, 0.990505, 0.989611, 0.988653, 0.9877][band - 1]
     a1, a2 = 0.00447623, 0.00107556
-    cam = camera_from_isd(flyby_isd(distortion={"themisir": {"band": band}}), source="themis")
+    spec = {"themisir": {"p_k": k, "p_alpha1": a1, "p_alpha2": a2}}  # the keys ALE writes (its THEMIS IR ISD)
+    cam = camera_from_isd(flyby_isd(distortion=spec), source="themis")
     ux, uy = np.linspace(-9.6, 9.6, 25), np.linspace(-1.5, 1.5, 25)
     dx, dy = cam.apply_distortion(ux, uy)
     np.testing.assert_allclose(dx, ux * k, rtol=0, atol=1e-12)
@@ -449,8 +451,8 @@ def test_themis_ir_apply_is_isis_forward_map(band):
                            "coefficients": [1e-4]}}, "optical_distortion.lunarorbiter.perspective_y"),
         ({"lunarorbiter": {"perspective_x": 0.0, "perspective_y": 0.0, "center_point_x": 0.0,
                            "center_point_y": 0.0, "odk": [1e-4]}}, "optical_distortion.lunarorbiter.*odk"),
-        ({"themisir": {"band": 11}}, "optical_distortion.themisir.band"),
-        ({"themisir": {}}, "optical_distortion.themisir.k"),
+        ({"themisir": {"p_k": -1.0, "p_alpha1": 0.0, "p_alpha2": 0.0}}, "optical_distortion.themisir.p_k"),
+        ({"themisir": {"p_k": 0.99, "p_alpha1": 0.0}}, "optical_distortion.themisir.p_alpha2"),
         ({"kplo_shadowcam": {"coefficients": [1e-5, 2e-5]}}, "optical_distortion.kplo_shadowcam.coefficients"),
     ],
 )
