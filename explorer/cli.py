@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     "explorer.commands.ortho",
     "explorer.commands.warmup",
     "explorer.commands.refine",
+    "explorer.commands.stereo",
 )
 
 
@@ -54,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _command_name(args: argparse.Namespace) -> str:
     parts = [str(args.command)]
-    for key in ("scene_command", "rpc_command"):
+    for key in ("scene_command", "rpc_command", "stereo_command"):
         if getattr(args, key, None):
             parts.append(str(getattr(args, key)))
     return " ".join(parts)

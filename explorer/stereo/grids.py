@@ -46,13 +46,14 @@ class EpipolarGrids:
     epipolar_size : (int, int)
         Epipolar image size, rows x columns.
     height : float
-        Ellipsoidal height of the grids, metres.
+        Ellipsoidal height of the grids, metres (on a DEM: the mean of the nodes' heights).
     angles : ndarray, shape (R, C)
         Local epipolar direction in the left image at each node (radians from the column axis towards rows).
     baseline_ratios : ndarray, shape (R, C)
         Local disparity per metre of height at each node (left pixels per metre; shareloc's "baseline ratio").
     ground : ndarray, shape (R, C, 3)
-        The node's ground point at the grid height: lon, lat (degrees), height (m).
+        The node's ground point: lon, lat (degrees), height (m; the grid's height, or the DEM's under the
+        node's left position).
     """
 
     left_rows: np.ndarray
@@ -171,7 +172,7 @@ def _coloc(src: Sensor, dst: Sensor, row: np.ndarray, col: np.ndarray, h: np.nda
     return r, c, np.column_stack([lon, lat, np.broadcast_to(h, lon.shape)])
 
 
-def local_epipolar(left: Sensor, right: Sensor, row: np.ndarray, col: np.ndarray, height: float,
+def local_epipolar(left: Sensor, right: Sensor, row: np.ndarray, col: np.ndarray, height: float | np.ndarray,
                    offset_m: float = ELEVATION_OFFSET_M) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                                                   np.ndarray]:
     """Local epipolar direction at left pixels (shareloc's ``compute_local_epipolar_line``).
@@ -189,7 +190,7 @@ def local_epipolar(left: Sensor, right: Sensor, row: np.ndarray, col: np.ndarray
     """
     row = np.asarray(row, dtype=np.float64).ravel()
     col = np.asarray(col, dtype=np.float64).ravel()
-    h = np.full(row.shape, float(height))
+    h = np.broadcast_to(np.asarray(height, dtype=np.float64), row.shape).copy()
     rr, rc, ground = _coloc(left, right, row, col, h)
     s_r, s_c, _ = _coloc(right, left, rr, rc, h - offset_m)
     e_r, e_c, _ = _coloc(right, left, rr, rc, h + offset_m)
@@ -198,7 +199,7 @@ def local_epipolar(left: Sensor, right: Sensor, row: np.ndarray, col: np.ndarray
     return angle, ratio, rr, rc, ground
 
 
-def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: float = 30.0,
+def epipolar_grids(left: Any, right: Any, *, height: float | None = None, dem: Any = None, step: float = 30.0,
                    elevation_offset_m: float = ELEVATION_OFFSET_M, margin: int = 0) -> EpipolarGrids:
     """Left and right epipolar resampling grids of a pair at an ellipsoidal height (shareloc's scheme).
 
@@ -207,6 +208,11 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: 
     left, right : Sensor or RationalFunctionModel
     height : float, optional
         Ellipsoidal height of the grids, metres; default: the mean of the two sensors' scene heights.
+    dem : DEM, optional
+        Instead of one height, each node at the height of the DEM under its left position (as shareloc with a
+        DTM; :func:`explorer.rpc.dem.localization_on_dem`: ellipsoidal heights, e.g.
+        :class:`explorer.terrain_io.EllipsoidalDEM`).  Needs an RPC left image; the epipolar image size takes
+        the right corners at the DEM's lowest and highest heights.
     step : float
         Grid step, epipolar pixels (> 0).
     elevation_offset_m : float
@@ -235,6 +241,15 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: 
     h = 0.5 * (mean_height(left_s) + mean_height(right_s)) if height is None else float(height)
     if not np.isfinite(h):
         raise InputError(f"height must be finite, got {height}")
+    node_height = _dem_heights(left_s, dem) if dem is not None else None
+    corner_heights = [h]
+    if node_height is not None:
+        h_origin = node_height(np.array([0.0]), np.array([0.0]))[0]
+        h_low, h_high = _dem_range(dem)
+        corner_heights = [h_low, h_high]
+        if not np.isfinite(h_origin):
+            raise InputError("the DEM does not cover the left image's origin")
+        h = float(h_origin)
     step = float(step)
     # shareloc's prepare_rectification, in package pixels (its physical point = ours + 0.5)
     origin = np.array([0.0, 0.0])  # shareloc: physical (0.5, 0.5) of index (0, 0), our (0, 0)
@@ -250,9 +265,12 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: 
         return (np.array([0.0, sensor.n_rows, sensor.n_rows, 0.0]),
                 np.array([0.0, 0.0, sensor.n_columns, sensor.n_columns]))
 
-    lr_c, lc_c, _ = _coloc(right_s, left_s, *corners(right_s), np.full(4, h))
     left_r, left_c = corners(left_s)
-    pts = np.concatenate([np.column_stack([left_r, left_c]), np.column_stack([lr_c, lc_c])])
+    pts_list = [np.column_stack([left_r, left_c])]
+    for hc in corner_heights:
+        lr_c, lc_c, _ = _coloc(right_s, left_s, *corners(right_s), np.full(4, hc))
+        pts_list.append(np.column_stack([lr_c, lc_c]))
+    pts = np.concatenate(pts_list)
     if not np.isfinite(pts).all():
         raise InputError(f"the right image's corners do not localise at height {h:g} m")
     rel = pts - origin
@@ -274,12 +292,18 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: 
     col_pts = np.empty((n_rows_grid, 2))
     col_pts[0] = start
     col_ang = np.empty(n_rows_grid)
-    ang, _, _, _, _ = local_epipolar(left_s, right_s, start[:1], start[1:], h, elevation_offset_m)
+
+    def heights_at(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        return np.full(rows.shape, h) if node_height is None else node_height(rows, cols)
+
+    ang, _, _, _, _ = local_epipolar(left_s, right_s, start[:1], start[1:], heights_at(start[:1], start[1:]),
+                                     elevation_offset_m)
     col_ang[0] = ang[0]
     for i in range(1, n_rows_grid):
         col_pts[i] = walk(col_pts[i - 1], col_ang[i - 1:i], 0)[0]
-        ang, _, _, _, _ = local_epipolar(left_s, right_s, col_pts[i, :1], col_pts[i, 1:], h, elevation_offset_m)
-        col_ang[i] = ang[0]
+        ang, _, _, _, _ = local_epipolar(left_s, right_s, col_pts[i, :1], col_pts[i, 1:],
+                                         heights_at(col_pts[i, :1], col_pts[i, 1:]), elevation_offset_m)
+        col_ang[i] = ang[0] if np.isfinite(ang[0]) else col_ang[i - 1]
     # then every row along the epipolar direction, all rows at once
     left_pos = np.empty((n_rows_grid, n_cols_grid, 2))
     right_pos = np.empty((n_rows_grid, n_cols_grid, 2))
@@ -290,15 +314,45 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, step: 
     for j in range(n_cols_grid):
         if j > 0:
             current = walk(current, angles[:, j - 1], 1)
-        ang, ratio, rr, rc, g = local_epipolar(left_s, right_s, current[:, 0], current[:, 1], h, elevation_offset_m)
+        ang, ratio, rr, rc, g = local_epipolar(left_s, right_s, current[:, 0], current[:, 1],
+                                               heights_at(current[:, 0], current[:, 1]), elevation_offset_m)
+        if j > 0:  # a node off the DEM keeps its neighbour's direction (its positions are NaN)
+            ang = np.where(np.isfinite(ang), ang, angles[:, j - 1])
         left_pos[:, j] = current
         right_pos[:, j, 0] = rr
         right_pos[:, j, 1] = rc
         angles[:, j] = ang
         ratios[:, j] = ratio
         ground[:, j] = g
-    return EpipolarGrids(left_pos[..., 0], left_pos[..., 1], right_pos[..., 0], right_pos[..., 1], step, size, h,
-                         angles, ratios, ground)
+    grid_height = h if node_height is None else float(np.nanmean(ground[..., 2]))
+    return EpipolarGrids(left_pos[..., 0], left_pos[..., 1], right_pos[..., 0], right_pos[..., 1], step, size,
+                         grid_height, angles, ratios, ground)
+
+
+def _dem_heights(left: Sensor, dem: Any) -> Any:
+    """Function (rows, cols) -> ellipsoidal height of the DEM under left pixels (NaN off the DEM)."""
+    from explorer.rpc.dem import localization_on_dem
+    from explorer.stereo.sensors import rpc_model
+
+    model = rpc_model(left)
+    if model is None:
+        raise InputError("grids on a DEM need an RPC left image (give --height for other sensors)")
+
+    def heights(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        _, _, hh, ok = localization_on_dem(model, np.asarray(rows, dtype=np.float64),
+                                           np.asarray(cols, dtype=np.float64), dem)
+        return np.where(ok, hh, np.nan)
+
+    return heights
+
+
+def _dem_range(dem: Any) -> tuple[float, float]:
+    """Lowest and highest ellipsoidal height of a DEM (its grid's finite values)."""
+    lo, hi = getattr(dem, "min", None), getattr(dem, "max", None)
+    lo, hi = (lo() if callable(lo) else lo), (hi() if callable(hi) else hi)
+    if lo is None or hi is None or not (np.isfinite(lo) and np.isfinite(hi)):
+        raise InputError(f"cannot read the height range of the DEM ({type(dem).__name__})")
+    return float(lo), float(hi)
 
 
 def write_grids(grids: EpipolarGrids, out_dir: str | Path, *, prefix: str = "") -> dict[str, Path]:
@@ -334,7 +388,7 @@ def write_grids(grids: EpipolarGrids, out_dir: str | Path, *, prefix: str = "") 
         ) as ds:
             ds.write(dx, 1)
             ds.write(dy, 2)
-            ds.write(np.full(grids.shape, grids.height), 3)
+            ds.write(grids.ground[..., 2], 3)
             ds.set_band_description(1, "column displacement (sensor - epipolar), px")
             ds.set_band_description(2, "row displacement (sensor - epipolar), px")
             ds.set_band_description(3, "height above the ellipsoid, m")
