@@ -9,6 +9,7 @@ Usage: python benchmarks/ortho_bench.py [--size 400] [--scale 10000]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -19,9 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from explorer.geometry.frames import LocalFrame
+from explorer.methods.adapter import MethodSensor
 from explorer.ortho import (
-    RPCProjector,
-    SceneProjector,
+    DEMHeights,
+    OrthoGeometry,
+    SensorTerrain,
     SourceImage,
     default_pattern,
     gdal_rpc_orthoimage,
@@ -29,12 +32,12 @@ from explorer.ortho import (
     measure_geolocation,
     ortho_dask_array,
     render_synthetic_source,
-    scene_image_to_lonlat,
     write_orthoimage,
 )
 from explorer.presets import build_scene
 from explorer.rpc import read_rpc
 from explorer.rpc.dem import localization_on_dem
+from explorer.rpc.sensor import RPCSensor
 from explorer.terrain_io import read_geotiff_dem
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,7 +63,7 @@ def gdal_comparison(n: int, tmp: Path, repeats: int = 3) -> dict:
     src = render_synthetic_source(to_lonlat, (n, n), pattern, tmp / "src.npy")
     t_render = time.perf_counter() - t0
     source = np.load(src)
-    projector = RPCProjector(rpc, (n, n), dem=dem)
+    projector = OrthoGeometry(RPCSensor(dataclasses.replace(rpc, image_size=(n, n))), DEMHeights(dem))
     np.asarray(ortho_dask_array(projector, SourceImage(src), grid, 512).compute())  # warm (kernels, caches)
     ours_t, gdal_t = [], []
     for _ in range(repeats):  # round robin: both see the same machine load
@@ -88,8 +91,9 @@ def scale_run(n: int, chunk: int, tmp: Path) -> dict:
     g1 = grid_covering(lon, lat, gsd, epsg)
     grid = type(g1)(epsg, g1.x0, g1.y0, gsd, n, n)
     pattern = default_pattern(epsg, gsd, (grid.x0, grid.y0))
-    src = render_synthetic_source(scene_image_to_lonlat(scene), scene.shape, pattern, tmp / "isb.npy")
-    arr = ortho_dask_array(SceneProjector(scene, "exact"), SourceImage(src), grid, chunk)
+    geometry = OrthoGeometry(MethodSensor.create(scene, "exact"), SensorTerrain(scene.terrain))
+    src = render_synthetic_source(geometry.image_to_lonlat, scene.shape, pattern, tmp / "isb.npy")
+    arr = ortho_dask_array(geometry, SourceImage(src), grid, chunk)
     t0 = time.perf_counter()
     stats = write_orthoimage(arr, grid, tmp / "isb.tif", scheduler="threads")
     dt = time.perf_counter() - t0

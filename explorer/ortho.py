@@ -15,16 +15,20 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, cast
+from typing import TYPE_CHECKING, Any
 
 import dask
 import dask.array as da
 import numpy as np
 import pyproj
 
+from explorer.errors import InputError
 from explorer.geometry.dem_intersection import heights_at
-from explorer.scene import Scene
 from explorer.terrain_io import height_grid_of
+
+if TYPE_CHECKING:
+    from explorer.geometry.terrain import Terrain
+    from explorer.sensor import Sensor
 
 NODATA = np.float32(-9999.0)
 
@@ -88,89 +92,170 @@ def grid_covering(lon: np.ndarray, lat: np.ndarray, gsd: float, epsg: int) -> Or
 
 
 # ------------------------------------------------------------------------ ground -> image
-class Projector(Protocol):
-    """Maps ground (lon, lat) on the terrain to source image (row, col) with a validity mask."""
-
-    image_shape: tuple[int, int]
-
-    def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+# Where the ground point of an output pixel lies: on a constant height above the ellipsoid, on a lon/lat DEM
+# (heights above the ellipsoid) or on the sensor's own terrain in its local ENU frame.  Each surface gives
+# the ground points of (lon, lat) in the sensor's frame, the ellipsoidal heights there, and the image to
+# ground of a sensor on it (to render a synthetic source the way the sensor saw it).
 
 
-class SceneProjector:
-    """Ground -> image through a scene's rigorous model and a best-scanline method.
+def projects_geodetic(sensor: object) -> bool:
+    """True where ``sensor`` declares ``has_geodetic_projection`` (``geodetic_to_image(lon, lat, h)`` and
+    ``geodetic_localization(row, col, h)`` on longitude, latitude and ellipsoidal height, as an RPC is
+    defined): ortho then skips the round trip through the local frame."""
+    return bool(getattr(type(sensor), "has_geodetic_projection", False))
 
-    Heights come from ``height`` (constant, metres above the ellipsoid), from ``dem``
-    (an object with ``height(lon, lat)`` in metres above the ellipsoid) or, when both are
-    None, from the scene's own terrain (local ENU heights; ``docs/conventions.md#frames``).
+
+#: Fixed-point steps of :meth:`EllipsoidHeight.image_to_lonlat` at most, and the height change that stops them.
+PLANE_ITERATIONS = 10
+PLANE_TOL_M = 1e-7
+
+
+@dataclass(frozen=True)
+class EllipsoidHeight:
+    """The ground at a constant height above the ellipsoid, metres."""
+
+    height_m: float
+
+    def heights(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        """Ellipsoidal heights (N,) at (lon, lat) (N,) degrees."""
+        return np.full(np.shape(lon), float(self.height_m))
+
+    def ground(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        """Ground points (N, 3), local ENU metres of ``sensor.frame``."""
+        return sensor.frame.geodetic_to_enu(lon, lat, self.heights(sensor, lon, lat))
+
+    def image_to_lonlat(self, sensor: Sensor, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Image points -> (lon, lat) degrees on this height (NaN where the line of sight does not reach it)."""
+        if projects_geodetic(sensor):
+            lon, lat, _ = sensor.geodetic_localization(row, col, np.full(np.shape(row), float(self.height_m)))  # type: ignore[attr-defined]
+            return lon, lat
+        # local planes Z = z with z moved until the ellipsoidal height is the one asked (dZ/dh ~ 1)
+        frame = sensor.frame
+        z = np.full(np.shape(row), float(self.height_m) - frame.h0_m)
+        for _ in range(PLANE_ITERATIONS):
+            g = sensor.image_to_ground(row, col, height=z)
+            lon, lat, h = frame.enu_to_geodetic(g)
+            dz = np.where(np.isfinite(h), float(self.height_m) - h, 0.0)
+            z = z + dz
+            if not np.max(np.abs(dz), initial=0.0) > PLANE_TOL_M:
+                break
+        lon, lat, _ = frame.enu_to_geodetic(sensor.image_to_ground(row, col, height=z))
+        return lon, lat
+
+    def height_range(self) -> tuple[float, float]:
+        """(lowest, highest) ellipsoidal height, metres."""
+        return float(self.height_m), float(self.height_m)
+
+
+class DEMHeights:
+    """The ground on a lon/lat DEM with heights above the ellipsoid (:class:`~explorer.terrain_io.GeoDEM` on the
+    ellipsoid, :class:`~explorer.terrain_io.EllipsoidalDEM`, or any object with ``height(lon, lat)``, ``min`` and
+    ``max``); a gridded DEM is sampled by the compiled bilinear lookup of the DEM kernel."""
+
+    def __init__(self, dem: Any) -> None:
+        self.dem = dem
+        self._grid = height_grid_of(dem)
+
+    def heights(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        if self._grid is not None:
+            return heights_at(self._grid, lon, lat).reshape(np.shape(lon))
+        return np.asarray(self.dem.height(lon, lat), dtype=np.float64)
+
+    def ground(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        return sensor.frame.geodetic_to_enu(lon, lat, self.heights(sensor, lon, lat))
+
+    def image_to_lonlat(self, sensor: Sensor, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """First hit of the lines of sight on the DEM (a sensor in geodetic coordinates: an RPC)."""
+        if not projects_geodetic(sensor):
+            raise InputError("a lon/lat DEM is intersected here only by a sensor in geodetic coordinates (an RPC); "
+                             "give a scene its DEM as its own terrain (SensorTerrain)")
+        lon, lat, _, _ = sensor.geodetic_localization_on_dem(row, col, self.dem)  # type: ignore[attr-defined]
+        return lon, lat
+
+    def height_range(self) -> tuple[float, float]:
+        return float(self.dem.min), float(self.dem.max)
+
+
+@dataclass(frozen=True)
+class SensorTerrain:
+    """The ground on the sensor's own terrain (local ENU heights of its frame, :class:`Terrain`).
+
+    ``terrain`` must be the terrain the sensor's ``image_to_ground`` intersects by default (a scene's
+    ``terrain``), so that the synthetic source and the orthoimage see the same ground.
     """
 
-    def __init__(self, scene: Scene, method: str = "exact", *, height: float | None = None,
-                 dem: Any = None, method_params: dict | None = None) -> None:
-        from explorer.methods import create
+    terrain: Terrain
 
-        self.scene = scene
-        self.method = create(method, scene, **(method_params or {}))
-        if self.method.needs_fit:
-            raise ValueError(f"method {method!r} needs control points; orthorectification uses a search method")
-        self.height = height
-        self.dem = dem
-        self.image_shape = scene.shape
-
-    def ground_points(self, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
-        """Local ENU ground points (N, 3) on the terrain at (lon, lat) (N,) degrees."""
-        frame = self.scene.frame
-        if self.height is not None or self.dem is not None:
-            h = np.full(lon.shape, float(cast(float, self.height))) if self.dem is None else self.dem.height(lon, lat)
-            return frame.geodetic_to_enu(lon, lat, h)
-        terrain = self.scene.terrain
-        # the terrain is a surface in ENU: find the point with this lon/lat whose up equals the DEM height
-        h = np.full(lon.shape, terrain.mean_height)
+    def ground(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        """The point with this lon/lat whose local up equals the terrain height there; NaN off the terrain."""
+        frame = sensor.frame
+        terrain = self.terrain
+        h = np.full(np.shape(lon), terrain.mean_height)
         for _ in range(4):
             p = frame.geodetic_to_enu(lon, lat, h)
             h = h + (terrain.height(p[:, 0], p[:, 1]) - p[:, 2])
         p = frame.geodetic_to_enu(lon, lat, h)
         return np.where(np.isfinite(terrain.height(p[:, 0], p[:, 1]))[:, None], p, np.nan)
 
+    def heights(self, sensor: Sensor, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        g = self.ground(sensor, lon, lat)
+        out = np.full(np.shape(lon), np.nan)
+        ok = np.isfinite(g[:, 0])
+        if ok.any():
+            out[ok] = sensor.frame.enu_to_geodetic(g[ok])[2]
+        return out
+
+    def image_to_lonlat(self, sensor: Sensor, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lon, lat, _ = sensor.frame.enu_to_geodetic(sensor.image_to_ground(row, col))
+        return lon, lat
+
+    def height_range(self) -> tuple[float, float]:
+        """(lowest, highest) local height, metres."""
+        return float(self.terrain.min_height), float(self.terrain.max_height)
+
+
+Surface = EllipsoidHeight | DEMHeights | SensorTerrain
+
+
+class OrthoGeometry:
+    """Ground (lon, lat) on a surface -> image (row, col) of any :class:`~explorer.sensor.Sensor`.
+
+    A sensor declaring ``has_geodetic_projection`` (an RPC, :func:`projects_geodetic`) is asked in
+    longitude, latitude and ellipsoidal height; any other through local ENU ground points of its frame.  A
+    best-scanline method is a sensor too (:class:`explorer.methods.adapter.MethodSensor`).
+
+    Parameters
+    ----------
+    sensor : Sensor
+    surface : EllipsoidHeight, DEMHeights or SensorTerrain
+    """
+
+    def __init__(self, sensor: Sensor, surface: Surface) -> None:
+        self.sensor = sensor
+        self.surface = surface
+        self.image_shape = (int(sensor.n_rows), int(sensor.n_columns))
+
     def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        ground = self.ground_points(lon, lat)
-        ok = np.all(np.isfinite(ground), axis=1)
+        """Image (row, col) (N,) of the ground at (lon, lat) (N,) degrees, and True where it is on the image."""
         row = np.full(lon.shape, np.nan)
         col = np.full(lon.shape, np.nan)
-        valid = np.zeros(lon.shape, bool)
-        if ok.any():
-            res = self.method.ground_to_image(ground[ok])
-            row[ok], col[ok], valid[ok] = res.row, res.col, res.valid
-        return row, col, valid
-
-
-class RPCProjector:
-    """Ground -> image through a rational function model (row/col 0-based, pixel centre)."""
-
-    def __init__(self, rpc: Any, image_shape: tuple[int, int], *, height: float | None = None,
-                 dem: Any = None) -> None:
-        if height is None and dem is None:
-            raise ValueError("RPCProjector needs a height or a DEM")
-        self.rpc = rpc
-        self.height = height
-        self.dem = dem
-        self.image_shape = (int(image_shape[0]), int(image_shape[1]))
-        self._grid = height_grid_of(dem) if dem is not None else None
-
-    def locate(self, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if self.dem is None:
-            h = np.full(lon.shape, float(cast(float, self.height)))  # a height is given when there is no DEM
-        elif self._grid is not None:  # the compiled bilinear lookup of the DEM kernel
-            h = heights_at(self._grid, lon, lat).reshape(np.shape(lon))
+        if projects_geodetic(self.sensor):
+            h = self.surface.heights(self.sensor, lon, lat)
+            ok = np.isfinite(h)
+            if ok.any():
+                row[ok], col[ok] = self.sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])  # type: ignore[attr-defined]
         else:
-            h = self.dem.height(lon, lat)
-        ok = np.isfinite(h)
-        row = np.full(lon.shape, np.nan)
-        col = np.full(lon.shape, np.nan)
-        if ok.any():
-            row[ok], col[ok] = self.rpc.projection(lon[ok], lat[ok], h[ok])
+            ground = self.surface.ground(self.sensor, lon, lat)
+            ok = np.all(np.isfinite(ground), axis=1)
+            if ok.any():
+                row[ok], col[ok] = self.sensor.ground_to_image(ground[ok])
         nr, nc = self.image_shape
-        valid = ok & (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)
+        valid = (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)  # NaN: False
         return row, col, valid
+
+    def image_to_lonlat(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Image points (N,) -> (lon, lat) degrees on the surface (the sensor's own image to ground)."""
+        return self.surface.image_to_lonlat(self.sensor, row, col)
 
 
 # ---------------------------------------------------------------------------- source image
@@ -339,23 +424,23 @@ def block_lonlat(grid: OrthoGrid, rows: slice, cols: slice, step: int = LONLAT_S
     return interpolate(node_lon, r_all, c_all), interpolate(node_lat, r_all, c_all)
 
 
-def render_block(projector: Projector, source: SourceImage, grid: OrthoGrid, rows: slice, cols: slice) -> np.ndarray:
+def render_block(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, rows: slice, cols: slice) -> np.ndarray:
     """Orthoimage block (len(rows), len(cols)) float32; :data:`NODATA` outside the footprint."""
     lon, lat = block_lonlat(grid, rows, cols)
     shape = lon.shape
-    row, col, valid = projector.locate(lon.ravel(), lat.ravel())
+    row, col, valid = geometry.locate(lon.ravel(), lat.ravel())
     values = source.sample_bilinear(row, col, valid)
     out = np.where(valid & np.isfinite(values), values, NODATA).astype(np.float32)
     return out.reshape(shape)
 
 
-def ortho_dask_array(projector: Projector, source: SourceImage, grid: OrthoGrid, chunk: int = 2048) -> da.Array:
+def ortho_dask_array(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, chunk: int = 2048) -> da.Array:
     """The orthoimage as a lazy dask array (float32) over output chunks of ``chunk`` x ``chunk``."""
 
     def block(block_info: dict | None = None) -> np.ndarray:
         assert block_info is not None  # dask passes it to map_blocks functions that accept it
         (r0, r1), (c0, c1) = block_info[None]["array-location"]
-        return render_block(projector, source, grid, slice(r0, r1), slice(c0, c1))
+        return render_block(geometry, source, grid, slice(r0, r1), slice(c0, c1))
 
     return da.map_blocks(block, dtype=np.float32, chunks=da.core.normalize_chunks(chunk, (grid.height, grid.width)),
                          meta=np.empty((0, 0), np.float32))
@@ -558,17 +643,6 @@ def render_synthetic_source(
             e, n = lonlat_to_projected(to_utm, lon, lat)
             f.write(pattern.value(e, n).astype(np.float32).tobytes())
     return path
-
-
-def scene_image_to_lonlat(scene: Scene) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """image -> ground on the scene terrain -> (lon, lat) degrees."""
-
-    def fn(row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        g = scene.image_to_ground(row, col)
-        lon, lat, _ = scene.frame.enu_to_geodetic(g)
-        return lon, lat
-
-    return fn
 
 
 def _image_rows(image: Any, i0: int, n: int, width: int) -> np.ndarray:

@@ -31,6 +31,7 @@ __all__ = [
     "DEFAULT_ASSETS_DIR",
     "GeoDEM",
     "Geoid",
+    "read_dem_above_ellipsoid",
     "read_geotiff_dem",
     "height_grid_of",
     "read_hgt",
@@ -564,3 +565,30 @@ class EllipsoidalDEM:
             cached = _grid_of(base.heights + self.geoid.geoid_height(glon, glat), self.dem.transform)
             object.__setattr__(self, "_height_grid", cached)
         return cached
+
+
+def read_dem_above_ellipsoid(path: str | Path, *, orthometric: bool = False) -> GeoDEM | EllipsoidalDEM:
+    """A DEM file as heights above the WGS84 ellipsoid, the convention of ``pushbroom ortho`` and
+    ``pushbroom rpc localize`` (``docs/conventions.md#dem-heights``).
+
+    An SRTM ``.hgt`` tile holds heights above the EGM96 geoid: they are always converted (``h + N``, the EGM96
+    grid :meth:`Geoid.egm96`).  A GeoTIFF is taken as ellipsoidal heights (GDAL's ``RPC_DEM`` convention) unless
+    ``orthometric`` says its heights are above EGM96.
+
+    Parameters
+    ----------
+    path : str or Path
+        GeoTIFF or SRTM ``.hgt``.
+    orthometric : bool
+        The GeoTIFF's heights are above the EGM96 geoid.
+
+    Returns
+    -------
+    GeoDEM or EllipsoidalDEM
+        A height source (``height(lon, lat)``, ``min``, ``max``) of ellipsoidal heights.
+    """
+    path = Path(path)
+    dem = read_hgt(path) if path.suffix.lower() == ".hgt" else read_geotiff_dem(path)
+    if orthometric or dem.vertical_reference == "egm96":
+        return EllipsoidalDEM(dem, Geoid.egm96())
+    return dem

@@ -115,10 +115,10 @@ def _warm_one_method(name: str, scene: Any, **options: Any) -> None:
 
 
 def _warm_ortho() -> None:
-    from explorer.ortho import OrthoGrid, RPCProjector, SourceImage, render_block
+    from explorer.ortho import EllipsoidHeight, OrthoGeometry, OrthoGrid, SourceImage, render_block
+    from explorer.rpc.sensor import RPCSensor
 
-    rpc = _rpc_for_warmup()
-    projector = RPCProjector(rpc, (1000, 1000), height=500.0)
+    geometry = OrthoGeometry(RPCSensor(_rpc_for_warmup()), EllipsoidHeight(500.0))
 
     class _Flat:
         shape = (1000, 1000)
@@ -127,7 +127,7 @@ def _warm_ortho() -> None:
             return np.where(valid, 1.0, np.nan)
 
     grid = OrthoGrid(32631, 730_000.0, 4_987_000.0, 10.0, 8, 8)
-    render_block(projector, cast("SourceImage", _Flat()), grid, slice(0, 8), slice(0, 8))
+    render_block(geometry, cast("SourceImage", _Flat()), grid, slice(0, 8), slice(0, 8))
 
 
 def steps() -> list[tuple[str, Callable[[], None]]]:

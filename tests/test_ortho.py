@@ -1,5 +1,6 @@
 """Orthorectification: synthetic ground pattern geolocation, GDAL peer check, schedulers."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -8,10 +9,12 @@ import rasterio
 
 from explorer.cli import main
 from explorer.geometry.frames import LocalFrame
+from explorer.methods.adapter import MethodSensor
 from explorer.ortho import (
     NODATA,
-    RPCProjector,
-    SceneProjector,
+    DEMHeights,
+    OrthoGeometry,
+    SensorTerrain,
     SourceImage,
     default_pattern,
     gdal_rpc_orthoimage,
@@ -19,11 +22,12 @@ from explorer.ortho import (
     measure_geolocation,
     ortho_dask_array,
     render_synthetic_source,
-    scene_image_to_lonlat,
     write_orthoimage,
 )
 from explorer.presets import build_scene
+from explorer.rpc import read_rpc
 from explorer.rpc.dem import localization_on_dem
+from explorer.rpc.sensor import RPCSensor
 
 DATA = Path(__file__).parent / "data" / "rpc"
 ASSETS = Path(__file__).parent.parent / "assets" / "dem"
@@ -34,8 +38,9 @@ def _synthetic_ortho(tmp_path, scene, gsd, chunk=128):
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()
     grid = grid_covering(lon, lat, gsd, epsg)
     pattern = default_pattern(epsg, gsd, (grid.x0, grid.y0))
-    src = render_synthetic_source(scene_image_to_lonlat(scene), scene.shape, pattern, tmp_path / "src.npy")
-    arr = ortho_dask_array(SceneProjector(scene, "exact"), SourceImage(src), grid, chunk)
+    geometry = OrthoGeometry(MethodSensor.create(scene, "exact"), SensorTerrain(scene.terrain))
+    src = render_synthetic_source(geometry.image_to_lonlat, scene.shape, pattern, tmp_path / "src.npy")
+    arr = ortho_dask_array(geometry, SourceImage(src), grid, chunk)
     return np.asarray(arr.compute(scheduler="threads")), grid, pattern
 
 
@@ -79,7 +84,8 @@ def test_rpc_orthoimage_agrees_with_gdal_rpc_warp(tmp_path):
         return lo, la
 
     src = render_synthetic_source(to_lonlat, (n, n), pattern, tmp_path / "src.npy")
-    ours = np.asarray(ortho_dask_array(RPCProjector(rpc, (n, n), dem=dem), SourceImage(src), grid, 64).compute())
+    sensor = RPCSensor(dataclasses.replace(rpc, image_size=(n, n)))
+    ours = np.asarray(ortho_dask_array(OrthoGeometry(sensor, DEMHeights(dem)), SourceImage(src), grid, 64).compute())
     gdal = gdal_rpc_orthoimage(np.load(src), rpc, grid, dem_path)
     ours_geo = measure_geolocation(ours, grid, pattern, block=32)
     gdal_geo = measure_geolocation(gdal, grid, pattern, block=32)
@@ -95,8 +101,9 @@ def test_threaded_and_local_cluster_outputs_are_byte_identical(tmp_path):
     epsg = LocalFrame(float(np.mean(lat)), float(np.mean(lon))).utm_epsg()
     grid = grid_covering(lon, lat, 40.0, epsg)
     pattern = default_pattern(epsg, 40.0, (grid.x0, grid.y0))
-    src = render_synthetic_source(scene_image_to_lonlat(scene), scene.shape, pattern, tmp_path / "src.npy")
-    arr = ortho_dask_array(SceneProjector(scene, "exact"), SourceImage(src), grid, 96)
+    geometry = OrthoGeometry(MethodSensor.create(scene, "exact"), SensorTerrain(scene.terrain))
+    src = render_synthetic_source(geometry.image_to_lonlat, scene.shape, pattern, tmp_path / "src.npy")
+    arr = ortho_dask_array(geometry, SourceImage(src), grid, 96)
     a, b = tmp_path / "threads.tif", tmp_path / "cluster.tif"
     write_orthoimage(arr, grid, a, scheduler="threads")
     write_orthoimage(arr, grid, b, scheduler="local-cluster:2")
@@ -158,3 +165,40 @@ def test_sparse_sampling_of_a_large_source_matches_scipy(tmp_path):
     values = source.sample_bilinear(row, col, np.ones(50, bool))
     truth = map_coordinates(image.astype(np.float64), [row, col], order=1)
     np.testing.assert_allclose(values, truth, atol=1e-12)
+
+
+class _LocalFrameOnly:
+    """An RPCSensor seen only through the Sensor interface (no geodetic capability declared)."""
+
+    def __init__(self, sensor):
+        self._s = sensor
+        self.frame, self.n_rows, self.n_columns = sensor.frame, sensor.n_rows, sensor.n_columns
+
+    def ground_to_image(self, ground):
+        return self._s.ground_to_image(ground)
+
+    def image_to_ground(self, row, col, *, height=None):
+        return self._s.image_to_ground(row, col, height=height)
+
+
+def test_ortho_geometry_takes_any_sensor_rpc_in_geodetic_or_local_coordinates():
+    """Truth: the RPC's own projection at the same ground points; the local-frame path (any Sensor) agrees."""
+    from explorer.ortho import EllipsoidHeight
+
+    rpc = read_rpc(DATA / "PHRDIMAP_P1BP--2018122638935449CP.XML")
+    sensor = RPCSensor(rpc)
+    rng = np.random.default_rng(4)
+    lon = rpc.lon_offset + rng.uniform(-0.8, 0.8, 500) * rpc.lon_scale
+    lat = rpc.lat_offset + rng.uniform(-0.8, 0.8, 500) * rpc.lat_scale
+    h = 310.0
+    row, col, valid = OrthoGeometry(sensor, EllipsoidHeight(h)).locate(lon, lat)
+    r_ref, c_ref = rpc.projection(lon, lat, np.full(lon.shape, h))[:2]
+    np.testing.assert_array_equal(row, r_ref)
+    np.testing.assert_array_equal(valid, (r_ref >= -0.5) & (r_ref <= sensor.n_rows - 0.5) & (c_ref >= -0.5)
+                                  & (c_ref <= sensor.n_columns - 0.5))
+    assert valid.mean() > 0.5
+    row2, col2, valid2 = OrthoGeometry(_LocalFrameOnly(sensor), EllipsoidHeight(h)).locate(lon, lat)
+    assert np.max(np.hypot(row2 - r_ref, col2 - c_ref)) < 1e-6
+    # image -> ground on the height: back where the projection put it
+    lo, la = OrthoGeometry(_LocalFrameOnly(sensor), EllipsoidHeight(h)).image_to_lonlat(r_ref[:20], c_ref[:20])
+    assert np.max(np.abs(lo - lon[:20])) < 1e-9 and np.max(np.abs(la - lat[:20])) < 1e-9

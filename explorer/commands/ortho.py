@@ -10,6 +10,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from explorer.commands._args import (
     existing_file,
@@ -21,6 +22,12 @@ from explorer.commands._args import (
 )
 from explorer.commands._progress import with_compile_progress
 from explorer.commands.simulate import add_scene_arguments, scene_from_args
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from explorer.ortho import Surface
+    from explorer.sensor import Sensor
 
 _SCHEDULER = re.compile(r"^(threads|processes|synchronous|local-cluster(:[1-9][0-9]{0,2})?|tcp://[^\s:/]+:[0-9]{1,5})$")
 
@@ -42,44 +49,69 @@ def image_shape(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
-def _rpc_image_to_lonlat(rpc, dem, height):
+#: Output pixels along each image edge whose ground points outline the footprint (plus the centre).
+OUTLINE_POINTS = 9
+
+
+def _outline(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Image points (pixel edges) along the border of a ``shape`` image, and its centre."""
     import numpy as np
 
-    from explorer.rpc.dem import localization_on_dem
+    r1, c1 = shape[0] - 0.5, shape[1] - 0.5
+    t = np.linspace(0.0, 1.0, OUTLINE_POINTS)
+    rows = np.concatenate([np.full_like(t, -0.5), -0.5 + t * shape[0], np.full_like(t, r1), r1 - t * shape[0],
+                           [0.5 * (shape[0] - 1)]])
+    cols = np.concatenate([-0.5 + t * shape[1], np.full_like(t, c1), c1 - t * shape[1], np.full_like(t, -0.5),
+                           [0.5 * (shape[1] - 1)]])
+    return rows, cols
 
-    def fn(row, col):
-        if dem is not None:
-            lon, lat, _, ok = localization_on_dem(rpc, row, col, dem)
-        else:
-            lon, lat, ok = rpc.localization(row, col, np.full(row.shape, float(height)))
-        return lon, lat
 
-    return fn
+def _surface_option(args: argparse.Namespace) -> str:
+    """The option that chose the ground surface (for error messages)."""
+    if args.dem:
+        return f"--dem {args.dem}"
+    if args.height is not None:
+        return f"--height {args.height:g}"
+    return "the scene's terrain" if not args.rpc else "the RPC's height offset (no --height or --dem)"
 
 
 def build_ortho_job(args: argparse.Namespace, workdir: Path):
-    """(projector, source, grid, pattern or None) for the parsed arguments."""
+    """(geometry, source, grid, pattern or None) for the parsed arguments.
+
+    The sensor is the scene (through the chosen best-scanline method, :class:`explorer.methods.adapter.
+    MethodSensor`) or the RPC (:class:`explorer.rpc.sensor.RPCSensor`); the ground is the DEM (heights above the
+    ellipsoid, :func:`explorer.terrain_io.read_dem_above_ellipsoid`), a constant ellipsoidal height or the
+    scene's own terrain.  A scene's DEM becomes its own terrain (resampled onto its local frame), so the
+    synthetic source and the orthoimage see the same ground.
+    """
+    import dataclasses
+
     import numpy as np
 
     from explorer.errors import InputError
     from explorer.ortho import (
-        RPCProjector,
-        SceneProjector,
+        DEMHeights,
+        EllipsoidHeight,
+        OrthoGeometry,
+        SensorTerrain,
         SourceImage,
         default_pattern,
         grid_covering,
         render_synthetic_source,
-        scene_image_to_lonlat,
     )
 
     dem = None
     if args.dem:
-        from explorer.terrain_io import read_geotiff_dem, read_hgt
+        from explorer.terrain_io import read_dem_above_ellipsoid
 
-        dem = read_hgt(args.dem) if str(args.dem).lower().endswith(".hgt") else read_geotiff_dem(args.dem)
+        dem = read_dem_above_ellipsoid(args.dem, orthometric=args.dem_orthometric)
     if args.rpc:
         from explorer.rpc import read_rpc
+        from explorer.rpc.sensor import RPCSensor
 
+        if args.method is not None:
+            raise InputError(f"--method {args.method}: an RPC has no scanlines to search; ortho projects with the "
+                             "RPC itself (leave out --method, or give a scene)")
         rpc = read_rpc(args.rpc)
         if args.image:
             shape = SourceImage(args.image).shape
@@ -92,23 +124,45 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
             shape = args.rpc_shape
         else:
             raise InputError("--rpc with --synthetic needs --rpc-shape ROWSxCOLS (the source image size)")
-        height = args.height if args.height is not None else (None if dem is not None else rpc.height_offset)
-        projector: RPCProjector | SceneProjector = RPCProjector(rpc, shape, height=height, dem=dem)
-        r = np.array([0, 0, shape[0] - 1, shape[0] - 1, shape[0] / 2], float)
-        c = np.array([0, shape[1] - 1, shape[1] - 1, 0, shape[1] / 2], float)
-        h0 = rpc.height_offset if height is None else height
-        lon, lat, _ = rpc.localization(r, c, np.full(5, h0))
-        to_lonlat = _rpc_image_to_lonlat(rpc, dem, h0 if dem is None else None)
+        rpc = dataclasses.replace(rpc, image_size=(int(shape[0]), int(shape[1])))
+        sensor: Sensor = RPCSensor(rpc)
+        if args.height is not None:
+            lo, hi = rpc.height_range()
+            if not lo <= args.height <= hi:
+                raise InputError(f"--height {args.height:g} m is outside the RPC's height range "
+                                 f"{lo:g} .. {hi:g} m (its validity domain)")
+        surface: Surface = DEMHeights(dem) if dem is not None else EllipsoidHeight(
+            float(args.height if args.height is not None else rpc.height_offset))
+        h_ref = float(args.height) if args.height is not None else float(rpc.height_offset)
     else:
+        from explorer.methods.adapter import MethodSensor
+
         scene = scene_from_args(args)
-        projector = SceneProjector(scene, args.method, height=args.height, dem=dem)
+        if dem is not None:
+            scene = scene.with_terrain(_dem_as_terrain(scene, dem, str(args.dem)))
         shape = scene.shape
-        lon, lat, _ = scene.frame.enu_to_geodetic(scene.footprint())
-        to_lonlat = scene_image_to_lonlat(scene)
+        if args.height is not None:
+            surface = EllipsoidHeight(float(args.height))
+            lo_h, hi_h = (args.height - scene.frame.h0_m,) * 2
+        else:
+            surface = SensorTerrain(scene.terrain)
+            lo_h, hi_h = surface.height_range()
+        method = args.method or "exact"
+        pad = max(100.0, 0.1 * (hi_h - lo_h))  # the learned methods' SCOPs span the heights asked for, and more
+        sensor = MethodSensor.create(scene, method, height_range=(lo_h - pad, hi_h + pad), scops=args.scops)
+        h_ref = float(args.height) if args.height is not None else scene.terrain.mean_height + scene.frame.h0_m
+    geometry = OrthoGeometry(sensor, surface)
+    rows, cols = _outline(shape)
+    lon, lat = EllipsoidHeight(h_ref).image_to_lonlat(sensor, rows, cols)
+    ok = np.isfinite(lon) & np.isfinite(lat)
+    if not ok.any():
+        raise InputError(f"{_surface_option(args)}: no line of sight of the image reaches the ground at "
+                         f"{h_ref:.6g} m above the ellipsoid (is the sensor below it?)")
+    lon, lat = lon[ok], lat[ok]
     if dem is not None:
         from explorer.terrain_io import height_grid_of, require_coverage
 
-        # corners and centre at one height: a DEM that misses them all is the wrong DEM; one that misses
+        # outline and centre at one height: a DEM that misses them all is the wrong DEM; one that misses
         # a corner by metres is not (the pixels it does not cover are no-data in the output)
         dem_grid = height_grid_of(dem)
         if dem_grid is not None:
@@ -125,7 +179,7 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
     pattern = None
     if args.synthetic:
         pattern = default_pattern(epsg, args.gsd, (grid.x0, grid.y0))
-        src_path = render_synthetic_source(to_lonlat, shape, pattern, workdir / "synthetic_source.npy")
+        src_path = render_synthetic_source(geometry.image_to_lonlat, shape, pattern, workdir / "synthetic_source.npy")
         source = SourceImage(src_path)
     else:
         source = SourceImage(args.image)
@@ -134,7 +188,37 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
                 f"--image {args.image} is {source.shape[0]} x {source.shape[1]} pixels but the scene is "
                 f"{shape[0]} x {shape[1]}: not the image of this scene"
             )
-    return projector, source, grid, pattern
+    return geometry, source, grid, pattern
+
+
+#: Largest side of the local grid a scene's DEM is resampled onto (nodes).
+MAX_TERRAIN_NODES = 2048
+
+
+def _dem_as_terrain(scene, dem, label: str):
+    """The DEM (ellipsoidal heights) resampled onto the scene's local frame over its footprint (+5 %), at the
+    DEM's own spacing (at most :data:`MAX_TERRAIN_NODES` nodes a side)."""
+    import numpy as np
+
+    from explorer.errors import InputError
+    from explorer.real.from_rpc import terrain_from_dem
+    from explorer.terrain_io import height_grid_of
+
+    lo_h, hi_h = float(dem.min), float(dem.max)
+    corners = np.vstack([scene.footprint(lo_h - scene.frame.h0_m), scene.footprint(hi_h - scene.frame.h0_m)])
+    if not np.isfinite(corners).all():
+        raise InputError(f"--dem {label}: the image's lines of sight do not reach the DEM's heights "
+                         f"{lo_h:g} .. {hi_h:g} m")
+    lo, hi = corners[:, :2].min(0), corners[:, :2].max(0)
+    pad = 0.05 * (hi - lo)
+    extent = (lo[0] - pad[0], hi[0] + pad[0], lo[1] - pad[1], hi[1] + pad[1])
+    grid = height_grid_of(dem)
+    spacing_m = 30.0 if grid is None else abs(grid.dy) * 110_574.0
+    cell = max(spacing_m, max(extent[1] - extent[0], extent[3] - extent[2]) / (MAX_TERRAIN_NODES - 1))
+    terrain = terrain_from_dem(dem, scene.frame, extent, cell_m=cell)
+    if not np.isfinite(terrain.heights).any():
+        raise InputError(f"--dem {label} does not cover the image footprint at all")
+    return terrain
 
 
 WORK_PREFIX = "pushbroom-ortho-"
@@ -202,9 +286,9 @@ def cmd_ortho(args: argparse.Namespace) -> int:
         raise InputError("give either --image or --synthetic, not both")
     with work_folder() as tmp:
         t0 = time.perf_counter()
-        projector, source, grid, pattern = build_ortho_job(args, tmp)
+        geometry, source, grid, pattern = build_ortho_job(args, tmp)
         t_setup = time.perf_counter() - t0
-        arr = ortho_dask_array(projector, source, grid, args.chunk)
+        arr = ortho_dask_array(geometry, source, grid, args.chunk)
         bar = tqdm(total=arr.npartitions, desc="ortho blocks", unit="block")
 
         def progress(done: int, total: int) -> None:
@@ -238,13 +322,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_scene_arguments(p)
     p.add_argument("--rpc", default=None, type=existing_file, help="RPC file (any supported format) instead of a scene")
     p.add_argument("--rpc-shape", default=None, type=image_shape, help="source size ROWSxCOLS for --rpc --synthetic")
-    p.add_argument("--dem", default=None, type=raster_file, help="GeoTIFF or .hgt DEM, heights above the ellipsoid")
+    p.add_argument("--dem", default=None, type=raster_file,
+                   help="GeoTIFF DEM of heights above the ellipsoid, or SRTM .hgt (above EGM96: converted)")
+    p.add_argument("--dem-orthometric", action="store_true",
+                   help="the GeoTIFF DEM's heights are above the EGM96 geoid (added N); .hgt files always are")
     p.add_argument("--height", type=finite_float, default=None, help="constant ellipsoidal height, metres")
     p.add_argument("--image", default=None, type=existing_file,
                    help="source image (.npy or any raster rasterio reads); must have the scene's size")
     p.add_argument("--synthetic", action="store_true", help="render a known ground pattern as the source")
     p.add_argument("--gsd", type=positive_float, required=True, help="output pixel size, metres (> 0)")
-    p.add_argument("--method", default="exact", help="best-scanline method (a search method)")
+    p.add_argument("--method", default=None,
+                   help="best-scanline method on the scene (default exact; a learned one is fitted on --scops SCOPs "
+                        "simulated from the scene)")
+    p.add_argument("--scops", type=int_in_range(4, 100_000, "--scops"), default=100,
+                   help="SCOPs per height layer a learned --method is fitted on (default 100, 3 layers)")
     p.add_argument("--chunk", type=int_in_range(16, 65536, "--chunk"), default=2048,
                    help="output chunk size, pixels (16 .. 65536)")
     p.add_argument("--scheduler", default="threads", type=scheduler_name,

@@ -10,7 +10,6 @@ import argparse
 import csv
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from explorer.commands._args import (
@@ -135,12 +134,9 @@ def cmd_project(args: argparse.Namespace) -> int:
 
 
 def _load_dem(args: argparse.Namespace) -> Any:
-    from explorer.terrain_io import EllipsoidalDEM, Geoid, read_geotiff_dem, read_hgt
+    from explorer.terrain_io import read_dem_above_ellipsoid
 
-    path = Path(args.dem)
-    dem = read_hgt(path) if path.suffix.lower() == ".hgt" else read_geotiff_dem(path)
-    orthometric = args.dem_orthometric or dem.vertical_reference == "egm96"
-    return EllipsoidalDEM(dem, Geoid.egm96()) if orthometric else dem
+    return read_dem_above_ellipsoid(args.dem, orthometric=args.dem_orthometric)
 
 
 def cmd_localize(args: argparse.Namespace) -> int:

@@ -11,7 +11,7 @@ the local and the ellipsoid normals, 1 to 1e-5 over an image).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -48,6 +48,11 @@ class RPCSensor:
     #: the search methods need line geometry and are unavailable on it.
     has_line_geometry: ClassVar[bool] = False
     has_polynomial_exterior: ClassVar[bool] = False
+
+    #: Capability: the model is defined on longitude, latitude and ellipsoidal height
+    #: (:meth:`geodetic_to_image`, :meth:`geodetic_localization`, :meth:`geodetic_localization_on_dem`), so a
+    #: caller with geodetic ground points (orthorectification) skips the round trip through the local frame.
+    has_geodetic_projection: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         if self.frame is None:
@@ -99,6 +104,27 @@ class RPCSensor:
         """:meth:`image_to_ground` with flags (0 found, 3 the RPC does not localise the point)."""
         ground = self.image_to_ground(row, col, height=height)
         return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
+
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lon, lat) degrees and ellipsoidal heights (N,) metres -> (row, col) (N,), the RPC's projection."""
+        row, col = self.rpc.projection(lon, lat, h)[:2]
+        return row, col
+
+    def geodetic_localization(
+        self, row: np.ndarray, col: np.ndarray, h: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Image points (N,) at ellipsoidal heights (N,) -> (lon, lat, converged), the RPC's exact localisation."""
+        lon, lat, ok = self.rpc.localization(row, col, h)[:3]
+        return lon, lat, ok
+
+    def geodetic_localization_on_dem(
+        self, row: np.ndarray, col: np.ndarray, dem: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Image points (N,) -> (lon, lat, h, found): the first hit on a lon/lat DEM of ellipsoidal heights
+        (:func:`explorer.rpc.dem.localization_on_dem`)."""
+        from explorer.rpc.dem import localization_on_dem
+
+        return localization_on_dem(self.rpc, row, col, dem)
 
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
