@@ -221,7 +221,8 @@ class OrthoGeometry:
     """Ground (lon, lat) on a surface -> image (row, col) of any :class:`~explorer.sensor.Sensor`.
 
     A sensor declaring ``has_geodetic_projection`` (an RPC, :func:`projects_geodetic`) is asked in
-    longitude, latitude and ellipsoidal height; any other through local ENU ground points of its frame.  A
+    longitude, latitude and ellipsoidal height (valid: on the image); any other through local ENU ground points of
+    its frame (:meth:`~explorer.sensor.Sensor.project`: valid as the sensor says).  A
     best-scanline method is a sensor too (:class:`explorer.methods.adapter.MethodSensor`).
 
     Parameters
@@ -244,13 +245,13 @@ class OrthoGeometry:
             ok = np.isfinite(h)
             if ok.any():
                 row[ok], col[ok] = self.sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])  # type: ignore[attr-defined]
-        else:
-            ground = self.surface.ground(self.sensor, lon, lat)
-            ok = np.all(np.isfinite(ground), axis=1)
-            if ok.any():
-                row[ok], col[ok] = self.sensor.ground_to_image(ground[ok])
-        nr, nc = self.image_shape
-        valid = (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)  # NaN: False
+            nr, nc = self.image_shape
+            return row, col, (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)  # NaN: False
+        ground = self.surface.ground(self.sensor, lon, lat)
+        ok = np.all(np.isfinite(ground), axis=1)
+        valid = np.zeros(lon.shape, dtype=bool)
+        if ok.any():
+            row[ok], col[ok], valid[ok] = self.sensor.project(ground[ok])  # the sensor's own validity flags
         return row, col, valid
 
     def image_to_lonlat(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -177,6 +177,9 @@ class _LocalFrameOnly:
     def ground_to_image(self, ground):
         return self._s.ground_to_image(ground)
 
+    def project(self, ground):
+        return self._s.project(ground)
+
     def image_to_ground(self, row, col, *, height=None):
         return self._s.image_to_ground(row, col, height=height)
 

@@ -12,16 +12,17 @@ Not a method module: it registers nothing (the registry discovers it and finds n
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from explorer.errors import InputError
 from explorer.methods.base import BestScanlineMethod, create
 from explorer.points import image_grid
+from explorer.sensor import Localization, Projection
 
 if TYPE_CHECKING:
-    from explorer.geometry.frames import LocalFrame
+    from explorer.geometry.frames import Ellipsoid, LocalFrame
     from explorer.points import PointSet
     from explorer.scene import Scene
 
@@ -46,7 +47,9 @@ class MethodSensor:
     outside a learned model's domain): such points are flagged, never returned bare.
     """
 
-    has_polynomial_exterior = False  # the method answers, not the polynomials
+    #: The method answers ground to image, not the polynomials; the adapter offers no line geometry of its own.
+    has_polynomial_exterior: ClassVar[bool] = False
+    has_line_geometry: ClassVar[bool] = False
 
     def __init__(self, scene: Scene, method: BestScanlineMethod) -> None:
         self.scene = scene
@@ -100,6 +103,10 @@ class MethodSensor:
         return self.scene.frame
 
     @property
+    def body(self) -> Ellipsoid:
+        return self.scene.body
+
+    @property
     def n_rows(self) -> int:
         return self.scene.n_rows
 
@@ -113,11 +120,22 @@ class MethodSensor:
         valid = res.valid
         return np.where(valid, res.row, np.nan), np.where(valid, res.col, np.nan)
 
+    def project(self, ground: np.ndarray) -> Projection:
+        """(row, col) and the method's validity (converged, on the image, inside a learned model's domain)."""
+        res = self.method.ground_to_image(ground)
+        return Projection(res.row, res.col, res.valid)
+
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
     ) -> np.ndarray:
         """The scene's own image to ground (a method only maps ground to image)."""
         return self.scene.image_to_ground(row, col, height=height)
+
+    def localize(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> Localization:
+        """The scene's own image to ground with flags."""
+        return self.scene.localize(row, col, height=height)
 
     def footprint(self, height: float | None = None) -> np.ndarray:
         return self.scene.footprint(height)
