@@ -12,6 +12,7 @@ import numpy as np
 
 from explorer.methods.base import BestScanlineMethod, ScanlineResult
 from explorer.points import PointSet
+from explorer.sensor import StandIn
 
 
 @dataclass
@@ -115,3 +116,37 @@ def evaluate_method(
         residual_col=dc,
         evaluated_index=index,
     )
+
+
+def evaluate_stand_in(stand_in: StandIn, check: PointSet, name: str = "stand-in") -> tuple[Evaluation, np.ndarray]:
+    """A stand-in model's error against the sensor at check points (exact rows / columns: the sensor's).
+
+    Parameters
+    ----------
+    stand_in : explorer.sensor.StandIn
+        E.g. the MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG model.
+    check : PointSet
+        Ground points in the sensor's frame with the sensor's own image positions.
+    name : str
+        The evaluation's method name.
+
+    Returns
+    -------
+    Evaluation
+        Residuals stand-in minus sensor (NaN where the stand-in gives no point), no CE.
+    status : ndarray of int8 (N,)
+        0 where the stand-in gives a point, 3 (no image point) elsewhere.
+    """
+    t0 = time.perf_counter()
+    row, col = stand_in.ground_to_image(check.ground)
+    dt = time.perf_counter() - t0
+    dr, dc = row - check.row, col - check.col
+    ok = np.isfinite(dr) & np.isfinite(dc)
+    dr, dc = np.where(ok, dr, np.nan), np.where(ok, dc, np.nan)
+    n = len(check)
+    ev = Evaluation(method=name, n_scops=0, n_scps=n, n_evaluated=n, rmse_px=_rms(dr[ok]),
+                    dr_max_px=float(np.max(np.abs(dr[ok]))) if ok.any() else float("nan"),
+                    col_rmse_px=_rms(dc[ok]), fit_s=0.0, locate_s=dt, ce_evals_per_point=0.0,
+                    converged_frac=float(ok.mean()) if n else 0.0, valid_frac=float(ok.mean()) if n else 0.0,
+                    residual_row=dr, residual_col=dc, evaluated_index=np.arange(n))
+    return ev, np.where(ok, 0, 3).astype(np.int8)

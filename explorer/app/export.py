@@ -31,7 +31,7 @@ from typing import Any, cast
 import numpy as np
 
 from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, _Recording, point_status
-from explorer.evaluate import Evaluation, evaluate_method
+from explorer.evaluate import Evaluation, evaluate_method, evaluate_stand_in
 from explorer.io_atomic import atomic_folder
 from explorer.methods.base import BestScanlineMethod
 from explorer.points import PointSet
@@ -87,26 +87,6 @@ def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
     proj = scene.project(scps.ground)
     keep = np.flatnonzero(proj.valid)
     return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
-
-
-def stand_in_evaluation(stand_in: StandIn, scps: PointSet) -> tuple[Evaluation, np.ndarray]:
-    """The stand-in's error against the sensor at the check points (an :class:`Evaluation` named
-    :data:`STAND_IN_METHOD`, and its status: 0 where the stand-in gives a point on the image, else 3)."""
-    t0 = time.perf_counter()
-    row, col = stand_in.ground_to_image(scps.ground)
-    dt = time.perf_counter() - t0
-    dr, dc = row - scps.row, col - scps.col
-    ok = np.isfinite(dr) & np.isfinite(dc)
-    dr, dc = np.where(ok, dr, np.nan), np.where(ok, dc, np.nan)
-    n = len(scps)
-    ev = Evaluation(method=STAND_IN_METHOD, n_scops=0, n_scps=n, n_evaluated=n,
-                    rmse_px=float(np.sqrt(np.mean(dr[ok] ** 2))) if ok.any() else math.nan,
-                    dr_max_px=float(np.max(np.abs(dr[ok]))) if ok.any() else math.nan,
-                    col_rmse_px=float(np.sqrt(np.mean(dc[ok] ** 2))) if ok.any() else math.nan,
-                    fit_s=0.0, locate_s=dt, ce_evals_per_point=0.0, converged_frac=float(ok.mean()) if n else 0.0,
-                    valid_frac=float(ok.mean()) if n else 0.0, residual_row=dr, residual_col=dc,
-                    evaluated_index=np.arange(n))
-    return ev, np.where(ok, 0, 3).astype(np.int8)
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
@@ -179,7 +159,7 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     map_status = dict(status)
     stand_in_summary: dict[str, Any] | None = None
     if stand_in is not None:
-        ev_s, st_s = stand_in_evaluation(stand_in, scps)
+        ev_s, st_s = evaluate_stand_in(stand_in, scps, STAND_IN_METHOD)
         maps[STAND_IN_METHOD], map_status[STAND_IN_METHOD] = ev_s, st_s
         stand_in_summary = {"model": stand_in.label, "against": source.get("truth"),
                             **method_summary(ev_s, st_s, FitRecord(None, 0.0, 0, {}), None)}

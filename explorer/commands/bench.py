@@ -59,11 +59,13 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
 FILE_SOURCE_HELP = {
     "rpc": "the scene resected from this RPC file instead of a preset",
     "scene": "a scene JSON (any `pushbroom scene` output) instead of a preset",
-    "dimap": "the MPC scene of a Pleiades DIMAP rigorous model",
-    "dg": "the MPC scene of a DigitalGlobe/Maxar XML rigorous model",
-    "isd": "the MPC scene of a USGS CSM line-scan ISD",
+    "dimap": "a Pleiades DIMAP rigorous model (the truth; its vendor RPC is measured as the stand-in)",
+    "dg": "a DigitalGlobe/Maxar XML rigorous model (the truth; its vendor RPC is measured as the stand-in)",
+    "isd": "a USGS CSM line-scan ISD: the camera itself (the MPC fitted to it is measured as the stand-in)",
 }
 FILE_SOURCES = tuple(FILE_SOURCE_HELP)
+STAND_IN_POINTS = 50_000
+"""SCPs on which the bench measures a file source's stand-in (the model-vs-model map) against the sensor."""
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -86,13 +88,32 @@ def cmd_bench(args: argparse.Namespace) -> int:
         methods, counts = resolve_methods(args.methods), parse_counts(args.scops)
         source = source_from_args(args, degree=args.degree, n_gcps=args.gcps)
         print(f"scene: {source.label} ({source.scene.n_rows} x {source.scene.n_columns} pixels)")
+        print(f"truth: {source.info.get('truth')}")
         if source.report is not None:
             print(source.report.summary())
+        coverage = source.info.get("dem_coverage")
+        if coverage:
+            print(f"DEM covers {100 * coverage['fraction']:.1f} % of the image ({coverage['covered_points']} of "
+                  f"{coverage['grid_points']} grid points); {coverage['note']}")
         result = bench_scene(
             source.scene, source.label, methods, counts, args.scps,
             seed=args.seed, max_points_slow=args.max_points_slow, slow_seconds=args.slow_seconds,
             method_params=params,
         )
+        result.doc["truth"] = source.info.get("truth")
+        result.doc["dem_coverage"] = coverage
+        if source.stand_in is not None:
+            from explorer.evaluate import evaluate_stand_in
+            from explorer.points import simulate_points
+
+            check = simulate_points(source.scene, min(args.scps, STAND_IN_POINTS), kind="scp", seed=args.seed)
+            ev, _ = evaluate_stand_in(source.stand_in, check)
+            result.doc["stand_in"] = {"model": source.stand_in.label, "n": ev.n_evaluated,
+                                      "valid_frac": ev.valid_frac, **{k: v if v == v else None for k, v in (
+                                          ("rmse_row_px", ev.rmse_px), ("max_row_px", ev.dr_max_px),
+                                          ("rmse_col_px", ev.col_rmse_px))}}
+            print(f"stand-in: {source.stand_in.label} vs the sensor on {ev.n_evaluated:,} SCPs: row RMSE "
+                  f"{ev.rmse_px:.4g} px, max {ev.dr_max_px:.4g} px; column RMSE {ev.col_rmse_px:.4g} px")
     else:
         result = run_bench(
             args.preset or "WSU", args.methods, args.scops, args.scps, seed=args.seed, relief_m=args.relief,

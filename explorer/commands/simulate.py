@@ -19,6 +19,19 @@ if TYPE_CHECKING:
     from explorer.scene import Scene
 
 
+FILE_SOURCES = ("scene", "isd", "dimap", "dg")
+"""File options :func:`scene_from_args` reads (each where the command offers it)."""
+PERTURBATIONS = {"relief": 0.0, "relief_seed": 0, "attitude_rate_scale": 1.0, "jitter_scale": 1.0}
+"""Preset perturbation options and their defaults."""
+
+
+def add_file_sources(p: argparse.ArgumentParser) -> None:
+    """``--isd``, ``--dimap``, ``--dg``: real sensors, read by :func:`explorer.sources.load_source`."""
+    p.add_argument("--isd", default=None, type=existing_file, help="a USGS CSM line-scan ISD (JSON): the camera")
+    p.add_argument("--dimap", default=None, type=existing_file, help="a Pleiades DIMAP: the rigorous model")
+    p.add_argument("--dg", default=None, type=existing_file, help="a DigitalGlobe / Maxar XML: the rigorous model")
+
+
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The options every command that builds a scene accepts."""
     p.add_argument("--preset", default=None, help="preset id (default: the presets file's default, WSU)")
@@ -30,12 +43,31 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def scene_from_args(args: argparse.Namespace, preset: str | None = None) -> Scene:
-    """Build the scene named by ``--scene`` or ``--preset`` and the perturbation options."""
-    from explorer.presets import build_scene
-    from explorer.real.linescan import load_scene
+    """The scene of the command's source options, through the one loader of every command
+    (:func:`explorer.sources.load_source`): a file (``--scene``, and where the command offers them ``--isd``,
+    ``--dimap``, ``--dg``) as that loader reads it -- the sensor itself, the truth -- or the preset with the
+    perturbation options.
 
-    if getattr(args, "scene", None):
-        return load_scene(args.scene)  # an MPC or a rigorous line-scan scene file
+    Raises
+    ------
+    InputError
+        Two sources, or perturbation options (which shape a synthetic preset) with a file.
+    """
+    from explorer.errors import InputError
+    from explorer.presets import build_scene
+    from explorer.sources import load_source
+
+    files = [(k, getattr(args, k)) for k in FILE_SOURCES if getattr(args, k, None) is not None]
+    if len(files) > 1 or (files and (preset or getattr(args, "preset", None))):
+        given = [f"--{k}" for k, _ in files] + (["--preset"] if preset or getattr(args, "preset", None) else [])
+        raise InputError("give one source: " + " and ".join(given) + " were given")
+    if files:
+        changed = [f"--{n.replace('_', '-')}" for n, default in PERTURBATIONS.items()
+                   if getattr(args, n, default) != default]
+        if changed:
+            raise InputError(f"{', '.join(changed)} shape(s) a synthetic preset; not applicable to --{files[0][0]}")
+        kind, value = files[0]
+        return load_source(kind, value).scene
     return build_scene(
         preset or args.preset,
         relief_m=args.relief,
@@ -109,8 +141,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_presets)
 
-    p = sub.add_parser("simulate", help="simulate SCOPs/SCPs on a preset and save them as .npz")
+    p = sub.add_parser("simulate", help="simulate SCOPs/SCPs on a preset or a sensor file and save them as .npz")
     add_scene_arguments(p)
+    add_file_sources(p)
     p.add_argument("--n", type=positive_int, default=100, help="about this many points per layer (>= 4)")
     p.add_argument("--layers", type=positive_int, default=1, help="height layers of a 3D grid")
     p.add_argument("--kind", choices=("scop", "scp"), default="scop")

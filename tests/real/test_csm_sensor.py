@@ -151,3 +151,24 @@ def test_real_isd_truth_is_the_camera(isd):
         assert res.valid.all()
         assert np.max(np.abs(res.row - (truth.line - 0.5))) < 1e-6, name
         assert np.max(np.abs(res.col - (truth.sample - 0.5))) < 1e-6, name
+
+
+def test_simulate_reads_an_isd_through_the_one_loader(tmp_path):
+    """``pushbroom simulate --isd``: the same path from file to sensor as explore and bench; the points are
+    the camera's (its own ground_to_image gives their rows), and preset perturbations are refused on a file."""
+    from explorer.cli import main
+    from explorer.errors import InputError
+    from explorer.points import PointSet
+
+    out = tmp_path / "p.npz"
+    assert main(["simulate", "--isd", str(DATA / "orbitalLineScan.json"), "--n", "20", "--out", str(out)]) == 0
+    pts = PointSet.load_npz(out)
+    cam = read_isd(DATA / "orbitalLineScan.json")
+    truth = cam.ground_to_image(csm_scene(cam).to_body_fixed(pts.ground))
+    np.testing.assert_allclose(truth.line - 0.5, pts.row, atol=1e-7)
+    from explorer.commands.simulate import scene_from_args
+
+    args = __import__("argparse").Namespace(preset=None, scene=None, isd=str(DATA / "orbitalLineScan.json"),
+                                            relief=5.0, relief_seed=0, attitude_rate_scale=1.0, jitter_scale=1.0)
+    with pytest.raises(InputError, match="--relief"):
+        scene_from_args(args)
