@@ -21,7 +21,7 @@ from explorer.errors import InputError
 from explorer.rpc.model import RationalFunctionModel
 from explorer.rpc.sensor import RPCSensor
 from explorer.scene import Scene
-from explorer.sensor import Sensor
+from explorer.sensor import Sensor, has_line_geometry
 from explorer.stereo import _kernels
 
 #: Newton iterations of the compiled RPC localisation at most.
@@ -172,13 +172,24 @@ def inside_image(sensor: Sensor, row: np.ndarray, col: np.ndarray) -> np.ndarray
 
 
 def perspective_centres(sensor: Sensor, row: np.ndarray, col: np.ndarray) -> np.ndarray | None:
-    """Perspective centres (N, 3) ECEF of image points where the sensor has them (a :class:`Scene`: MPC,
-    rigorous line-scan), else None (an RPC has no sensor position)."""
-    if not isinstance(sensor, Scene):
+    """Perspective centres (N, 3) ECEF of image points where the sensor declares line geometry
+    (:func:`explorer.sensor.has_line_geometry`: MPC, rigorous line-scan, CSM), else None (an RPC has no sensor
+    position)."""
+    if not has_line_geometry(sensor):
         return None
-    origin, _ = sensor.rays(np.asarray(row, dtype=np.float64), np.asarray(col, dtype=np.float64))
-    return sensor.frame.enu_to_ecef(origin)
+    line_sensor: Any = sensor
+    centres = line_sensor.perspective_centre(line_sensor.line_time(np.asarray(row, dtype=np.float64)))
+    return sensor.frame.enu_to_ecef(np.asarray(centres, dtype=np.float64))
 
 
-__all__ = ["as_sensor", "ecef_to_geodetic", "geodetic_to_ecef", "inside_image", "localise", "localise_geodetic",
-           "mean_height", "perspective_centres", "project", "project_geodetic", "rpc_arrays", "rpc_model"]
+def check_same_body(left: Sensor, right: Sensor) -> None:
+    """Raise :class:`InputError` when the two sensors' frames are on different bodies."""
+    body_l = getattr(left.frame, "body", None)
+    body_r = getattr(right.frame, "body", None)
+    if body_l != body_r:
+        raise InputError(f"the two images are on different bodies ({body_l} and {body_r})")
+
+
+__all__ = ["as_sensor", "check_same_body", "ecef_to_geodetic", "geodetic_to_ecef", "inside_image", "localise",
+           "localise_geodetic", "mean_height", "perspective_centres", "project", "project_geodetic", "rpc_arrays",
+           "rpc_model"]

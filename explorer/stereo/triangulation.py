@@ -40,6 +40,7 @@ from explorer.stereo import _kernels
 from explorer.stereo.sensors import (
     RPC_MAX_ITER,
     as_sensor,
+    check_same_body,
     ecef_to_geodetic,
     inside_image,
     localise,
@@ -151,10 +152,12 @@ def triangulate(
     Raises
     ------
     InputError
-        A sensor of an unknown type, pixel arrays of different lengths, or a NaN/infinite pixel.
+        A sensor of an unknown type, sensors on two bodies, pixel arrays of different lengths, or a NaN/infinite
+        pixel.
     """
     left_s = as_sensor(left, "left")
     right_s = as_sensor(right, "right")
+    check_same_body(left_s, right_s)
     lr, lc, rr, rc = (_pixels(v, n) for v, n in ((left_rows, "left_rows"), (left_cols, "left_cols"),
                                                  (right_rows, "right_rows"), (right_cols, "right_cols")))
     if not (lr.size == lc.size == rr.size == rc.size):
