@@ -1,4 +1,4 @@
-"""``refine``: adjust an image-space correction of RPCs to control, check and tie points.
+"""``refine``: adjust RPCs (image-space corrections) or MPC scenes (exterior offsets and drifts) to points.
 
 ``pushbroom refine SOURCE --gcps gcps.csv [--model shift|affine|poly2] [--check check.csv] --out DIR``
 (one image) and ``pushbroom refine --images A B [C ...] --ties ties.csv [--gcps gcps.csv] --out DIR``
@@ -36,7 +36,7 @@ def cmd_refine(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from explorer.errors import InputError
-    from explorer.refine.adjust import refine_rpcs
+    from explorer.refine.adjust import refine_images
     from explorer.refine.points_io import CONTROL_COLUMNS, TIE_COLUMNS, read_points_csv
     from explorer.rpc import read_rpc
 
@@ -47,9 +47,6 @@ def cmd_refine(args: argparse.Namespace) -> int:
         images = [args.source]
     if not images:
         raise InputError("no image: give SOURCE or --images A B ...")
-    if args.model.startswith("attitude"):
-        raise InputError(f"--model {args.model} needs a rigorous or CSM sensor; refine adjusts RPC files "
-                         "(shift, affine, poly2) only")
     if args.ties and len(images) < 2:
         raise InputError("--ties needs two images or more (--images A B ...)")
     if not args.gcps and not args.ties:
@@ -57,12 +54,17 @@ def cmd_refine(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {args.out}: exists and is not a folder")
-    rpcs = [read_rpc(p) for p in images]
+    if args.model.startswith("attitude"):  # exterior corrections of MPC scene files (pushbroom scene ...)
+        from explorer.real.linescan import load_scene
+
+        sensors: list = [load_scene(p) for p in images]
+    else:
+        sensors = [read_rpc(p) for p in images]
     names = [Path(p).name for p in images]
     if len(set(names)) != len(names):
         names = list(images)
-    refinement = refine_rpcs(
-        rpcs,
+    refinement = refine_images(
+        sensors,
         model=args.model,
         control=read_points_csv(args.gcps, CONTROL_COLUMNS) if args.gcps else None,
         ties=read_points_csv(args.ties, TIE_COLUMNS) if args.ties else None,
@@ -100,12 +102,15 @@ def register(subparsers: Any) -> None:
                     "points and control points (Levenberg-Marquardt, robust loss). Pixels are 0-based, "
                     "integer = pixel centre.",
     )  # fmt: skip
-    p.add_argument("source", nargs="?", type=existing_file, help="RPC file of one image")
-    p.add_argument("--images", nargs="+", type=existing_file, metavar="RPC", help="RPC files of several images")
+    p.add_argument("source", nargs="?", type=existing_file,
+                   help="RPC file of one image (MPC scene JSON with --model attitude / attitude-drift)")
+    p.add_argument("--images", nargs="+", type=existing_file, metavar="FILE", help="files of several images")
     p.add_argument("--gcps", type=existing_file, help="control points CSV: id,lon,lat,h,row,col[,image]")
     p.add_argument("--ties", type=existing_file, help="tie points CSV: id,image,row,col")
     p.add_argument("--check", type=existing_file, help="check points CSV: id,lon,lat,h,row,col[,image]")
-    p.add_argument("--model", choices=MODELS, default="affine", help="correction model (default affine)")
+    p.add_argument("--model", choices=MODELS, default="affine",
+                   help="RPC: shift, affine (default), poly2; MPC scene: attitude (position and angle offsets), "
+                        "attitude-drift (and their rates)")
     p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a measured coordinate, px")
     p.add_argument("--sigma-ground", type=_non_negative, default=0.0,
                    help="sigma of control points' ground coordinates, m (0 = fixed; default)")

@@ -4,7 +4,7 @@
 - :mod:`explorer.refine.torch_rpc` -- the RPC's ground to image in torch (float64), autograd Jacobians;
 - :mod:`explorer.refine.bundle` -- Levenberg-Marquardt bundle adjustment with a robust loss (Schur
   complement over the ground points), sigma0 and covariances;
-- :mod:`explorer.refine.adjust` -- :func:`refine_rpcs`, the report and its files;
+- :mod:`explorer.refine.adjust` -- :func:`refine_images`, the report and its files;
 - :mod:`explorer.refine.fold` -- the correction folded into an RPC file;
 - :mod:`explorer.refine.points_io` -- control/check/tie point CSV files.
 

@@ -1,15 +1,17 @@
-"""Refine RPCs to control, check and tie points: the adjustment, its report and its files.
+"""Refine image models to control, check and tie points: the adjustment, its report and its files.
 
-:func:`refine_rpcs` adjusts an image-space correction (:mod:`explorer.refine.corrections`) of one or
-several RPCs to control points (ground known to ``sigma_ground_m``, or fixed) and tie points (ground
-unknown) by :func:`explorer.refine.bundle.bundle_adjust`, and returns a :class:`Refinement`:
+:func:`refine_images` adjusts a correction of one or several images' models (an image-space correction
+of RPCs, :mod:`explorer.refine.corrections`; the exterior orientation of MPC scenes,
+:mod:`explorer.refine.torch_scene`) to control points (ground known to ``sigma_ground_m``, or fixed)
+and tie points (ground unknown) by :func:`explorer.refine.bundle.bundle_adjust`, and returns a :class:`Refinement`:
 
 - residuals ``measured - model`` of every observation before and after, its role (``control``,
   ``check``, ``tie``) and outlier flag;
 - the parameters with their a posteriori sigmas and correlations, ``sigma0``;
 - RMSEs per image coordinate, ``sqrt(mean((d_row^2 + d_col^2) / 2))`` over the points that are not
   outliers, in pixels (the noise of one coordinate when the model fits);
-- the adjusted RPCs with the correction folded in (:func:`explorer.refine.fold.fold_correction`).
+- the adjusted models (:mod:`explorer.refine.images`): RPCs with the correction folded in
+  (:func:`explorer.refine.fold.fold_correction`), scenes with corrected coefficients (a JSON sidecar).
 
 Check points are kept apart from control: with one image they take no part in the adjustment and are
 projected by the adjusted model; with several images, a check point measured in two images or more
@@ -36,22 +38,18 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.refine.bundle import BundleProblem, BundleResult, bundle_adjust, metres_per_degree
-from explorer.refine.corrections import CORRECTION_PARAMETERS, correction_names
-from explorer.refine.fold import FoldResult, fold_correction
+from explorer.refine.images import RPCImage, SceneImage, image_adapter
 from explorer.refine.points_io import PointTable
-from explorer.rpc.model import RationalFunctionModel
 
-__all__ = ["Refinement", "image_size", "refine_rpcs"]
+__all__ = ["Refinement", "image_size", "refine_images"]
 
 #: RMSE definition written into every report.
 RMSE_DEFINITION = "per image coordinate: sqrt(mean((d_row^2 + d_col^2) / 2)) over non-outlier points, pixels"
 
 
-def image_size(rpc: RationalFunctionModel) -> tuple[int, int]:
-    """(rows, columns) of the RPC's image: the file's size, else ``2 * offset + 1`` (as RPCSensor)."""
-    if rpc.image_size is not None:
-        return int(rpc.image_size[0]), int(rpc.image_size[1])
-    return int(round(2 * rpc.row_offset + 1)), int(round(2 * rpc.col_offset + 1))
+def image_size(sensor: Any) -> tuple[int, int]:
+    """(rows, columns) of an RPC's image (the file's size, else ``2 * offset + 1``) or of a scene."""
+    return image_adapter(sensor).size
 
 
 def _rmse(d: np.ndarray) -> float | None:
@@ -60,15 +58,15 @@ def _rmse(d: np.ndarray) -> float | None:
 
 @dataclass
 class Refinement:
-    """Result of :func:`refine_rpcs`; :meth:`report` and :meth:`write` give it to other tools."""
+    """Result of :func:`refine_images`; :meth:`report` and :meth:`write` give it to other tools."""
 
     model: str
     image_names: list[str]
-    rpcs: list[RationalFunctionModel]
+    images: list[RPCImage | SceneImage]
     parameter_names: list[str]
     result: BundleResult
     observations: dict[str, Any]
-    adjusted: list[FoldResult]
+    adjusted: list[dict[str, Any]]
     settings: dict[str, Any]
     check_residuals_before: np.ndarray
     check_residuals_after: np.ndarray
@@ -95,7 +93,7 @@ class Refinement:
 
     def parameter_table(self) -> list[dict[str, Any]]:
         sigma = self.result.parameter_sigma
-        n_per = len(correction_names(self.model))
+        n_per = len(self.parameter_names) // len(self.images)
         return [{"name": name, "value": float(v), "sigma": float(s), "image": self.image_names[k // n_per]}
                 for k, (name, v, s) in enumerate(zip(self.parameter_names, self.parameters, sigma, strict=True))]
 
@@ -119,10 +117,9 @@ class Refinement:
             "iterations": res.iterations,
             "n_observations": int(res.outlier.size),
             "n_outliers": int(res.outlier.sum()),
-            "images": [{"name": n, "rows": image_size(r)[0], "columns": image_size(r)[1],
-                        "adjusted_rpc": f"adjusted_rpc_{k}.txt" if len(self.rpcs) > 1 else "adjusted_rpc.txt",
-                        "fold_max_residual_px": f.max_residual_px, "fold_rms_residual_px": f.rms_residual_px}
-                       for k, (n, r, f) in enumerate(zip(self.image_names, self.rpcs, self.adjusted, strict=True))],
+            "images": [{"name": n, "kind": im.kind, "rows": im.size[0], "columns": im.size[1],
+                        "adjusted_model": im.stem + (f"_{k}" if len(self.images) > 1 else "") + im.suffix, **f}
+                       for k, (n, im, f) in enumerate(zip(self.image_names, self.images, self.adjusted, strict=True))],
             "settings": self.settings,
         }
         if self.check_ground is not None:
@@ -155,9 +152,9 @@ class Refinement:
         return rows
 
     def write(self, out_dir: str | os.PathLike[str]) -> list[Path]:
-        """Write ``report.json``, ``points.csv``, ``parameters.csv`` and the adjusted RPC(s) into ``out_dir``."""
+        """Write ``report.json``, ``points.csv``, ``parameters.csv`` and the adjusted models into ``out_dir``
+        (RPC00B text ``adjusted_rpc[_K].txt`` for RPCs, scene JSON ``adjusted_scene[_K].json`` for scenes)."""
         from explorer.io_atomic import write_text_atomic
-        from explorer.rpc.writers import write_rpc00b_text
 
         folder = Path(out_dir)
         if folder.exists() and not folder.is_dir():
@@ -170,8 +167,8 @@ class Refinement:
             writer.writeheader()
             writer.writerows({k: (f"{v:.10g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows)
             written.append(write_text_atomic(folder / name, text.getvalue()))
-        for entry, fold in zip(self.report()["images"], self.adjusted, strict=True):
-            written.append(write_rpc00b_text(fold.rpc, folder / entry["adjusted_rpc"]))
+        for entry, image in zip(self.report()["images"], self.images, strict=True):
+            written.append(image.write(folder / entry["adjusted_model"]))
         return written
 
 
@@ -194,11 +191,11 @@ def _image_of(table: PointTable, names: list[str]) -> np.ndarray:
     return out
 
 
-def _check_inside(table: PointTable, image: np.ndarray, rpcs: list[RationalFunctionModel], role: str) -> None:
-    """InputError for a measurement outside its image or a ground point outside the RPC's domain."""
-    for k, rpc in enumerate(rpcs):
+def _check_inside(table: PointTable, image: np.ndarray, images: list[RPCImage | SceneImage], role: str) -> None:
+    """InputError for a measurement outside its image or a ground point outside the model's domain."""
+    for k, adapter in enumerate(images):
         sel = np.flatnonzero(image == k)
-        rows, cols = image_size(rpc)
+        rows, cols = adapter.size
         bad = sel[~((table.row[sel] >= -0.5) & (table.row[sel] <= rows - 0.5)
                     & (table.col[sel] >= -0.5) & (table.col[sel] <= cols - 0.5))]
         if bad.size:
@@ -207,24 +204,24 @@ def _check_inside(table: PointTable, image: np.ndarray, rpcs: list[RationalFunct
                              f"col {table.col[i]:g} is outside the image ({rows} x {cols} pixels)")
         if table.has_ground:
             assert table.lon is not None and table.lat is not None and table.h is not None
-            ok = rpc.ground_validity(table.lon[sel], table.lat[sel], table.h[sel])
+            ok = adapter.ground_ok(table.lon[sel], table.lat[sel], table.h[sel])
             if not ok.all():
                 i = int(sel[~ok][0])
                 raise InputError(f"{table.path}: {role} point {table.ids[i]!r} (line {i + 2}) at lon {table.lon[i]:g}, "
-                                 f"lat {table.lat[i]:g}, h {table.h[i]:g} is outside the RPC's validity domain")
+                                 f"lat {table.lat[i]:g}, h {table.h[i]:g} is outside the {adapter.what}'s validity "
+                                 "domain")
 
 
-def _initial_ground(rpcs: list[RationalFunctionModel], image: np.ndarray, row: np.ndarray,
+def _initial_ground(images: list[RPCImage | SceneImage], image: np.ndarray, row: np.ndarray,
                     col: np.ndarray) -> np.ndarray:
-    """Start (lon, lat, h) (N, 3) of tie points: each localised in its first image (``image``, (N,)) at that
-    RPC's height offset (vectorised per image)."""
+    """Start (lon, lat, h) (N, 3) of tie points: each localised in its first image (``image``, (N,)) at the
+    RPC's height offset or on the scene's terrain (vectorised per image)."""
     out = np.empty((image.size, 3))
-    for k, rpc in enumerate(rpcs):
+    for k, adapter in enumerate(images):
         sel = np.flatnonzero(image == k)
         if not sel.size:
             continue
-        h = np.full(sel.size, rpc.height_offset)
-        lon, lat, ok = rpc.localization(row[sel], col[sel], h)[:3]
+        lon, lat, h, ok = adapter.localise(row[sel], col[sel])
         if not ok.all():
             i = int(sel[~ok][0])
             raise InputError(f"a tie point at row {row[i]:g}, col {col[i]:g} does not localise in its image")
@@ -232,8 +229,8 @@ def _initial_ground(rpcs: list[RationalFunctionModel], image: np.ndarray, row: n
     return out
 
 
-def refine_rpcs(
-    rpcs: list[RationalFunctionModel],
+def refine_images(
+    sensors: list[Any],
     *,
     model: str = "affine",
     control: PointTable | None = None,
@@ -247,14 +244,17 @@ def refine_rpcs(
     outlier_probability: float = 0.999,
     max_iterations: int = 50,
 ) -> Refinement:
-    """Adjust an image-space correction of each RPC to control and tie points.
+    """Adjust a correction of each image's model to control and tie points.
 
     Parameters
     ----------
-    rpcs : list of RationalFunctionModel
-        The images (one for a resection to control points, several for a bundle adjustment).
-    model : {"shift", "affine", "poly2"}
-        Correction model (:mod:`explorer.refine.corrections`), the same for every image.
+    sensors : list of RationalFunctionModel or Scene
+        The images (one for a resection to control points, several for a bundle adjustment), all RPCs or
+        all MPC scenes (on one body).
+    model : str
+        The same for every image: for RPCs ``shift``, ``affine`` or ``poly2`` (image space,
+        :mod:`explorer.refine.corrections`); for MPC scenes ``attitude`` or ``attitude-drift`` (exterior
+        orientation, :mod:`explorer.refine.torch_scene`).
     control, ties, check : PointTable, optional
         Control points (``id,lon,lat,h,row,col`` [+ ``image``]), tie points (``id,image,row,col``) and
         check points (as control; never used as control).
@@ -274,17 +274,19 @@ def refine_rpcs(
     Raises
     ------
     InputError
-        Too few points, a point outside its image or the RPC's domain, an unknown image name, a
-        degenerate configuration, bad sigmas (one line naming the problem).
+        Too few points, a point outside its image or the model's domain, an unknown image name, a
+        degenerate configuration, bad sigmas, a model the sensor has not (one line naming the problem).
     """
-    import explorer.refine.torch_rpc as torch_rpc
-
-    if not rpcs:
+    if not sensors:
         raise InputError("no image to refine")
-    if model not in CORRECTION_PARAMETERS:
-        raise InputError(f"unknown RPC correction model {model!r} (one of {', '.join(CORRECTION_PARAMETERS)}; "
-                         "attitude models need a rigorous or CSM sensor)")
-    names = names or [f"image{k}" for k in range(len(rpcs))]
+    images = [image_adapter(s) for s in sensors]
+    if len({im.kind for im in images}) > 1 or len({im.axes for im in images}) > 1:
+        raise InputError("the images must be all RPCs or all scenes, on one body")
+    if model not in images[0].models:
+        other = " (attitude models need a rigorous sensor: an MPC scene)" if images[0].kind == "rpc" else ""
+        raise InputError(f"unknown {images[0].what} correction model {model!r} (one of "
+                         f"{', '.join(images[0].models)}){other}")
+    labels: list[str] = list(names) if names else [f"image{k}" for k in range(len(images))]
     if not (np.isfinite(sigma_px) and sigma_px > 0):
         raise InputError(f"pixel sigma must be a finite number > 0, got {sigma_px}")
     if not (np.isfinite(sigma_ground_m) and sigma_ground_m >= 0):
@@ -295,8 +297,9 @@ def refine_rpcs(
         raise InputError(f"{control.path}: control points need lon, lat, h")
     if check is not None and not check.has_ground:
         raise InputError(f"{check.path}: check points need lon, lat, h")
-    n_par = len(correction_names(model))
-    multi = len(rpcs) > 1
+    projectors = [im.projector(model) for im in images]
+    n_par = len(projectors[0].parameter_names)
+    multi = len(images) > 1
 
     point_key: dict[tuple[str, str], int] = {}  # (role, id) -> ground point index
     ground: list[np.ndarray] = []
@@ -306,8 +309,8 @@ def refine_rpcs(
     pending: list[tuple[int, int, float, float]] = []  # tie points: (ground index, first image, row, col)
 
     def add(table: PointTable, role: str, as_tie: bool) -> None:
-        image = _image_of(table, names)
-        _check_inside(table, image, rpcs, role)
+        image = _image_of(table, labels)
+        _check_inside(table, image, images, role)
         by_id: dict[str, list[int]] = {}
         for i, pid in enumerate(table.ids):
             by_id.setdefault(pid, []).append(i)
@@ -345,16 +348,16 @@ def refine_rpcs(
         # every check measurement is projected from its surveyed ground by the adjusted model; with several
         # images, those seen in two images or more also enter the adjustment as tie points
         assert check.lon is not None and check.lat is not None and check.h is not None
-        image = _image_of(check, names)
+        image = _image_of(check, labels)
         if multi:
             add(check, "check", True)
         else:
-            _check_inside(check, image, rpcs, "check")
+            _check_inside(check, image, images, "check")
         check_only.update(id=list(check.ids), image=image.tolist(), row=check.row.tolist(), col=check.col.tolist(),
                           ground=list(zip(check.lon, check.lat, check.h, strict=True)))
     if pending:
         idx, first, t_row, t_col = (np.asarray(v) for v in zip(*pending, strict=True))
-        starts = _initial_ground(rpcs, first.astype(np.int64), t_row.astype(float), t_col.astype(float))
+        starts = _initial_ground(images, first.astype(np.int64), t_row.astype(float), t_col.astype(float))
         for j, g in zip(idx, starts, strict=True):
             ground[int(j)] = g
     if not obs["id"]:
@@ -363,40 +366,37 @@ def refine_rpcs(
     if not multi and n_control * 2 <= n_par:
         raise InputError(f"too few control points: the {model} model has {n_par} parameters and needs at least "
                          f"{n_par // 2 + 1} points, got {n_control}")
-    projectors = [torch_rpc.TorchRPC(r, model) for r in rpcs]
     problem = BundleProblem(
         projectors=projectors,
-        initial_parameters=[np.zeros(n_par) for _ in rpcs],
+        initial_parameters=[np.zeros(n_par) for _ in images],
         ground=np.asarray(ground),
         ground_sigma_m=np.asarray(sigma_g)[:, None],
         image_index=np.asarray(obs["image"]),
         point_index=np.asarray(obs["point"]),
         measured=np.stack([obs["row"], obs["col"]], axis=1),
         sigma_px=np.asarray(sigma_px, dtype=np.float64),
+        axes=images[0].axes,
     )
-    base = list(correction_names(model))
-    stacked = [n if not multi else f"{names[k]}:{n}" for k in range(len(rpcs)) for n in base]
+    base = list(projectors[0].parameter_names)
+    stacked = [n if not multi else f"{labels[k]}:{n}" for k in range(len(images)) for n in base]
     result = bundle_adjust(problem, loss=loss, loss_scale=loss_scale, outlier_probability=outlier_probability,
                            max_iterations=max_iterations, parameter_names=stacked)
-    adjusted = [fold_correction(r, model, p) for r, p in zip(rpcs, result.parameters, strict=True)]
+    adjusted = [im.adjust(model, p) for im, p in zip(images, result.parameters, strict=True)]
 
-    # check points projected only (one image): residuals before and after by the folded-free correction
+    # check points: their surveyed ground projected by the model before and after (compiled paths)
     ck_before = np.zeros((0, 2))
     ck_after = np.zeros((0, 2))
     extra: dict[str, Any] = {}
     if check_only["id"]:
-        from explorer.refine.corrections import apply_correction
-
         g = np.asarray(check_only["ground"])
         img = np.asarray(check_only["image"])
         measured = np.stack([check_only["row"], check_only["col"]], axis=1)
         before = np.empty_like(measured)
         after = np.empty_like(measured)
-        for k, rpc in enumerate(rpcs):
+        for k, adapter in enumerate(images):
             sel = img == k
-            row, col = rpc.projection(g[sel, 0], g[sel, 1], g[sel, 2])
-            before[sel] = np.stack([row, col], axis=1)
-            after[sel] = np.stack(apply_correction(model, result.parameters[k], row, col), axis=1)
+            before[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], model, None)
+            after[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], model, result.parameters[k])
         flagged = {(pid, k) for pid, k, r, o in zip(obs["id"], obs["image"], obs["role"], result.outlier,
                                                     strict=True) if r == "check" and o}
         check_only["outlier"] = [int((pid, k) in flagged) for pid, k in zip(check_only["id"], check_only["image"],
@@ -405,16 +405,17 @@ def refine_rpcs(
         ck_before, ck_after = (measured - before)[keep], (measured - after)[keep]
         extra["check_only"] = check_only
         extra["check_residuals"] = (measured - before, measured - after)
-    check_ground = _check_ground(check, obs, result) if multi and check is not None else None
+    check_ground = _check_ground(check, obs, result, images[0].axes) if multi and check is not None else None
     settings = {"sigma_px": sigma_px, "sigma_ground_m": sigma_ground_m, "loss": loss, "loss_scale_sigma": loss_scale,
                 "outlier_probability": outlier_probability,
                 "outlier_threshold_sigma": float(np.sqrt(-2.0 * np.log(1.0 - outlier_probability)))}
-    return Refinement(model=model, image_names=names, rpcs=list(rpcs), parameter_names=stacked, result=result,
+    return Refinement(model=model, image_names=labels, images=images, parameter_names=stacked, result=result,
                       observations=obs, adjusted=adjusted, settings=settings, check_residuals_before=ck_before,
                       check_residuals_after=ck_after, check_ground=check_ground, extra=extra)
 
 
-def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleResult) -> dict[str, Any]:
+def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleResult,
+                  axes: tuple[float, float]) -> dict[str, Any]:
     """Triangulated check points against their surveyed ground: errors (E, N, U metres) and predicted sigmas."""
     assert check.lon is not None and check.lat is not None and check.h is not None
     truth = {pid: (check.lon[i], check.lat[i], check.h[i]) for i, pid in enumerate(check.ids)}
@@ -424,7 +425,7 @@ def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleRe
         return {"n": 0}
     est = result.ground[points]
     tru = np.asarray([truth[ids[p]] for p in points])
-    m_lon, m_lat = metres_per_degree(tru[:, 1], tru[:, 2])
+    m_lon, m_lat = metres_per_degree(tru[:, 1], tru[:, 2], axes)
     err = np.stack([(est[:, 0] - tru[:, 0]) * m_lon, (est[:, 1] - tru[:, 1]) * m_lat, est[:, 2] - tru[:, 2]], axis=1)
     cov = result.ground_covariance_m[points]
     predicted = np.sqrt(np.einsum("jii->j", cov))

@@ -34,7 +34,7 @@ def test_refine_writes_the_report(gcps, tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--model", "poly2"], "too few control points: the poly2 model has 12 parameters"),
-    (["--model", "attitude"], "needs a rigorous or CSM sensor"),
+    (["--model", "attitude"], "not valid JSON"),  # attitude models refine MPC scene files
     (["--ties", "{gcps}"], "--ties needs two images"),
 ])
 def test_refine_bad_input_is_one_line(gcps, tmp_path, capsys, extra, message):
@@ -70,3 +70,35 @@ def test_refine_images_with_ties(tmp_path, capsys):
     assert main(["refine", str(PAIR[0]), "--images", str(PAIR[1]), "--gcps", str(tmp_path / "gcps.csv"),
                  "--out", str(out)]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+def test_refine_scene_attitude(tmp_path):
+    """An MPC scene file moved by known offsets: ``--model attitude`` writes the adjusted scene sidecar."""
+    import numpy as np
+
+    from explorer.presets import build_scene
+    from explorer.real.linescan import load_scene
+    from explorer.refine.points_io import PointTable
+    from explorer.refine.torch_scene import adjusted_scene
+
+    scene = build_scene("WSU")
+    scene.save(tmp_path / "scene.json")
+    true = np.array([3.0, -2.0, 1.0, 1e-5, -1e-5, 2e-5])
+    rng = np.random.default_rng(3)
+    n = 30
+    ground = scene.image_to_ground(rng.uniform(0, scene.n_rows - 1, n), rng.uniform(0, scene.n_columns - 1, n),
+                                   height=rng.uniform(-50, 50, n))
+    row, col = adjusted_scene(scene, "attitude", true).ground_to_image(ground)
+    lon, lat, h = scene.frame.enu_to_geodetic(ground)
+    write_points_csv(tmp_path / "gcps.csv", PointTable([f"g{i}" for i in range(n)], row + rng.normal(0, 0.3, n),
+                                                      col + rng.normal(0, 0.3, n), lon, lat, h))
+    out = tmp_path / "out"
+    assert main(["refine", str(tmp_path / "scene.json"), "--gcps", str(tmp_path / "gcps.csv"), "--model",
+                 "attitude", "--sigma-px", "0.3", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [p["name"] for p in report["parameters"]][:3] == ["position_e_m", "position_n_m", "position_u_m"]
+    assert report["control_rmse_px"] < 0.4 < report["control_rmse_px_before"]
+    adjusted = load_scene(out / "adjusted_scene.json")
+    values = np.array([p["value"] for p in report["parameters"]])
+    np.testing.assert_allclose(adjusted.exterior.position_coeffs[:, 0],
+                               scene.exterior.position_coeffs[:, 0] + values[:3], rtol=0, atol=1e-9)

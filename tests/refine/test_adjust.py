@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("torch")
 
 from explorer.errors import InputError  # noqa: E402
-from explorer.refine.adjust import refine_rpcs  # noqa: E402
+from explorer.refine.adjust import refine_images  # noqa: E402
 from explorer.refine.corrections import apply_correction  # noqa: E402
 from explorer.refine.fold import fold_correction  # noqa: E402
 from explorer.refine.points_io import read_points_csv  # noqa: E402
@@ -28,7 +28,7 @@ def acceptance():
     rpc = pleiades()
     control = simulate_points(rpc, 40, noise_px=NOISE, seed=101, prefix="gcp")
     check = simulate_points(rpc, 500, noise_px=NOISE, seed=202, prefix="chk")
-    return rpc, control, check, refine_rpcs([rpc], model="affine", control=control, check=check, sigma_px=NOISE)
+    return rpc, control, check, refine_images([rpc], model="affine", control=control, check=check, sigma_px=NOISE)
 
 
 def test_recovers_a_known_affine_bias_within_three_sigmas(acceptance):
@@ -100,7 +100,7 @@ def test_point_files_and_hostile_points(tmp_path):
     np.testing.assert_allclose(back.row, pts.row, atol=1e-6)
     pts.row[4] = 60000.0
     with pytest.raises(InputError, match=r"control point 'p4' \(line 6\) .* outside the image \(49826 x 39951"):
-        refine_rpcs([rpc], control=pts)
+        refine_images([rpc], control=pts)
     (tmp_path / "nan.csv").write_text("id,lon,lat,h,row,col\na,57.3,22.0,100,10,nan\n")
     with pytest.raises(InputError, match=r"nan.csv: line 2, column 'col': 'nan' is not a finite number"):
         read_points_csv(tmp_path / "nan.csv")
@@ -113,4 +113,4 @@ def test_point_files_and_hostile_points(tmp_path):
     far = simulate_points(rpc, 10, seed=7)
     far.lon[2] += 3.0
     with pytest.raises(InputError, match="'p2' .* outside the RPC's validity domain"):
-        refine_rpcs([rpc], control=far)
+        refine_images([rpc], control=far)

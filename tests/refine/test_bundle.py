@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip("torch")
 
 from explorer.errors import InputError  # noqa: E402
-from explorer.refine.adjust import refine_rpcs  # noqa: E402
+from explorer.refine.adjust import refine_images  # noqa: E402
 from explorer.refine.bundle import metres_per_degree, robust_weights  # noqa: E402
 from explorer.refine.points_io import PointTable  # noqa: E402
 from tests.refine.cases import TRUE_AFFINE, pleiades, simulate_points  # noqa: E402
@@ -20,7 +20,7 @@ def test_affine_to_fixed_ground_is_linear_least_squares():
     rpc = pleiades()
     pts = simulate_points(rpc, 25, noise_px=0.4, seed=11)
     sigma = 0.5
-    ref = refine_rpcs([rpc], model="affine", control=pts, sigma_px=sigma, loss="linear")
+    ref = refine_images([rpc], model="affine", control=pts, sigma_px=sigma, loss="linear")
     r0, c0 = rpc.projection(pts.lon, pts.lat, pts.h)
     design = np.column_stack([np.ones_like(r0), r0, c0])
     p_row, res_row = np.linalg.lstsq(design, pts.row - r0, rcond=None)[:2]
@@ -42,7 +42,7 @@ def test_shift_sigma_is_sigma0_over_root_n():
     rpc = pleiades()
     n = 30
     pts = simulate_points(rpc, n, model="shift", params=np.array([2.5, -1.0]), noise_px=0.3, seed=4)
-    ref = refine_rpcs([rpc], model="shift", control=pts, sigma_px=0.3)
+    ref = refine_images([rpc], model="shift", control=pts, sigma_px=0.3)
     r0, c0 = rpc.projection(pts.lon, pts.lat, pts.h)
     d = np.stack([pts.row - r0, pts.col - c0], axis=1)
     np.testing.assert_allclose(ref.parameters, d.mean(axis=0), atol=1e-10)
@@ -57,11 +57,11 @@ def test_gross_errors_are_flagged_and_do_not_bias(loss):
     pts = simulate_points(rpc, 40, noise_px=0.3, seed=21)
     bad = [3, 17, 30]
     pts.row[bad] += np.array([25.0, -40.0, 12.0])
-    ref = refine_rpcs([rpc], model="affine", control=pts, sigma_px=0.3, loss=loss)
+    ref = refine_images([rpc], model="affine", control=pts, sigma_px=0.3, loss=loss)
     assert np.flatnonzero(ref.result.outlier).tolist() == bad
     z = (ref.parameters - TRUE_AFFINE) / ref.result.parameter_sigma
     assert np.all(np.abs(z) < 3.0), z
-    clean = refine_rpcs([rpc], model="affine", control=PointTable(
+    clean = refine_images([rpc], model="affine", control=PointTable(
         [pts.ids[i] for i in range(40) if i not in bad], np.delete(pts.row, bad), np.delete(pts.col, bad),
         np.delete(pts.lon, bad), np.delete(pts.lat, bad), np.delete(pts.h, bad)), sigma_px=0.3, loss="linear")
     np.testing.assert_allclose(ref.parameters, clean.parameters, rtol=1e-8, atol=1e-10)
@@ -95,7 +95,7 @@ def test_degenerate_and_too_few_points_are_one_line_errors():
     rpc = pleiades()
     pts = simulate_points(rpc, 12, seed=2)
     with pytest.raises(InputError, match="too few control points: the affine model has 6 parameters"):
-        refine_rpcs([rpc], model="affine", control=PointTable(pts.ids[:3], pts.row[:3], pts.col[:3],
+        refine_images([rpc], model="affine", control=PointTable(pts.ids[:3], pts.row[:3], pts.col[:3],
                                                               pts.lon[:3], pts.lat[:3], pts.h[:3]))
     # every point on one image column: row_per_col cannot be told from the shift
     g = np.stack([pts.lon, pts.lat, pts.h], axis=1)
@@ -104,8 +104,8 @@ def test_degenerate_and_too_few_points_are_one_line_errors():
     row, col = rpc.projection(lon, lat, g[:, 2])
     line = PointTable(pts.ids, row, col, lon, lat, g[:, 2])
     with pytest.raises(InputError, match="degenerate configuration.*(row_per_col|row_shift)"):
-        refine_rpcs([rpc], model="affine", control=line)
-    refine_rpcs([rpc], model="shift", control=line)  # a shift is determined by these points
+        refine_images([rpc], model="affine", control=line)
+    refine_images([rpc], model="shift", control=line)  # a shift is determined by these points
 
 
 def test_bad_sigmas_and_models():
@@ -115,4 +115,4 @@ def test_bad_sigmas_and_models():
                             ({"model": "attitude"}, "attitude models need a rigorous"),
                             ({"loss": "l1"}, "unknown robust loss"), ({"loss_scale": 0.0}, "loss scale")):
         with pytest.raises(InputError, match=message):
-            refine_rpcs([rpc], control=pts, **kwargs)
+            refine_images([rpc], control=pts, **kwargs)

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("torch")
 
 from explorer.errors import InputError  # noqa: E402
-from explorer.refine.adjust import refine_rpcs  # noqa: E402
+from explorer.refine.adjust import refine_images  # noqa: E402
 from explorer.refine.points_io import PointTable  # noqa: E402
 from explorer.rpc import read_rpc  # noqa: E402
 from tests.refine.cases import PAIR, TRUE_PAIR, simulate_pair_points  # noqa: E402
@@ -24,7 +24,7 @@ def pair():
     ties = simulate_pair_points(rpcs, 300, ground_known=False, prefix="t", rng=rng)
     gcps = simulate_pair_points(rpcs, 6, ground_known=True, prefix="g", rng=rng)
     check = simulate_pair_points(rpcs, 60, ground_known=True, prefix="c", rng=rng)
-    ref = refine_rpcs(rpcs, model="affine", control=gcps, ties=ties, check=check, sigma_px=NOISE,
+    ref = refine_images(rpcs, model="affine", control=gcps, ties=ties, check=check, sigma_px=NOISE,
                       names=[p.name for p in PAIR])
     return rpcs, ties, gcps, check, ref
 
@@ -74,7 +74,7 @@ def test_tie_point_in_one_image_is_an_error(pair):
     one = PointTable(ties.ids[:1] + ties.ids[300:310], np.r_[ties.row[:1], ties.row[300:310]],
                      np.r_[ties.col[:1], ties.col[300:310]], image=[ties.image[0]] + ties.image[300:310])
     with pytest.raises(InputError, match="tie point 't1' is measured in one image only"):
-        refine_rpcs(rpcs, model="affine", control=gcps, ties=one)
+        refine_images(rpcs, model="affine", control=gcps, ties=one)
     with pytest.raises(InputError, match="an 'image' column is needed with several images"):
-        refine_rpcs(rpcs, model="shift", control=PointTable(gcps.ids, gcps.row, gcps.col, gcps.lon, gcps.lat,
+        refine_images(rpcs, model="shift", control=PointTable(gcps.ids, gcps.row, gcps.col, gcps.lon, gcps.lat,
                                                             gcps.h))
