@@ -163,3 +163,69 @@ def test_the_course_built_from_a_copied_notebooks_folder_works_offline(tmp_path)
     assert not problems, "\n".join(problems)
     assert sum(r.n_views for r in reports) >= sum("scene_view(" in s for s in sources.values())
     assert sum(r.n_figures for r in reports) >= n_files // 2
+
+
+@pytest.mark.slow
+@pytest.mark.browser
+def test_a_double_click_in_jupyterlab_opens_a_course_file_as_a_notebook(tmp_path):
+    """JupyterLab (this venv's, with ``notebooks/jupyterlab_overrides.json`` as its settings overrides, which
+    ``./run.sh setup`` installs) on a copy of notebooks/: double-clicking ``01_*.py`` in the file browser opens a
+    notebook (cells), not a text editor; and nothing in the folder changes."""
+    import json
+    import os
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from tests import course_pages
+
+    if not os.path.exists(course_pages.CHROMIUM):
+        pytest.skip("needs Debian chromium at /usr/bin/chromium")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    pytest.importorskip("jupyterlab")
+    root = _tracked_copy(tmp_path)
+    before = {name: (root / name).read_bytes() for name in _files(root)}
+    settings = tmp_path / "lab-settings"
+    settings.mkdir()
+    overrides = json.loads((NOTEBOOK_DIR / "jupyterlab_overrides.json").read_text(encoding="utf-8"))
+    (settings / "overrides.json").write_text(json.dumps(overrides), encoding="utf-8")
+    port = next(p for p in range(8170, 8180) if socket.socket().connect_ex(("127.0.0.1", p)) != 0)
+    token = "course-test"
+    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(tmp_path / "jupyter-config"),
+           "JUPYTERLAB_SETTINGS_DIR": str(tmp_path / "user-settings"),
+           "JUPYTERLAB_WORKSPACES_DIR": str(tmp_path / "workspaces")}
+    server = subprocess.Popen(
+        [sys.executable, "-m", "jupyterlab", "--no-browser", f"--port={port}", "--ServerApp.ip=127.0.0.1",
+         f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}",
+         f"--LabServerApp.app_settings_dir={settings}", "--allow-root"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        t0 = time.monotonic()
+        while socket.socket().connect_ex(("127.0.0.1", port)) != 0:
+            assert server.poll() is None and time.monotonic() - t0 < 120, "JupyterLab did not start"
+            time.sleep(0.5)
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=course_pages.CHROMIUM, args=course_pages.ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1300, "height": 900})
+                page.set_default_timeout(180_000)
+                page.goto(f"http://127.0.0.1:{port}/lab?token={token}")
+                item = page.locator(".jp-DirListing-item", has_text="01_frame_vs_pushbroom.py")
+                item.first.dblclick()
+                page.wait_for_selector(".jp-NotebookPanel .jp-MarkdownCell", state="visible")
+                page.wait_for_timeout(1000)
+                page.screenshot(path=str(tmp_path / "lab.png"))
+                assert page.locator(".jp-NotebookPanel .jp-Cell").count() > 3
+                assert page.locator(".jp-FileEditor:visible").count() == 0
+            finally:
+                browser.close()
+    finally:
+        server.terminate()
+        try:
+            server.wait(30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait(10)
+    assert _files(root) == set(before)
+    assert all((root / name).read_bytes() == data for name, data in before.items())
