@@ -91,12 +91,15 @@ for sc in (lin, wsu):
 # The papers' protocol: SCOPs on a regular image grid, independent SCPs, RMSE (Eq. 4) and
 # $dr_{max}$ (Eq. 5) of the row.
 #
-# A neural network trained on very few SCOPs may not reach the papers' feasibility criterion (a
-# sub-pixel validation error): the package then marks all its points *not converged* and logs one
-# line saying so. That is a result of the sweep, not an accident, so this cell collects those lines
-# instead of letting them scroll past, and lists the runs they concern below the sweep: the
-# assertion checks that only the networks (`mlp`, `ann`) are among them; the regressions (`lrm`,
-# `prm`) always fit.
+# A trained model that does not reach the papers' feasibility criterion (a sub-pixel validation
+# error) has all its points marked *not converged*, and the package logs one line saying so. That
+# is a result of the sweep, not an accident, so this cell collects those lines instead of letting
+# them scroll past, and lists the runs they concern below the sweep. They are of two kinds (the
+# assertion checks that there is no third): the networks (`mlp`, `ann`) on 20 SCOPs or fewer, too few
+# points to train on (exercise 3), and, at the full sizes, the trained models on `agile`, whose
+# strong attitude rates the networks and the GA polynomial (`ogp`) do not learn to a sub-pixel error.
+# The regressions (`lrm`, `prm`) never fail this way: their error is a model error, shown in the
+# figure.
 
 # %%
 class CollectLines(logging.Handler):
@@ -138,7 +141,8 @@ assert max(lrm_linear) < 1e-9
 failed = [(key, ev.n_scops) for key, evs in sweeps.items() for ev in evs if ev.converged_frac < 1.0]
 print(f"{len(collected.lines)} training(s) logged as not converged; runs with points not converged: "
       + (", ".join(f"{key} on {n} SCOPs" for key, n in failed) or "none"))
-assert all(key.split()[1] in ("mlp", "ann") for key, _ in failed)
+assert all((key.split()[1] in ("mlp", "ann") and n <= 20) or key.split()[0] == "agile" for key, n in failed)
+assert not any(key.split()[1] in ("lrm", "prm") for key, _ in failed)
 
 # %%
 accuracy_vs_density(sweeps)
