@@ -32,7 +32,9 @@ Run record (one per run, JSON-ready; NaN written as null):
   ``converged_frac``, ``fit_converged`` (the method's ``fit_info["converged"]``);
 * ``fit_s``, ``locate_s`` (the evaluated points), ``locate_s_full_est`` (scaled to all the SCPs),
   ``ce_evals_per_point`` (mean), ``ce_evals_max``;
-* ``relief_m``, ``warnings`` (messages the method emitted), ``error`` (None, or the exception).
+* ``relief_m``, ``warnings`` (messages the method emitted), ``error`` (None, or the exception), ``skipped``
+  (None, or why the method cannot run on this sensor: :class:`~explorer.errors.MethodUnavailableError`; a
+  skipped run is not a failure).
 
 Conventions: ``docs/conventions.md``; the papers' tables next to ours: ``docs/results.md``.
 """
@@ -56,7 +58,7 @@ from explorer.bench_defaults import (
     DEFAULT_SCPS,
     DEFAULT_SLOW_SECONDS,
 )
-from explorer.errors import ExplorerError, InputError, UnknownNameError
+from explorer.errors import ExplorerError, InputError, MethodUnavailableError, UnknownNameError
 from explorer.evaluate import Evaluation, evaluate_method
 from explorer.methods import available, create, registry
 from explorer.points import PointSet, simulate_points
@@ -207,7 +209,7 @@ def _record(preset: str, name: str, n_scops: int, n_scops_used: int, check: Poin
         "subsample_reason": None, "rmse_px": None, "dr_max_px": None, "col_rmse_px": None, "fit_s": 0.0,
         "locate_s": None, "locate_s_full_est": None, "ce_evals_per_point": None, "ce_evals_max": None,
         "converged_frac": None, "valid_frac": None, "fit_converged": None, "relief_m": relief_m,
-        "params": dict(params), "warnings": [], "error": None,
+        "params": dict(params), "warnings": [], "error": None, "skipped": None,
     }
 
 
@@ -341,6 +343,10 @@ def run_one(
         rec["warnings"] = sorted({str(w.message) for w in caught} | set(logged))
     except (KeyboardInterrupt, MemoryError):
         raise
+    except MethodUnavailableError as exc:  # the sensor lacks what the method needs: skipped, with the reason
+        rec["skipped"] = str(exc)
+        _log.warn(f"bench: {name} on {preset} skipped: {exc}")
+        return rec, None
     except Exception as exc:  # a broken method must not stop the benchmark of the others
         rec["error"] = f"{type(exc).__name__}: {exc}"
         _log.warn(f"bench: {name} on {preset} (n_scops={n_scops}) failed: {rec['error']}")
@@ -584,7 +590,8 @@ def format_table(runs: Iterable[dict]) -> str:
                 cells.append(f"{v}/{r['n_scps']}")
             else:
                 cells.append(str(v) if isinstance(v, str) else fmt(v))
-        rows.append((cells, r.get("error")))
+        rows.append((cells, f"ERROR {r['error']}" if r.get("error") else
+                     f"SKIPPED {r['skipped']}" if r.get("skipped") else None))
     head = [h for _, h in TABLE_COLUMNS]
     widths = [max([len(h)] + [len(c[i]) for c, err in rows if not err]) for i, h in enumerate(head)]
 
@@ -593,5 +600,5 @@ def format_table(runs: Iterable[dict]) -> str:
 
     out = [line(head), "-" * len(line(head))]
     for cells, err in rows:
-        out.append(line(cells) if not err else line(cells[:3]) + f"  ERROR {err}")
+        out.append(line(cells) if not err else line(cells[:3]) + f"  {err}")
     return "\n".join(out)

@@ -24,6 +24,11 @@ class ConvergenceError(ExplorerError, RuntimeError):
     """An iterative solver that did not converge for some points."""
 
 
+class MethodUnavailableError(ExplorerError, ValueError):
+    """A method that cannot run on this sensor by what the sensor declares (no line geometry, ...); the bench
+    and the explorer skip it with this reason and go on."""
+
+
 class NotFittedError(ExplorerError, RuntimeError):
     """A learned method asked to predict before ``fit`` was called."""
 

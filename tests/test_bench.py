@@ -247,3 +247,22 @@ def test_bench_cli_on_a_real_rpc(tmp_path, capsys):
     assert {r["method"] for r in runs} == {"nr", "lrm"}
     nr = next(r for r in runs if r["method"] == "nr")
     assert nr["preset"].startswith("rpc_PLEIADES.xml") and nr["rmse_px"] < 1e-8
+
+
+def test_a_method_the_sensor_cannot_serve_is_skipped_with_the_reason():
+    """Issue 25 class 1: a search method on an RPC sensor (no scanlines) is recorded as skipped with the reason
+    (not as an error, so the bench's exit status stays 0 and the other runs go on)."""
+    from pathlib import Path
+
+    from explorer.bench import format_table, run_one
+    from explorer.points import simulate_points
+    from explorer.presets import build_scene
+    from explorer.rpc import read_rpc
+    from explorer.rpc.sensor import RPCSensor
+
+    rpc = RPCSensor(read_rpc(Path(__file__).parent / "data" / "rpc" / "rpc_IKONOS.txt"))
+    check = simulate_points(build_scene("WSU"), 100, kind="scp")
+    rec, ev = run_one(rpc, "exact", check, None, preset="ikonos", n_scops=0, n_scps_requested=100)
+    assert ev is None and rec["error"] is None
+    assert "'exact' searches the scanlines" in rec["skipped"] and "'rpc' has none" in rec["skipped"]
+    assert "SKIPPED method 'exact'" in format_table([rec])

@@ -123,6 +123,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         )
     print(format_table(result.runs))
     failed = [r for r in result.runs if r.get("error")]
+    skipped = [r for r in result.runs if r.get("skipped")]
+    if skipped:
+        print(f"\n{len(skipped)} run(s) skipped: the method cannot run on this sensor (reason in the table/JSON)")
     sub = [r for r in result.runs if r.get("subsampled")]
     if sub:
         print(f"\n{len(sub)} run(s) evaluated on a seeded random subsample of the SCPs (column 'SCPs eval'); "

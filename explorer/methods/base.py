@@ -20,7 +20,7 @@ from typing import ClassVar
 import numpy as np
 
 from explorer import _log
-from explorer.errors import NotFittedError, UnknownNameError, as_points
+from explorer.errors import MethodUnavailableError, NotFittedError, UnknownNameError, as_points
 from explorer.geometry.kernels import CollinearityParams, collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
 from explorer.points import PointSet
@@ -184,10 +184,11 @@ class BestScanlineMethod(ABC):
 
 
 def require_line_geometry(name: str, sensor: object) -> None:
-    """Raise ``ValueError`` naming the method and the sensor unless the sensor declares line geometry
-    (:class:`explorer.sensor.LineGeometrySensor`): a search method needs physical scanlines."""
+    """Raise :class:`~explorer.errors.MethodUnavailableError` (a ``ValueError``) naming the method and the sensor
+    unless the sensor declares line geometry (:class:`explorer.sensor.LineGeometrySensor`): a search method needs
+    physical scanlines."""
     if not has_line_geometry(sensor):
-        raise ValueError(f"method {name!r} searches the scanlines of a line-scan sensor; "
+        raise MethodUnavailableError(f"method {name!r} searches the scanlines of a line-scan sensor; "
                          f"{getattr(sensor, 'name', type(sensor).__name__)!r} has none (an RPC: use its resected "
                          "MPC, --as-mpc, a stand-in)")
 
