@@ -179,7 +179,10 @@ def image_grid(
         parts = [scene.image_to_ground(rr, cc, height=float(h)) for h in heights]
     ground = np.concatenate(parts)
     r3, c3 = np.tile(rr, layers), np.tile(cc, layers)
-    return PointSet(r3, c3, ground, scene.scanline_time(r3), (gr, gc, layers))
+    # image points the sensor flags (NaN: a ray that misses the body, a line outside a CSM camera's
+    # ephemeris tables) are dropped, as on one layer
+    ok = np.isfinite(ground).all(axis=1)
+    return PointSet(r3[ok], c3[ok], ground[ok], scene.scanline_time(r3[ok]), (gr, gc, layers))
 
 
 def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

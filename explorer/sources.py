@@ -281,6 +281,9 @@ def load_source(
         scene = csm_scene(camera)  # the truth: the camera itself (usgscsm's model)
         info.update(sensor=f"CSM {camera.metadata.get('sensor') or 'line scan'}",
                     model="USGS CSM line-scan camera (usgscsm's model)", body=scene.body.to_dict())
+        if camera.covered_fraction() < 1.0:  # lines outside the ephemeris tables: flagged, measured nowhere
+            info.update(table_coverage={"fraction": camera.covered_fraction(),
+                                        "lines": camera.covered_line_ranges()})
         mpc = scene_from_camera(camera, degree=degree, n_check=0)
         stand_in = StandIn(f"MPC degree {degree} fitted to the CSM camera", mpc, scene.frame)
     if dem is not None and kind in ("dimap", "dg"):

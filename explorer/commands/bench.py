@@ -91,6 +91,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"truth: {source.info.get('truth')}")
         if source.report is not None:
             print(source.report.summary())
+        tables = source.info.get("table_coverage")
+        if tables:
+            spans = ", ".join(f"{a:.0f}-{b:.0f}" for a, b in tables["lines"])
+            print(f"ephemeris tables cover {100 * tables['fraction']:.1f} % of the lines ({spans}): the other lines "
+                  "are flagged, not extrapolated, and carry no check points")
         coverage = source.info.get("dem_coverage")
         if coverage:
             print(f"DEM covers {100 * coverage['fraction']:.1f} % of the image ({coverage['covered_points']} of "

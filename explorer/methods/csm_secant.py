@@ -71,6 +71,10 @@ def fit_projective_line(scene: Scene) -> tuple[np.ndarray, int]:
     ground = np.concatenate([scene.image_to_ground(rr, cc, height=h),
                              scene.image_to_ground(rr, cc, height=h + PROJECTIVE_DELTA_Z)])
     line = np.concatenate([rr, rr])
+    ok = np.isfinite(ground).all(axis=1)  # grid points the sensor flags (outside a CSM camera's tables, off body)
+    if ok.sum() < 7:
+        raise ValueError(f"{scene.name}: only {int(ok.sum())} of the 18 projective-fit points reach the ground")
+    ground, line = ground[ok], line[ok]
     mean = ground.mean(axis=0)
     scale = ground.std(axis=0)
     scale[scale == 0] = 1.0

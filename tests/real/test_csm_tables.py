@@ -195,3 +195,22 @@ def test_covered_ranges_are_the_lines_line_covered_accepts(rates, pointing_windo
     assert cam.covered_fraction() == pytest.approx(ok.mean(), abs=1e-15)
     if pointing_window is not None:
         assert ok.mean() < 1.0
+
+
+def test_search_methods_run_on_the_covered_lines(hrsc):
+    """The CSM camera as the project's sensor: grids (SCOPs, SCPs, the exact method's seed) keep the covered
+    lines only, and exact / csm-secant find the camera's own lines there (1e-6 px) instead of failing on the
+    flagged ones (issue 25, class 1)."""
+    from explorer.methods import create
+    from explorer.points import image_grid
+    from explorer.real.csm_sensor import csm_scene
+
+    scene = csm_scene(hrsc)
+    grid = image_grid(scene, 600, layers=3)
+    assert len(grid) > 0 and np.all(np.isfinite(grid.ground))
+    assert grid.row.max() <= 2347.0 - 0.5  # scene rows are CSM lines - 0.5: only covered lines
+    for name in ("exact", "csm-secant"):
+        r = create(name, scene).ground_to_image(grid.ground)
+        assert r.valid.all(), name
+        assert np.max(np.abs(r.row - grid.row)) < 1e-6, name
+        assert np.max(np.abs(r.col - grid.col)) < 1e-6, name
