@@ -47,6 +47,15 @@ What is read (every key is checked; a missing key, a NaN or a bad unit raises
   raises :class:`~explorer.errors.SceneFileError` naming it;
 * ``radii`` (``semimajor``, ``semiminor``, ``unit`` m or km): any body.
 
+Checked at read time against what a physical camera can be (one-line
+:class:`~explorer.errors.SceneFileError` naming the file and the key): every position outside the body,
+unit quaternions, proper constant rotations, whole image sizes, reference heights within half the body's
+smaller semi-axis and below the sensor, and ephemeris tables that cover at least one image line.  Lines
+the tables do not cover are flagged by :meth:`CsmCamera.image_to_ground`, :meth:`CsmCamera.ground_to_image`
+(``status`` 5) and :meth:`CsmCamera.rays`, never extrapolated (:meth:`CsmCamera.line_covered`,
+:meth:`CsmCamera.covered_line_ranges`).  The file itself is read through :mod:`explorer.io_input`
+(regular files only, any text encoding, no binary junk, bounded nesting and number literals).
+
 A ray that misses the body comes back as NaN with ``hit=False``: usgscsm instead returns the
 point of the ray closest to the ellipsoid (its ``OffBody`` test), a ground point that does not
 lie on the surface asked for; a silent wrong number is what this package never returns.
