@@ -78,6 +78,11 @@ def cmd_refine(args: argparse.Namespace) -> int:
         max_iterations=args.max_iterations,
     )
     refinement.write(out)
+    if not args.no_panels:
+        from explorer.io_atomic import write_text_atomic
+        from explorer.panels.refine import refinement_html
+
+        write_text_atomic(out / "panels.html", refinement_html(refinement))
     report = refinement.report()
 
     def fmt(value: Any) -> str:
@@ -90,7 +95,8 @@ def cmd_refine(args: argparse.Namespace) -> int:
     for p in report["parameters"]:
         prefix = f"{p['image']}:" if len(images) > 1 else ""
         print(f"  {prefix}{p['name']:<16} {p['value']:+.6e} +- {p['sigma']:.2e}")
-    print(f"wrote {out}/report.json, points.csv, parameters.csv and the adjusted RPC file(s)")
+    print(f"wrote {out}/report.json, points.csv, parameters.csv, the adjusted model file(s)"
+          + ("" if args.no_panels else " and panels.html (residual vectors, removed field, parameters)"))
     return 0
 
 
@@ -118,6 +124,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--loss-scale", type=positive_float, default=1.5, help="robust loss scale, in sigmas")
     p.add_argument("--outlier-probability", type=_probability, default=0.999,
                    help="chi-square(2) probability beyond which a point is an outlier (default 0.999)")
+    p.add_argument("--no-panels", action="store_true", help="do not write DIR/panels.html (the Plotly panels)")
     p.add_argument("--max-iterations", type=positive_int, default=50, help=argparse.SUPPRESS)
     p.add_argument("--out", required=True, help="output folder (created)")
     p.set_defaults(func=cmd_refine)

@@ -29,6 +29,7 @@ def test_refine_writes_the_report(gcps, tmp_path, capsys):
     assert report["model"] == "affine"
     assert report["check_rmse_px"] < 0.5 < report["check_rmse_px_before"]
     assert (out / "adjusted_rpc.txt").exists() and (out / "points.csv").exists()
+    assert "row_per_row" in (out / "panels.html").read_text()
     assert "row_per_row" in capsys.readouterr().out
 
 
@@ -63,8 +64,9 @@ def test_refine_images_with_ties(tmp_path, capsys):
     write_points_csv(tmp_path / "gcps.csv", gcps, image=gcps.image)
     out = tmp_path / "ba"
     assert main(["refine", "--images", *map(str, PAIR), "--ties", str(tmp_path / "ties.csv"), "--gcps",
-                 str(tmp_path / "gcps.csv"), "--sigma-px", "0.3", "--out", str(out)]) == 0
+                 str(tmp_path / "gcps.csv"), "--sigma-px", "0.3", "--no-panels", "--out", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
+    assert not (out / "panels.html").exists()
     assert len(report["parameters"]) == 12 and report["tie_rmse_px"] < 0.3
     assert (out / "adjusted_rpc_0.txt").exists() and (out / "adjusted_rpc_1.txt").exists()
     assert main(["refine", str(PAIR[0]), "--images", str(PAIR[1]), "--gcps", str(tmp_path / "gcps.csv"),
