@@ -47,6 +47,7 @@ from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain
 from explorer.real.csm_camera import CsmCamera
 from explorer.scene import Scene
+from explorer.sensor import Projection
 
 __all__ = ["CsmExterior", "CsmScene", "csm_body", "csm_interior", "csm_scene"]
 
@@ -277,6 +278,11 @@ class CsmScene(Scene):
         in its search window).  ``row_guess`` is not needed (the camera seeds itself)."""
         g = self.camera.ground_to_image(self.frame.enu_to_ecef(as_points(ground)))
         return g.line - 0.5, g.sample - 0.5
+
+    def project(self, ground: np.ndarray) -> Projection:
+        """:meth:`ground_to_image` with the camera's validity flags (solved, and on the image)."""
+        g = self.camera.ground_to_image(self.frame.enu_to_ecef(as_points(ground)))
+        return Projection(g.line - 0.5, g.sample - 0.5, g.valid)
 
     # ------------------------------------------------------------ description
     def describe(self) -> str:
