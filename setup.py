@@ -6,8 +6,8 @@ from setuptools import find_packages, setup
 
 setup(
     packages=[*find_packages(include=["explorer", "explorer.*"]), "explorer.assets", "explorer.assets.dem",
-              "explorer.assets.rpc"],
+              "explorer.assets.rpc", "explorer.assets.plotlyjs"],
     package_dir={"explorer.assets": "assets"},
     package_data={"explorer": ["py.typed", "kernel_manifest.json"], "explorer.assets": ["*.json", "*.md"],
-                  "explorer.assets.dem": ["*"], "explorer.assets.rpc": ["*"]},
+                  "explorer.assets.dem": ["*"], "explorer.assets.rpc": ["*"], "explorer.assets.plotlyjs": ["*"]},
 )

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> dict:
     import_s = time.perf_counter() - t_import
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    model = ExplorerModel(locate_budget_s=args.budget)
+    model = ExplorerModel(preview_after_s=args.budget)
     t0 = time.perf_counter()
     app = ExplorerApp(server, preset=args.preset, methods=methods, scp_count=args.scps,
                       scop_density=args.density, sweep=args.sweep, model=model, background=True)
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> dict:
 
     def snapshot() -> dict:
         return {
-            n: {"n_evaluated": r.evaluation.n_evaluated if r.ok else 0, "subsampled": r.subsampled,
+            n: {"n_evaluated": r.evaluation.n_evaluated if r.ok else 0, "preview": r.preview,
                 "fit_s": r.fit.fit_s, "locate_s": r.evaluation.locate_s if r.ok else None,
                 "rmse_px": r.evaluation.rmse_px if r.ok else None, "error": r.error}
             for n, r in app.runs.items()
@@ -132,8 +132,8 @@ def run(args: argparse.Namespace) -> dict:
         "benchmark": "explorer_responsiveness",
         "machine": {"cpus": os.cpu_count(), "loadavg": os.getloadavg(), "python": platform.python_version()},
         "settings": {"preset": args.preset, "scps": args.scps, "scop_density": args.density,
-                     "methods": methods, "locate_budget_s": args.budget, "sweep": args.sweep,
-                     "max_cloud_points": app.max_cloud_points, "max_map_points": app.max_map_points},
+                     "methods": methods, "preview_after_s": args.budget, "sweep": args.sweep,
+                     "max_cloud_points": app.max_cloud_points, "max_map_cells": app.max_map_cells},
         "discovery_error": err,
         "cold_start": cold,
         "import_s": import_s,
@@ -152,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--density", type=int, default=100, help="SCOP density at start")
     p.add_argument("--scps", type=int, default=250_000)
     p.add_argument("--methods", default=None, help="comma-separated (default lrm,prm,mlp,nr where registered)")
-    p.add_argument("--budget", type=float, default=0.25, help="ground-to-image seconds per method")
+    p.add_argument("--budget", type=float, default=2.0,
+                   help="projected ground-to-image seconds beyond which a method shows a seeded preview first")
     p.add_argument("--sweep", action="store_true", help="also run the accuracy-vs-SCOPs sweep")
     p.add_argument("--timeout", type=float, default=600.0)
     p.add_argument("--cold-start", action="store_true",
@@ -177,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
           f"idle {st['idle_s']:.2f} s")
     print(f"  {'change':22} {'first s':>8} {'idle s':>8}  pending at first / subsampled")
     for s in res["steps"]:
-        sub = [n for n, m in s["methods"].items() if m["subsampled"]]
+        sub = [n for n, m in s["methods"].items() if m["preview"]]
         print(f"  {s['control'] + ' -> ' + str(s['value']):22} {s['first_s']:8.2f} {s['idle_s']:8.2f}  "
               f"{list(s['pending_at_first'])} / {sub}")
     if args.json:

@@ -20,7 +20,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["LOGGER_NAME", "collect_warnings", "get_logger", "quiet", "warn"]
+__all__ = ["LOGGER_NAME", "collect_warnings", "context", "get_logger", "quiet", "warn"]
 
 LOGGER_NAME = "explorer"
 
@@ -45,6 +45,9 @@ def warn(message: str, *, name: str | None = None) -> None:
     text = "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
     if getattr(_state, "quiet", 0):
         return
+    prefix = getattr(_state, "context", ())
+    if prefix:
+        text = f"[{' / '.join(prefix)}] {text}"
     get_logger(name).warning(text)
 
 
@@ -59,6 +62,19 @@ class _Collector(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         if record.thread == self.thread:
             self.messages.append(record.getMessage())
+
+
+@contextmanager
+def context(what: str) -> Iterator[None]:
+    """Prefix the warnings this thread logs inside the block with ``[what]`` (nested blocks join
+    theirs with " / "), so a line from background work names the work, e.g.
+    ``[accuracy-vs-SCOPs sweep, 30 SCOPs] mlp: ...``."""
+    old = getattr(_state, "context", ())
+    _state.context = (*old, str(what))
+    try:
+        yield
+    finally:
+        _state.context = old
 
 
 @contextmanager

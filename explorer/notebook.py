@@ -457,7 +457,7 @@ class ResidualPanel:
         fixed = s.colour_mode == "fixed"
         scene, check, control = self._computed()
         fig = residual_maps(self.evaluations, check, control=control, shape=scene.shape,
-                            limit_px=s.limit_px if fixed else None, mode=s.colour_mode, max_points=self.max_points)
+                            limit_px=s.limit_px if fixed else None, mode=s.colour_mode)
         fig.update_layout(title={"text": f"{scene.name}: relief {s.relief_m:g} m, attitude rate x"
                                          f"{s.attitude_rate_scale:g}, {len(control)} SCOPs",
                                  "font": {"size": 12}, "y": 0.995},

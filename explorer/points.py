@@ -101,6 +101,14 @@ def grid_shape_for(n: int, n_rows: int, n_columns: int) -> tuple[int, int]:
 BYTES_PER_POINT = 200
 
 
+def row_counts(n: int, n_grid_rows: int) -> np.ndarray:
+    """How many of ``n`` points each of ``n_grid_rows`` grid rows holds so that they sum to exactly ``n``:
+    ``floor((k + 1) n / g) - floor(k n / g)``, which differ by at most one and spread the longer rows
+    evenly (every row of a ``g x (n / g)`` grid when ``g`` divides ``n``)."""
+    k = np.arange(n_grid_rows + 1, dtype=np.int64)
+    return np.diff((k * int(n)) // int(n_grid_rows))
+
+
 def image_grid(
     scene: Scene,
     n: int,
@@ -125,8 +133,11 @@ def image_grid(
         Lowest and highest layer, metres; default the terrain's min/max, widened to
         +-500 m around the mean height when the terrain is flat.
     cell_centred : bool
-        False: nodes span the image from the first to the last pixel centre (SCOPs);
-        True: nodes at the centres of ``n`` equal cells (SCPs), so SCP and SCOP grids differ.
+        False: nodes span the image from the first to the last pixel centre (SCOPs), exactly ``n``
+        of them per layer: the grid rows hold ``n / rows`` rounded up or down (:func:`row_counts`),
+        each row spread from the first to the last column, so the corners are always nodes.
+        True: nodes at the centres of ``grid_shape_for(n)`` equal cells (SCPs; about ``n``), so
+        SCP and SCOP grids differ.
     jitter_px : float
         Uniform random offset of each node, in +- pixels (seeded); 0 keeps the grid regular.
     seed : int
@@ -141,6 +152,14 @@ def image_grid(
     check_allocation(float(n) * layers * BYTES_PER_POINT, f"a grid of {n} points x {layers} layer(s)",
                      "ask for fewer points or layers")
     gr, gc = grid_shape_for(n, scene.n_rows, scene.n_columns)
+    if not cell_centred and gr * gc != n:
+        # the chosen count exactly: rows of gc or gc +- 1 nodes, each spanning the image's columns
+        counts = row_counts(n, gr)
+        rows = np.linspace(0.0, scene.n_rows - 1.0, gr)
+        rr = np.repeat(rows, counts)
+        cc = np.concatenate([np.linspace(0.0, scene.n_columns - 1.0, int(c)) if c > 1
+                             else np.array([(scene.n_columns - 1.0) / 2.0]) for c in counts])
+        return _ragged_grid(scene, rr, cc, (gr, int(counts.max()), layers), layers, height_range, jitter_px, seed)
     if cell_centred:
         rows = (np.arange(gr) + 0.5) * scene.n_rows / gr - 0.5
         cols = (np.arange(gc) + 0.5) * scene.n_columns / gc - 0.5
@@ -163,6 +182,26 @@ def image_grid(
         ground = scene.image_to_ground(rr, cc)
         ok = np.isfinite(ground[:, 0])
         return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
+    return _layers(scene, rr, cc, (gr, gc, layers), layers, height_range)
+
+
+def _ragged_grid(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int, int], layers: int,
+                 height_range: tuple[float, float] | None, jitter_px: float, seed: int) -> PointSet:
+    """Points at image positions ``rr``, ``cc`` (N,) on the terrain (or on ``layers`` planes)."""
+    if jitter_px:
+        rng = np.random.default_rng(seed)
+        rr = np.clip(rr + rng.uniform(-jitter_px, jitter_px, rr.shape), -0.5, scene.n_rows - 0.5)
+        cc = np.clip(cc + rng.uniform(-jitter_px, jitter_px, cc.shape), -0.5, scene.n_columns - 0.5)
+    if layers == 1:
+        ground = scene.image_to_ground(rr, cc)
+        ok = np.isfinite(ground[:, 0])
+        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), shape)
+    return _layers(scene, rr, cc, shape, layers, height_range)
+
+
+def _layers(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int, int], layers: int,
+            height_range: tuple[float, float] | None) -> PointSet:
+    """The image positions' lines of sight cut by ``layers`` horizontal planes over ``height_range``."""
     if height_range is None:
         lo, hi = scene.terrain.min_height, scene.terrain.max_height
         if hi - lo < 1.0:
@@ -182,7 +221,7 @@ def image_grid(
     # image points the sensor flags (NaN: a ray that misses the body, a line outside a CSM camera's
     # ephemeris tables) are dropped, as on one layer
     ok = np.isfinite(ground).all(axis=1)
-    return PointSet(r3[ok], c3[ok], ground[ok], scene.scanline_time(r3[ok]), (gr, gc, layers))
+    return PointSet(r3[ok], c3[ok], ground[ok], scene.scanline_time(r3[ok]), shape)
 
 
 def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

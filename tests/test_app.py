@@ -296,19 +296,25 @@ def test_mlp_controls_reach_methods_that_declare_them(server):
 
 
 def test_residual_map_panel_holds_the_model_residuals(server):
-    app = make_app(server, max_map_points=None)
+    app = make_app(server)
     fig = app.handles["maps"].figure
     s = app.settings()
     scps = app.model.scps(s)
+    from explorer.panels.raster import aggregate, cell_grid
+
     for k, name in enumerate(("toy_poly", "toy_bisect")):
         ev = app.runs[name].evaluation
         (tr,) = [t for t in fig.data if t.name == f"{name} row"]
+        assert tr.type == "heatmap"
         ok = np.isfinite(ev.residual_row)
-        cd = np.asarray(tr.customdata)
-        np.testing.assert_array_equal(cd[:, 0], ev.residual_row[ok])
-        np.testing.assert_array_equal(cd[:, 1], ev.evaluated_index[ok])  # the SCP index a click selects
-        np.testing.assert_array_equal(np.asarray(tr.x), scps.col[ev.evaluated_index[ok]])
-        np.testing.assert_array_equal(np.asarray(tr.y), scps.row[ev.evaluated_index[ok]])
+        # the raster is the per-cell mean of the model's residuals (the same cells as the export)
+        cells = cell_grid(app.scene.shape, len(scps), scps.grid_shape[:2], app.max_map_cells)
+        idx = ev.evaluated_index[ok]
+        want = aggregate(cells, scps.row[idx], scps.col[idx], ev.residual_row[ok], idx)
+        np.testing.assert_array_equal(np.asarray(tr.z), want.value)
+        np.testing.assert_array_equal(np.asarray(tr.customdata)[..., 1], want.worst_index)  # what a click selects
+        np.testing.assert_array_equal(np.asarray(tr.x), cells.col_edges)
+        np.testing.assert_array_equal(np.asarray(tr.y), cells.row_edges)
         # default colour scale: per map, symmetric, the 99th percentile of |residual|
         axis = fig.layout[f"coloraxis{k + 1 if k else ''}"]
         lim = np.percentile(np.abs(ev.residual_row[ok]), 99)
@@ -368,17 +374,41 @@ def test_unconverged_training_is_reported(server):
         app = make_app(server, methods=("toy_unconverged",))
     assert app.runs["toy_unconverged"].ok
     text = app.handles["summary"].content
-    assert "training did not converge (stop_reason max_epochs, val_rmse_px 3.5)" in text
+    assert "did not reach its accuracy goal (validation RMSE 3.5 px; stop: max_epochs); the map shows the best " \
+        "model reached" in text
 
 
-def test_slow_methods_run_on_a_named_subsample(server):
-    model = ExplorerModel(locate_budget_s=1e-4, min_subsample=500, probe_points=200)
+def test_slow_method_shows_a_named_preview_then_every_point(server):
+    """Issue 24: a method projected to be slow is shown on a fixed seeded preview first (named as one in
+    the map title and the summary), then on every SCP; the final state never depends on timing."""
+    model = ExplorerModel(preview_after_s=1e-9, preview_points=500, probe_points=200)
+    s = Settings(preset="WSU", scp_count=3000, methods=("toy_bisect",))
+    rec = model.fit("toy_bisect", s)
+    assert model.needs_preview("toy_bisect", s, rec)
+    preview = model.evaluate("toy_bisect", s, fit=rec, max_points=model.preview_points)
+    assert preview.preview and preview.evaluation.n_evaluated == 500
+    again = ExplorerModel(preview_after_s=1e-9, preview_points=500, probe_points=200)
+    np.testing.assert_array_equal(preview.evaluation.evaluated_index,  # fixed and seeded
+                                  again.evaluate("toy_bisect", s, max_points=500).evaluation.evaluated_index)
+    from explorer.panels.figures import residual_maps
+
+    fig = residual_maps({"toy_bisect": preview.evaluation}, model.scps(s), shape=model.scene(s).shape)
+    assert "500 of 3,0" in fig.layout.meta["titles"][0] and "preview" in fig.layout.meta["titles"][0]
+    app = make_app(server, model=model, background=True)
+    try:
+        assert app.wait_idle(60)
+        run = app.runs["toy_bisect"]
+        assert not run.preview and run.evaluation.n_evaluated == len(model.scps(app.settings()))
+        assert "preview" not in app.handles["summary"].content
+    finally:
+        app.close()
+
+
+def test_foreground_app_always_evaluates_every_point(server):
+    model = ExplorerModel(preview_after_s=1e-9, preview_points=500, probe_points=200)
     app = make_app(server, model=model)
     run = app.runs["toy_bisect"]
-    assert run.subsampled and run.evaluation.n_evaluated == 500
-    assert "subsample of 500" in app.handles["summary"].content
-    assert "500 of 3,0" in app.handles["maps"].figure.layout.annotations[1].text
-    assert "toy_bisect" in app.handles["status"].content
+    assert not run.preview and run.evaluation.n_evaluated == len(model.scps(app.settings()))
 
 
 def test_accuracy_sweep_over_scop_densities(server):
@@ -495,7 +525,7 @@ def test_a_point_picked_in_a_map_is_selected_in_the_3d_view(server):
     assert f"SCP {i}" in app.handles["sel_text"].content
     # the maps carry the SCP index a click sends
     (tr,) = [t for t in app.handles["maps"].figure.data if t.name == "toy_bisect row"]
-    assert i in np.asarray(tr.customdata)[:, 1]
+    assert i in np.asarray(tr.customdata)[..., 1]
 
 
 def test_row_column_difference_and_colour_mode_controls_reach_the_maps(server):
@@ -545,10 +575,7 @@ def test_gui_export_is_every_point_and_reproducible(server):
     import io
     import zipfile
 
-    model = ExplorerModel(locate_budget_s=1e-4, min_subsample=500, probe_points=200)
-    app = make_app(server, model=model)
-    assert app.runs["toy_bisect"].subsampled  # the view subsamples ...
-    assert "subsample" in app.handles["maps_note"].content and "Export" in app.handles["maps_note"].content
+    app = make_app(server)
     a, b = app.export_bytes(), app.export_bytes()
     za, zb = zipfile.ZipFile(io.BytesIO(a)), zipfile.ZipFile(io.BytesIO(b))
     assert sorted(za.namelist()) == ["panels.html", "residuals.csv", "summary.json"]
@@ -556,7 +583,7 @@ def test_gui_export_is_every_point_and_reproducible(server):
     rows = za.read("residuals.csv").decode().splitlines()
     n = len(app.model.scps(app.settings()))
     assert rows[0].startswith("method,scp_index,row_px,col_px,row_residual_px,col_residual_px")
-    assert sum(r.startswith("toy_bisect,") for r in rows) == n  # ... the export does not
+    assert sum(r.startswith("toy_bisect,") for r in rows) == n
     import json
 
     summary = json.loads(za.read("summary.json"))

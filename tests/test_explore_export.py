@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -68,8 +69,12 @@ def _check_summary_against_csv(files: dict) -> None:
 def _check_offline_page(page: bytes) -> None:
     text = page.decode()
     assert "<script src=" not in text.replace(" ", "")  # nothing loaded from the network
-    assert "Plotly.newPlot" in text and len(text) > 3_000_000  # plotly.js inlined
+    assert "Plotly.newPlot" in text and text.count("* plotly.js") == 1  # plotly.js inlined once
+    assert 1_400_000 < len(page) < 5_000_000  # issue 24: rasters, not points
     assert "nr row: RMSE" in text and "nr column: RMSE" in text
+    # the Timing panel is filled: a fit time for the learned methods (not "no fit" everywhere)
+    assert '"text":"fit (s)"' in text.replace(": ", ":") and "ground-to-image (us" in text
+    assert re.search(r'"text":\["[0-9.e+-]+ s"', text)  # lrm's fit time, the first bar
 
 
 def _export_twice_identical(tmp_path, src, capsys) -> dict:

@@ -43,15 +43,21 @@ def direct_residuals(preset, method, n_scops, *, relief_m=0.0, attitude_rate_sca
 
 
 def map_traces(fig):
-    """{method: residual-map trace}: the traces carrying residuals, keyed by the method their ``meta`` names."""
-    return {str(t.meta).split()[0]: t for t in fig.data if t.customdata is not None}
+    """{method: residual-map raster}: the heatmaps carrying residuals, keyed by the method their ``meta`` names."""
+    return {str(t.meta).split()[0]: t for t in fig.data if t.type == "heatmap" and t.meta is not None}
 
 
 def residuals_of(fig, name):
-    """(x, y, residual) of a method's map: customdata holds the residual (px) in its first column."""
+    """(SCP index, SCP index, residual) of the drawn cells of a method's map.  With fewer SCPs than the
+    map's cells every cell holds one SCP (customdata: points in the cell, the SCP's index), so the
+    cell's value is that SCP's residual."""
     t = map_traces(fig)[name]
-    cd = np.asarray(t.customdata, dtype=float)
-    return np.asarray(t.x), np.asarray(t.y), (cd[:, 0] if cd.ndim == 2 else cd)
+    z = np.asarray(t.z, dtype=float).ravel()
+    cd = np.asarray(t.customdata)
+    assert cd[..., 0].max() == 1
+    drawn = np.isfinite(z)
+    idx = cd[..., 1].ravel()[drawn]
+    return idx, idx, z[drawn]
 
 
 @pytest.fixture(scope="module")
@@ -64,12 +70,11 @@ def test_setting_the_scop_density_redraws_the_model_residuals(panel):
     updates = panel.n_updates
     panel.controls["scop_density"].value = 10
     assert panel.n_updates == updates + 1
-    x, y, after = residuals_of(panel.figure, "lrm")
+    idx, _, after = residuals_of(panel.figure, "lrm")
     scps, truth = direct_residuals("WSU", "lrm", 10)
     ok = np.isfinite(truth)
-    # same points, same order: x = column, y = row of each SCP; colour = the model's new residual
-    np.testing.assert_array_equal(x, scps.col[ok])
-    np.testing.assert_array_equal(y, scps.row[ok])
+    # same points, same order (one SCP per map cell, row-major); value = the model's new residual
+    np.testing.assert_array_equal(idx, np.flatnonzero(ok))
     np.testing.assert_allclose(after, truth[ok], rtol=0, atol=1e-12)
     assert np.abs(after - before).max() > 1e-4, "the data changed with the density"
     scops = [t for t in panel.figure.data if t.name and t.name.startswith("SCOPs")]

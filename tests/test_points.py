@@ -10,12 +10,30 @@ def test_grid_count_and_exact_rows():
     scene = build_scene("SCB")
     pts = simulate_points(scene, 100, kind="scop")
     gr, gc, gl = pts.grid_shape
-    assert len(pts) == gr * gc * gl and abs(len(pts) - 100) <= 10
+    assert len(pts) == 100 and gr * (gc - 1) < 100 <= gr * gc  # exactly the count chosen (issue 24)
     assert pts.row.min() == 0 and pts.row.max() == scene.n_rows - 1
     # exact: the collinearity residual vanishes at each point's time
     r = scene.along_track_residual(pts.ground, pts.time) / scene.pixel_size_m
     assert np.max(np.abs(r)) < 1e-9
     np.testing.assert_allclose(scene.column_at_time(pts.ground, pts.time), pts.col, atol=1e-9)
+
+
+@pytest.mark.parametrize("preset", ["SCB", "WSU", "PMA"])
+@pytest.mark.parametrize("n", [10, 20, 30, 50, 99, 100, 101, 300, 500, 1000, 1003])
+def test_scop_count_is_the_one_chosen(preset, n):
+    """Issue 24: choosing n SCOPs gives n (not 99 or 105), on a layout that keeps the four image
+    corners and the first / last row and column, with grid rows differing by at most one point."""
+    scene = build_scene(preset)
+    pts = simulate_points(scene, n, kind="scop")
+    assert len(pts) == n
+    corners = {(0.0, 0.0), (0.0, scene.n_columns - 1.0), (scene.n_rows - 1.0, 0.0),
+               (scene.n_rows - 1.0, scene.n_columns - 1.0)}
+    assert corners <= set(zip(pts.row.tolist(), pts.col.tolist(), strict=True))
+    _, per_row = np.unique(pts.row, return_counts=True)
+    assert per_row.max() - per_row.min() <= 1
+    # every point exact: the collinearity residual vanishes at its time (independent of the generator)
+    r = scene.along_track_residual(pts.ground, pts.time) / scene.pixel_size_m
+    assert np.max(np.abs(r)) < 1e-9
 
 
 def test_fast_grid_path_equals_general_path():
@@ -51,7 +69,7 @@ def test_scp_grid_differs_from_scop_grid():
 def test_3d_grid_layers():
     scene = build_scene("WSU")
     pts = image_grid(scene, 100, layers=5, height_range=(-200.0, 600.0))
-    assert pts.grid_shape[2] == 5 and len(pts) == 5 * pts.grid_shape[0] * pts.grid_shape[1]
+    assert pts.grid_shape[2] == 5 and len(pts) == 5 * 100
     assert set(np.round(pts.ground[:, 2], 6)) == {-200.0, 0.0, 200.0, 400.0, 600.0}
 
 

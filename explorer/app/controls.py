@@ -18,6 +18,7 @@ import contextlib
 from typing import TYPE_CHECKING, Any
 
 from explorer.app.model import COLOUR_LIMITS_PX, COLOUR_MODES, COMPONENTS, SCOP_DENSITIES, SCP_COUNTS
+from explorer.panels.raster import AGGREGATES
 
 if TYPE_CHECKING:  # pragma: no cover
     from explorer.app.gui import ExplorerApp
@@ -119,9 +120,12 @@ def build_controls(app: ExplorerApp, *, scene_ids: list[str], scene_id: str, scp
         h["limit"] = gui.add_dropdown("Fixed limit +- px", [f"{v:g}" for v in COLOUR_LIMITS_PX], initial_value="1")
         h["component"] = gui.add_dropdown("Residual", COMPONENTS, initial_value=COMPONENTS[0],
                                           hint="row (scanline) residual, column residual, or both")
+        h["aggregate"] = gui.add_dropdown("Cell value", AGGREGATES, initial_value=AGGREGATES[0],
+                                          hint="each map cell: the signed mean of its check points' residuals, or "
+                                               "the (signed) residual of largest magnitude among them")
         h["diff_a"] = gui.add_dropdown("Difference: A", (NO_DIFFERENCE,), hint="map of A minus B (row residual)")
         h["diff_b"] = gui.add_dropdown("Difference: B", (NO_DIFFERENCE,))
-        h["show_scops"] = gui.add_checkbox("Show SCOPs on maps", True)
+        h["show_scops"] = gui.add_checkbox("SCOP overlay on maps", True)
         h["export"] = gui.add_button("Export (summary, residuals, panels)",
                                      hint="every check point, no subsample: a zip of summary.json, residuals.csv "
                                           "and panels.html (as `pushbroom explore --export`)")
@@ -160,8 +164,8 @@ def build_controls(app: ExplorerApp, *, scene_ids: list[str], scene_id: str, scp
             app.request_update()
 
     for key in ("preset", "relief", "rates", "jitter", "density", "scps", "color_method", "layers",
-                "neurons", "limit", "colour_mode", "component", "diff_a", "diff_b", "show_scops", "distance",
-                "exaggeration", "sweep", "sel_mode"):
+                "neurons", "limit", "colour_mode", "component", "aggregate", "diff_a", "diff_b", "show_scops",
+                "distance", "exaggeration", "sweep", "sel_mode"):
         h[key].on_update(changed)
     app._changed_cb = changed
 

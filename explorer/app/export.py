@@ -26,15 +26,13 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
-from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, _Recording, point_status
-from explorer.evaluate import Evaluation, evaluate_method, evaluate_stand_in
+from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, sensor_truth
+from explorer.evaluate import Evaluation, evaluate_stand_in
 from explorer.io_atomic import atomic_folder
-from explorer.methods.base import BestScanlineMethod
-from explorer.points import PointSet
 from explorer.sensor import StandIn
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status",
@@ -81,12 +79,6 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     return ("\n".join(lines) + "\n").encode()
 
 
-def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
-    """The check points with the sensor's own ground to image as their exact (row, col) (the truth every
-    residual is measured against); points the sensor does not project onto its image are left out."""
-    proj = scene.project(scps.ground)
-    keep = np.flatnonzero(proj.valid)
-    return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
@@ -134,24 +126,17 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     """
     from explorer.panels import figures as F  # noqa: N812
 
-    model = ExplorerModel(locate_budget_s=None, seed=seed, scenes={s.preset: scene})
+    model = ExplorerModel(preview_after_s=None, seed=seed, scenes={s.preset: scene})
     scops = model.scops(s)
-    scps = sensor_truth(scene, model.scps(s))
+    scps = model.scps(s)  # re-projected by the sensor's own ground_to_image (sensor_truth), as in the GUI
     evaluations: dict[str, Evaluation] = {}
     status: dict[str, np.ndarray] = {}
     summary: dict[str, Any] = {}
     for name in s.methods:
         rec = (fits or {}).get(name) or model.fit(name, s)
-        ev: Evaluation | None = None
-        st: np.ndarray | None = None
-        err = rec.error
-        if rec.method is not None:
-            rec_m = _Recording(rec.method)
-            try:
-                ev = evaluate_method(cast(BestScanlineMethod, rec_m), scps, seed=seed, fit=False)
-                st = point_status(rec_m.result)
-            except Exception as exc:  # a failing method is reported, not fatal
-                err = f"{type(exc).__name__}: {exc}"
+        # the GUI's own path (ExplorerModel.evaluate): every SCP, fit time and status included
+        run = model.evaluate(name, s, fit=rec)
+        ev, st, err = run.evaluation, run.status, run.error or rec.error
         if ev is not None and st is not None:
             evaluations[name], status[name] = ev, st
         summary[name] = method_summary(ev, st, rec, err)
@@ -180,10 +165,10 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     figs = []
     if maps:
         labels = {STAND_IN_METHOD: f"stand-in: {stand_in.label}"} if stand_in is not None else None
-        figs.append(("Residual maps (row and column; every check point drawn)" + (
+        figs.append((f"Residual maps (row and column; every check point, cell {s.aggregate})" + (
             "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
             F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
-                            component="row and column", status=map_status, max_points=None, labels=labels)))
+                            component="row and column", status=map_status, aggregate=s.aggregate, labels=labels)))
     if evaluations:
         figs.append(("Timing", F.timing_bars(evaluations)))
     notes = [f"source: {source.get('label', '')}", f"truth: {truth['model']}",
@@ -271,4 +256,4 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     return written
 
 
-__all__ = ["CSV_COLUMNS", "export_files", "method_summary", "residuals_csv", "run_export"]
+__all__ = ["CSV_COLUMNS", "export_files", "method_summary", "residuals_csv", "run_export", "sensor_truth"]

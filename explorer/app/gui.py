@@ -66,8 +66,8 @@ class ExplorerApp(Views):
     max_cloud_points : int
         At most this many SCPs are sent to the 3D view (an evenly strided subset, named in
         the GUI).
-    max_map_points : int
-        At most this many points per map (named in the map titles and under the maps).
+    max_map_cells : int
+        At most this many cells per residual map (:func:`explorer.panels.raster.cell_grid`).
     sweep : bool
         Compute the accuracy-vs-density sweep (checkbox, can be changed in the GUI).
     fit_wait_s : float
@@ -93,7 +93,7 @@ class ExplorerApp(Views):
         background: bool = True,
         model: ExplorerModel | None = None,
         max_cloud_points: int = 50_000,
-        max_map_points: int = 10_000,
+        max_map_cells: int = 15_000,
         sweep: bool = True,
         fit_wait_s: float = 0.5,
         sources: Sequence[Any] = (),
@@ -114,7 +114,7 @@ class ExplorerApp(Views):
         self.background = background
         self.debounce_s = debounce_s
         self.max_cloud_points = max_cloud_points
-        self.max_map_points = max_map_points
+        self.max_map_cells = max_map_cells
         self.fit_wait_s = fit_wait_s
         self.nodes: dict[str, Any] = {}
         self.runs: dict[str, MethodRun] = {}
@@ -281,7 +281,8 @@ class ExplorerApp(Views):
             color_method=cm if cm in methods else (methods[0] if methods else None),
             mlp_layers=int(h["layers"].value), mlp_neurons=int(h["neurons"].value),
             limit_px=float(h["limit"].value), colour_mode=h["colour_mode"].value,
-            component=h["component"].value, diff=diff, show_scops=bool(h["show_scops"].value),
+            component=h["component"].value, aggregate=h["aggregate"].value, diff=diff,
+            show_scops=bool(h["show_scops"].value),
             sensor_distance=h["distance"].value,
             height_exaggeration=float(h["exaggeration"].value), selection=sel,
             sweep=bool(h["sweep"].value),

@@ -6,8 +6,12 @@ fits and evaluates methods through ``explorer.methods.create`` /
 ``explorer.evaluate.evaluate_method``, and caches every result by what it depends on --
 scenes by (scene id, relief, attitude rates, jitter), SCOPs by (scene, density), SCPs by
 (scene, count), fits by (scene, SCOPs, method, params), evaluations by (fit, SCPs,
-subsample).  Methods too slow for the time budget are evaluated on a seeded subsample whose
-size the panels name; ``locate_budget_s=None`` (the export) never subsamples.
+subsample).  Every number the explorer shows comes from **every** SCP, whatever the load of the
+machine: the only subsample is a *preview* -- a fixed, seeded set of ``preview_points`` SCPs --
+shown first for a method whose full evaluation is projected to take longer than
+``preview_after_s``, while the full one computes; the GUI names it as a preview and replaces it
+by the full result (:meth:`ExplorerModel.needs_preview`).  Only *when* the full result appears
+depends on the machine, never what it is.
 
 Every evaluated point carries a status (:data:`STATUS_NAMES`): valid, *refused* (the method
 declined to answer outside its domain, e.g. a regression's height extrapolation), not
@@ -29,6 +33,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from explorer import _log
 from explorer.evaluate import Evaluation, evaluate_method
 from explorer.methods import available, create, registry
 from explorer.methods.base import BestScanlineMethod
@@ -53,6 +58,8 @@ STATUS_NAMES = ("valid", "refused", "not converged", "outside image")
 answer (outside its training / validity domain, e.g. lrm/prm height extrapolation); *not
 converged* = its iteration or training failed there; *outside image* = converged to a (row,
 column) off the image."""
+SWEEP_PURPOSE = "accuracy-vs-SCOPs sweep"
+"""How log lines of the background sweep's fits are prefixed (:func:`explorer._log.context`)."""
 DEFAULT_METHODS = ("lrm", "prm", "mlp", "nr")
 """Methods checked at start when registered (the direct / fast ones)."""
 PARAM_ALIASES = {
@@ -83,6 +90,9 @@ class Settings:
     component: str = "row"
     diff: tuple[str, str] | None = None
     """Two methods whose row-residual difference (first minus second) gets its own map."""
+    aggregate: str = "mean"
+    """Residual-map cell value: "mean" (signed mean of the cell's check points) or "max |residual|"
+    (the signed residual of largest magnitude in the cell); :data:`explorer.panels.AGGREGATES`."""
     show_scops: bool = True
     sensor_distance: str = "compressed"
     height_exaggeration: float = 1.0
@@ -117,7 +127,8 @@ class MethodRun:
     label: str
     evaluation: Evaluation | None
     fit: FitRecord
-    subsampled: bool = False
+    preview: bool = False
+    """True: evaluated on the seeded preview subset (the full evaluation is computing)."""
     error: str | None = None
     key: tuple = ()
     """The evaluation's cache key (identifies its content for redraw decisions)."""
@@ -248,10 +259,12 @@ class ExplorerModel:
 
     Parameters
     ----------
-    locate_budget_s : float or None
-        Ground-to-image time allowed per method on the SCPs; a method projected to need
-        more (from a probe on ``probe_points``) is evaluated on a seeded subsample that
-        fits the budget (at least ``min_subsample`` points).  None: always all SCPs.
+    preview_after_s : float or None
+        A method whose ground-to-image on all the SCPs is projected (from a probe on
+        ``probe_points``) to take longer than this gets a preview on ``preview_points`` seeded
+        SCPs first (:meth:`needs_preview`; the GUI's background mode only).  None: never.
+    preview_points : int
+        Size of the preview subset (fixed and seeded: the same points on every run).
     sweep_points : int
         SCPs (seeded subsample) used for the accuracy-vs-density sweep.
     seed : int
@@ -265,17 +278,17 @@ class ExplorerModel:
     def __init__(
         self,
         *,
-        locate_budget_s: float | None = 0.25,
+        preview_after_s: float | None = 2.0,
+        preview_points: int = 20_000,
         probe_points: int = 2000,
-        min_subsample: int = 2000,
         sweep_points: int = 5000,
         seed: int = 0,
         scenes: Mapping[str, Scene] | None = None,
     ) -> None:
         self.fixed_scenes: dict[str, Scene] = dict(scenes or {})
-        self.locate_budget_s = locate_budget_s
+        self.preview_after_s = preview_after_s
+        self.preview_points = int(preview_points)
         self.probe_points = probe_points
-        self.min_subsample = min_subsample
         self.sweep_points = sweep_points
         self.seed = seed
         self._scenes = _LRU(8)
@@ -284,7 +297,6 @@ class ExplorerModel:
         self._fits = _LRU(128)
         self._evals = _LRU(64)
         self._probes = _LRU(128)
-        self._plans = _LRU(256)
         self.counters: dict[str, int] = {"scene": 0, "scops": 0, "scps": 0, "fit": 0, "evaluate": 0}
         self.per_point_s: dict[tuple, float] = {}
         """Measured ground-to-image seconds per point by (method, params), from evaluations."""
@@ -313,9 +325,12 @@ class ExplorerModel:
         return self._scops.get_or((s.scene_key, density), make)
 
     def scps(self, s: Settings) -> PointSet:
+        """The check points: simulated on the scene's terrain, their exact (row, col) the sensor's own ground
+        to image (:func:`sensor_truth`) -- the same points in the GUI and the export."""
         def make() -> PointSet:
             self.counters["scps"] += 1
-            return simulate_points(self.scene(s), int(s.scp_count), kind="scp", seed=self.seed)
+            scene = self.scene(s)
+            return sensor_truth(scene, simulate_points(scene, int(s.scp_count), kind="scp", seed=self.seed))
         return self._scps.get_or((s.scene_key, int(s.scp_count)), make)
 
     # --------------------------------------------------------------- methods
@@ -336,8 +351,12 @@ class ExplorerModel:
         """The fit if it is already done (never computes)."""
         return self._fits.peek(self.fit_key(name, s, density))
 
-    def fit(self, name: str, s: Settings, density: int | None = None) -> FitRecord:
-        """Create and fit ``name`` (cached by scene, SCOPs, method and params)."""
+    def fit(self, name: str, s: Settings, density: int | None = None, *, purpose: str | None = None) -> FitRecord:
+        """Create and fit ``name`` (cached by scene, SCOPs, method and params).
+
+        ``purpose`` (e.g. "accuracy-vs-SCOPs sweep") prefixes the log lines the fit writes, so a
+        line printed by background work names the work it comes from.
+        """
         density = int(density or s.scop_density)
         cls = registry()[name]
         params = gui_params(cls, s)
@@ -349,44 +368,41 @@ class ExplorerModel:
             scops = self.scops(s, density) if cls.needs_fit else None
             # (warnings are not captured: catch_warnings is not thread-safe and fits run on two
             # threads; learned methods report a failed training in fit_info["converged"])
+            context = f"{purpose or 'maps'}, {density} SCOPs" if cls.needs_fit else (purpose or "maps")
             try:
-                m = create(name, scene, **params)
-                t0 = time.perf_counter()
-                if m.needs_fit:
-                    assert scops is not None
-                    m.fit(scops)
-                fit_s = time.perf_counter() - t0 if m.needs_fit else 0.0
+                with _log.context(context):
+                    m = create(name, scene, **params)
+                    t0 = time.perf_counter()
+                    if m.needs_fit:
+                        assert scops is not None
+                        m.fit(scops)
+                    fit_s = time.perf_counter() - t0 if m.needs_fit else 0.0
                 err = None
             except Exception as exc:  # a method failing must not take the explorer down
                 m, fit_s, err = None, 0.0, f"{type(exc).__name__}: {exc}"
             msgs = []
             if m is not None and m.fit_info.get("converged") is False:
-                details = ", ".join(f"{k} {m.fit_info[k]:.3g}" if isinstance(m.fit_info[k], float)
-                                    else f"{k} {m.fit_info[k]}" for k in ("stop_reason", "val_rmse_px", "epochs")
-                                    if k in m.fit_info)
-                msgs.append("training did not converge" + (f" ({details})" if details else "")
-                            + "; its points are flagged not converged")
+                msgs.append(training_note(m.fit_info))
             if cls.needs_fit:
                 self.fit_seconds[name] = fit_s
             return FitRecord(m, fit_s, len(scops) if scops is not None else 0, params, err, msgs)
         return self._fits.get_or(key, make)
 
-    def _projection(self, name: str, rec: FitRecord, s: Settings, scps: PointSet) -> tuple[float, float]:
-        """(projected seconds for all SCPs, marginal seconds per point) of ground-to-image.
+    def _projection(self, name: str, rec: FitRecord, s: Settings, scps: PointSet) -> float:
+        """Projected seconds of ground-to-image on all the SCPs.
 
-        Uses the per-point time measured by an earlier evaluation of the method when there is
-        one; else times ``probe_points`` points and, if the naive projection exceeds the
-        budget, 8x as many to separate the fixed overhead from the per-point cost (a small
-        probe overstates the per-point cost of fast vectorised methods).
+        Uses the per-point time measured by an earlier full evaluation of the method when there
+        is one; else times ``probe_points`` points and, if the naive projection exceeds
+        ``preview_after_s``, 8x as many to separate the fixed overhead from the per-point cost.
+        (Only whether a preview is shown first depends on it, never a shown number.)
         """
         known = self.per_point_s.get((name, tuple(sorted(rec.params.items()))))
         if known is not None:
-            return known * len(scps), known
+            return known * len(scps)
         key = (s.scene_key, rec.n_scops, name, tuple(sorted(rec.params.items())), len(scps))
-
         method = rec.method
-        budget = self.locate_budget_s
-        assert method is not None and budget is not None
+        limit = self.preview_after_s
+        assert method is not None and limit is not None
 
         def timed(n: int) -> float:
             sub = scps.sample(n, self.seed + 1)
@@ -394,42 +410,52 @@ class ExplorerModel:
             method.ground_to_image(sub.ground)
             return time.perf_counter() - t0
 
-        def make() -> tuple[float, float]:
+        def make() -> float:
             n_all = len(scps)
             n1 = min(self.probe_points, n_all)
             t1 = timed(n1)
             est = t1 * n_all / max(n1, 1)
-            if est <= budget or n1 == n_all:
-                return est, t1 / max(n1, 1)
+            if est <= limit or n1 == n_all:
+                return est
             n2 = min(8 * n1, n_all)
             t2 = timed(n2)
-            # a noisy first probe (a busy machine) must not make the marginal cost vanish
             per = max(t2 - t1, 0.25 * t2) / (n2 - n1) if n2 > n1 else t2 / n2
-            return t2 + per * (n_all - n2), per
-        return self._probes.get_or(key, make)
+            return t2 + per * (n_all - n2)
+        return float(self._probes.get_or(key, make))
+
+    def eval_key(self, name: str, s: Settings, density: int | None = None, max_points: int | None = None) -> tuple:
+        """Cache key of an evaluation: (fit key, SCP count, subsample size or None for all SCPs)."""
+        if max_points is not None and max_points >= int(s.scp_count):
+            max_points = None
+        return (self.fit_key(name, s, density), int(s.scp_count), max_points)
+
+    def cached_evaluation(self, name: str, s: Settings, density: int | None = None) -> MethodRun | None:
+        """The full evaluation (every SCP) if it is already done (never computes)."""
+        return self._evals.peek(self.eval_key(name, s, density))
+
+    def needs_preview(self, name: str, s: Settings, rec: FitRecord) -> bool:
+        """True when the full evaluation of ``name`` is not cached and is projected to take longer
+        than ``preview_after_s``: the GUI then shows the seeded preview first."""
+        if (self.preview_after_s is None or rec.method is None or self.cached_evaluation(name, s) is not None
+                or self.preview_points >= int(s.scp_count)):
+            return False
+        scps = self.scps(s)
+        if len(scps) <= self.preview_points:
+            return False
+        return self._projection(name, rec, s, scps) > self.preview_after_s
 
     def evaluate(self, name: str, s: Settings, *, max_points: int | None = None,
                  density: int | None = None, fit: FitRecord | None = None) -> MethodRun:
-        """Fit (cached; or use ``fit``) and evaluate ``name`` on the SCPs within the time budget
-        (cached).  ``fit`` must be the fit of ``name`` on ``density`` SCOPs (default the settings')."""
+        """Fit (cached; or use ``fit``) and evaluate ``name`` on every SCP, or on the seeded subsample
+        of ``max_points`` (the preview, the sweep) -- cached.  ``fit`` must be the fit of ``name`` on
+        ``density`` SCOPs (default the settings')."""
         rec = fit if fit is not None else self.fit(name, s, density)
-        fkey = self.fit_key(name, s, density)
         if rec.method is None:
             return MethodRun(name, self.label(name), None, rec, error=rec.error)
         scps = self.scps(s)
-        budget = self.locate_budget_s
-        if max_points is None and budget is not None:
-            plan_key = (fkey, int(s.scp_count))
-
-            def plan() -> tuple[int | None]:  # decided once per input, so a revisit is a cache hit
-                projected, per_point = self._projection(name, rec, s, scps)
-                if projected > budget:
-                    return (max(self.min_subsample, int(budget / per_point)),)
-                return (None,)
-            (max_points,) = self._plans.get_or(plan_key, plan)
         if max_points is not None and max_points >= len(scps):
             max_points = None
-        key = (fkey, int(s.scp_count), max_points)
+        key = self.eval_key(name, s, density, max_points)
 
         def make() -> MethodRun:
             self.counters["evaluate"] += 1
@@ -443,9 +469,9 @@ class ExplorerModel:
                 return MethodRun(name, self.label(name), None, rec, error=f"{type(exc).__name__}: {exc}")
             status = point_status(recorder.result)
             ev = dataclasses.replace(ev, n_scops=rec.n_scops, fit_s=rec.fit_s)
-            if ev.n_evaluated >= 5000:  # large enough for the per-point time to dominate
+            if max_points is None and ev.n_evaluated >= 5000:  # large enough for the per-point time to dominate
                 self.per_point_s[(name, tuple(sorted(rec.params.items())))] = ev.locate_s / ev.n_evaluated
-            return MethodRun(name, self.label(name), ev, rec, subsampled=max_points is not None, key=key,
+            return MethodRun(name, self.label(name), ev, rec, preview=max_points is not None, key=key,
                              status=status)
         return self._evals.get_or(key, make)
 
@@ -456,7 +482,7 @@ class ExplorerModel:
         cls = registry()[name]
         out = []
         for d in (densities if cls.needs_fit else densities[:1]):
-            rec = get_fit(d) if get_fit is not None else self.fit(name, s, d)
+            rec = get_fit(d) if get_fit is not None else self.fit(name, s, d, purpose=SWEEP_PURPOSE)
             if rec is None:
                 continue
             run = self.evaluate(name, s, max_points=self.sweep_points, density=d, fit=rec)
@@ -504,6 +530,14 @@ class ExplorerModel:
         return sel
 
 
+def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
+    """The check points with the sensor's own ground to image as their exact (row, col) (the truth every
+    residual is measured against); points the sensor does not project onto its image are left out."""
+    proj = scene.project(scps.ground)
+    keep = np.flatnonzero(proj.valid)
+    return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
+
+
 class _Recording:
     """A method seen through ``evaluate_method`` that keeps its last :class:`ScanlineResult`
     (the evaluation keeps residuals only; the status flags come from the result)."""
@@ -517,6 +551,21 @@ class _Recording:
     def ground_to_image(self, ground: np.ndarray, **kw: Any) -> Any:
         self.result = self._method.ground_to_image(ground, **kw)
         return self.result
+
+
+def training_note(info: Mapping[str, Any]) -> str:
+    """What a learned method's failed training verdict means for its map, e.g. "did not reach its
+    accuracy goal (validation RMSE 3.98 px > 1 px; stop: validation after 16 epochs); the map shows
+    the best model reached"."""
+    val = info.get("val_rmse_px")
+    limit = info.get("max_val_rmse_px")
+    parts = []
+    if isinstance(val, float):
+        parts.append(f"validation RMSE {val:.3g} px" + (f" > {limit:g} px" if isinstance(limit, (int, float)) else ""))
+    if "stop_reason" in info:
+        parts.append(f"stop: {info['stop_reason']}" + (f" after {info['epochs']} epochs" if "epochs" in info else ""))
+    return ("did not reach its accuracy goal" + (f" ({'; '.join(parts)})" if parts else "")
+            + "; the map shows the best model reached")
 
 
 def point_status(result: Any) -> np.ndarray:
@@ -543,23 +592,25 @@ def status_text(counts: Mapping[str, int], total: int) -> str:
 
 
 def summary_markdown(runs: dict[str, MethodRun], n_scps: int) -> str:
-    """A markdown table of the runs (RMSE, dr_max, CE/point, times, subsample)."""
-    lines = ["| method | RMSE px | dr_max px | CE/pt | fit s | g2i s | evaluated |",
-             "|---|---|---|---|---|---|---|"]
+    """A markdown table of the runs (RMSE, dr_max, CE/point, points evaluated, preview).
+
+    No timings: the table is the same on every run with the same settings (the times are in the
+    Timing panel)."""
+    lines = ["| method | RMSE px | dr_max px | CE/pt | evaluated |",
+             "|---|---|---|---|---|"]
     notes = []
     for n, r in runs.items():
         if not r.ok:
-            lines.append(f"| {n} | - | - | - | - | - | failed |")
+            lines.append(f"| {n} | - | - | - | failed |")
             notes.append(f"**{n}** failed: {r.error}")
             continue
         e = r.evaluation
         assert e is not None
-        ev = f"{e.n_evaluated:,}" + (" (subsample)" if r.subsampled else "")
-        lines.append(f"| {n} | {e.rmse_px:.3g} | {e.dr_max_px:.3g} | {e.ce_evals_per_point:.1f} | "
-                     f"{e.fit_s:.3g} | {e.locate_s:.3g} | {ev} |")
-        if r.subsampled:
-            notes.append(f"**{n}** is slow: evaluated on a seeded subsample of {e.n_evaluated:,} of "
-                         f"{n_scps:,} SCPs (time budget).")
+        ev = f"{e.n_evaluated:,}" + (" (preview)" if r.preview else "")
+        lines.append(f"| {n} | {e.rmse_px:.3g} | {e.dr_max_px:.3g} | {e.ce_evals_per_point:.1f} | {ev} |")
+        if r.preview:
+            notes.append(f"**{n}** is slow: a preview on a fixed seeded subset of {e.n_evaluated:,} of "
+                         f"{n_scps:,} SCPs is shown while every SCP is evaluated.")
         for w in r.fit.warnings:
             notes.append(f"**{n}**: {w}")
         flagged = status_text(r.status_counts(), e.n_evaluated)

@@ -58,7 +58,7 @@ class Views:
         methods_ready: threading.Event
         method_names: list[str]
         max_cloud_points: int
-        max_map_points: int | None
+        max_map_cells: int
         fit_wait_s: float
         background: bool
         _lock: threading.Condition
@@ -158,11 +158,18 @@ class Views:
             self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
 
     def _update_methods(self, s: Settings, gen: int | None) -> None:
-        """Fit (cached / background) and evaluate every checked method within the time budget."""
+        """Fit (cached / background) and evaluate every checked method on every SCP.
+
+        In background mode a method whose full evaluation is projected to be slow
+        (:meth:`ExplorerModel.needs_preview`) is shown first on the fixed seeded preview subset,
+        named as such, while its full evaluation runs on the fit threads; when it lands the
+        update runs again and shows it.  The final state never depends on the machine's load.
+        """
         m = self.model
         scps = m.scps(s)
         runs: dict[str, MethodRun] = {}
         pending: dict[str, str] = {}
+        self._eval_jobs = set()
         self._status("training" if any(registry()[n].needs_fit for n in s.methods) else "evaluating", 5)
         fits = self._get_fits([(n, None) for n in s.methods], s, 0, self.fit_wait_s, gen)
         for i, name in enumerate(s.methods):
@@ -171,6 +178,11 @@ class Views:
             rec = fits[(name, None)]
             if rec is None:
                 pending[name] = self._pending_text(name, s)
+            elif self.fits is not None and m.needs_preview(name, s, rec):
+                runs[name] = m.evaluate(name, s, fit=rec, max_points=m.preview_points)
+                key = ("evaluate", *m.eval_key(name, s))
+                self._eval_jobs.add(key)
+                self.fits.submit(key, lambda n=name, r=rec: m.evaluate(n, s, fit=r), 0, 0.5)  # type: ignore[misc]
             else:
                 runs[name] = m.evaluate(name, s, fit=rec)
             self._check(gen)
@@ -208,7 +220,8 @@ class Views:
         else:
             what = "grey (no method to colour by)"
         n_eval = len(idx_all)
-        sub = f" ({cm} evaluated on a subsample of {n_eval:,})" if n_eval < len(scps) else ""
+        sub = (f" ({cm}: preview on a fixed seeded {n_eval:,}; every SCP is being evaluated)"
+               if n_eval < len(scps) else "")
         dec = f"; the 3D view shows an evenly strided {len(idx):,} of {n_eval:,}" if len(idx) < n_eval else ""
         self.handles["cloud_text"].content = (f"SCPs: {len(scps):,}{sub}, {what}{dec}. SCOPs (gold): {len(scops)}. "
                                               f"{getattr(self, 'ground_text', '')}.")
@@ -220,30 +233,29 @@ class Views:
         runs, pending = self.runs, self.pending
         ok = {n: r.evaluation for n, r in runs.items() if r.evaluation is not None}
         maps_key = (tuple((n, runs[n].key) for n in ok), s.limit_px, s.colour_mode, s.component, s.diff,
-                    s.show_scops, s.scop_density, tuple(pending), self.methods_ready.is_set())
+                    s.show_scops, s.aggregate, s.scop_density, tuple(pending), self.methods_ready.is_set())
         if not self._changed("maps", maps_key):
             return
         if ok:
             fig = F.residual_maps(ok, scps, control=scops if s.show_scops else None, shape=scene.shape,
                                   limit_px=s.limit_px if s.colour_mode == "fixed" else None,
                                   mode=s.colour_mode, component=s.component, difference=s.diff,
-                                  status={n: runs[n].status for n in ok}, max_points=self.max_map_points)
+                                  status={n: runs[n].status for n in ok}, aggregate=s.aggregate,
+                                  max_cells=self.max_map_cells)
         else:
             fig = F.empty_figure("waiting for " + ", ".join(pending) if pending else self._no_method_text())
         self._set_figure("maps", fig)
         self._set_figure("timing", F.timing_bars(ok, colors=F.method_colors(self.method_names)) if ok else
                          F.empty_figure(self._no_method_text()))
         notes = []
-        sub = [n for n in ok if runs[n].subsampled]
+        sub = [n for n in ok if runs[n].preview]
         if sub:
-            notes.append(f"Subsampled to stay responsive: {', '.join(sub)} evaluated on a seeded subsample "
-                         "(time budget); **Export** evaluates every SCP.")
-        if self.max_map_points is not None and any(len(e.evaluated_index) > self.max_map_points
-                                                   for e in ok.values()):
-            notes.append(f"Each map draws an evenly strided {self.max_map_points:,} of its points; the RMSE "
-                         "in its title and the export use all of them.")
+            notes.append(f"Preview: {', '.join(sub)} shown on a fixed seeded subset of "
+                         f"{m.preview_points:,} SCPs while every SCP is evaluated (slow method); the maps are "
+                         "replaced when it is done.")
         if ok:
-            notes.append("Click a point in a map to select it in the 3D view.")
+            notes.append(f"Each map cell shows the {s.aggregate} of the residuals of the check points in it "
+                         "(transparent: no check point). Click a cell to select its worst point in the 3D view.")
         self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
         text = summary_markdown(runs, len(scps))
         if pending:
@@ -298,7 +310,7 @@ class Views:
             self.sweeps = {}
             self._set_figure("accuracy", F.empty_figure("sweep off" if s.methods else self._no_method_text()))
         if self.fits is not None:
-            self.fits.keep(wanted)
+            self.fits.keep(wanted | getattr(self, "_eval_jobs", set()))
 
     # ------------------------------------------------------------------- text
     def _no_method_text(self) -> str:
@@ -306,11 +318,11 @@ class Views:
 
     def _done_text(self, runs: dict[str, MethodRun], pending: dict[str, str], scps: PointSet) -> str:
         failed = [n for n, r in runs.items() if not r.ok]
-        sub = [n for n, r in runs.items() if r.subsampled]
+        sub = [n for n, r in runs.items() if r.preview]
         name = self.handles["preset"].value if self.scene is not None else ""
         txt = f"{name}: updated in {self.last_update_s:.2f} s ({len(scps):,} SCPs)"
         if sub:
-            txt += f"; on a subsample (slow): {', '.join(sub)}"
+            txt += f"; preview on a seeded subset (full result computing): {', '.join(sub)}"
         if pending:
             txt += f"; training: {', '.join(pending)}"
         if failed:

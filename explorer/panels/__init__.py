@@ -131,12 +131,29 @@ def robust_limit(values: np.ndarray, percentile: float = ROBUST_PERCENTILE) -> f
     return lim if lim > 0 else 1e-12
 
 
+def percent_text(count: int, total: int) -> str:
+    """``count`` of ``total`` as a percentage in words: ``"3.09 %"``, ``"100 %"``, ``"0.002 %"``;
+    never exponent notation, and never "100 %" / "0 %" unless every / no point is counted."""
+    total = max(int(total), 1)
+    if count >= total:
+        return "100 %"
+    if count <= 0:
+        return "0 %"
+    p = 100.0 * count / total
+    if p >= 99.9:
+        return ">99.9 %"
+    if p < 0.001:
+        return "<0.001 %"
+    digits = max(0, 2 - int(np.floor(np.log10(p))))  # three significant digits
+    return f"{p:.{digits}f}".rstrip("0").rstrip(".") + " %"
+
+
 def count_text(count: int, total: int) -> str:
     """``"2 of 40,000"`` for one or two points (a percentage of so few says nothing), else
-    ``"1,234 (3.1%)"``."""
+    ``"1,234 (3.09 %)"`` (:func:`percent_text`)."""
     if count <= 2:
         return f"{count} of {total:,}"
-    return f"{count:,} ({100.0 * count / max(total, 1):.2g}%)"
+    return f"{count:,} ({percent_text(count, total)})"
 
 
 def height_rgb(height_m: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -159,6 +176,6 @@ def rgb_string(rgb: tuple[int, int, int]) -> str:
 
 __all__ = [
     "DIVERGING", "FLAT_GROUND_RGB", "HEIGHT", "INVALID_RGB", "ITERATION", "LOG_MAGNITUDE", "NEGATIVE_END",
-    "POSITIVE_END", "ROBUST_PERCENTILE", "SCOP_RGB", "count_text", "diverging_rgb", "height_rgb",
+    "POSITIVE_END", "ROBUST_PERCENTILE", "SCOP_RGB", "count_text", "percent_text", "diverging_rgb", "height_rgb",
     "plotly_colorscale", "ramp", "rgb_string", "robust_limit",
 ]

@@ -40,6 +40,8 @@ from explorer.panels import (
     rgb_string,
     robust_limit,
 )
+from explorer.panels.raster import AGGREGATES, MAX_CELLS, cell_grid, occupied
+from explorer.panels.raster import aggregate as aggregate_cells
 from explorer.points import PointSet
 
 SCOP_MARKS = (10, 20, 30, 50, 100, 300, 500, 1000)
@@ -154,7 +156,7 @@ class MapPanel:
 def _panels(
     evaluations: Mapping[str, Evaluation], check: PointSet, component: str,
     difference: tuple[str, str] | None, status: Mapping[str, np.ndarray] | None,
-    labels: Mapping[str, str] | None, max_points: int | None,
+    labels: Mapping[str, str] | None, aggregate: str,
 ) -> list[MapPanel]:
     comps = {"row": ("row",), "column": ("column",), "row and column": ("row", "column")}.get(component)
     if comps is None:
@@ -168,10 +170,8 @@ def _panels(
             ok = np.isfinite(res)
             rms = float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else float("nan")
             m = idx.size
-            sub = f"{m:,} of {ev.n_scps:,} SCPs" if m < ev.n_scps else f"{m:,} SCPs"
-            shown = min(m, max_points) if max_points is not None else m
-            dec = f", {shown:,} drawn" if shown < m else ""
-            title = f"{_label(n, labels)} {c}: RMSE {rms:.3g} px<br>({sub}{dec})"
+            sub = f"{m:,} of {ev.n_scps:,} SCPs: seeded preview" if m < ev.n_scps else f"all {m:,} SCPs"
+            title = f"{_label(n, labels)} {c}: RMSE {rms:.3g} px<br>({sub}; cell {aggregate})"
             missing: dict[str, np.ndarray] = {}
             if (~ok).any():
                 if st is not None and np.shape(st) == res.shape:
@@ -193,7 +193,7 @@ def _panels(
             ok = np.isfinite(d)
             rms = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else float("nan")
             title = (f"{_label(a, labels)} minus {_label(b, labels)} (row): RMS {rms:.3g} px"
-                     f"<br>({int(ok.sum()):,} points both evaluated)")
+                     f"<br>({int(ok.sum()):,} points both evaluated; cell {aggregate})")
             out.append(MapPanel(title, d[ok], common[ok], {}, "difference"))
     return out
 
@@ -209,13 +209,15 @@ def residual_maps(
     component: str = "row",
     difference: tuple[str, str] | None = None,
     status: Mapping[str, np.ndarray] | None = None,
-    max_points: int | None = 20000,
+    aggregate: str = "mean",
+    max_cells: int = MAX_CELLS,
     labels: Mapping[str, str] | None = None,
     columns: int | None = None,
     show_control: bool = True,
     percentile: float = ROBUST_PERCENTILE,
 ) -> go.Figure:
-    """Residual maps over the image: one small multiple per method (and component).
+    """Residual maps over the image: one small multiple per method (and component), each a raster of
+    the residual aggregated per image cell (:mod:`explorer.panels.raster`).
 
     Parameters
     ----------
@@ -225,7 +227,7 @@ def residual_maps(
     check : PointSet
         The SCPs the evaluations used (image row/col of each point).
     control : PointSet, optional
-        SCOPs, drawn as gold crosses on every map (one legend entry toggles them); beyond
+        SCOPs, an overlay of gold crosses on every map (one legend entry toggles them); beyond
         :data:`MANY_SCOPS` they are small and start hidden.
     shape : (int, int), optional
         Image (rows, columns) for the axis ranges (pixel edges).
@@ -247,9 +249,13 @@ def residual_maps(
         Per method the status codes (M,) of ``explorer.app.model.STATUS_NAMES``; points
         without a residual are then drawn and named as refused / not converged / outside
         the image (else all as not converged).
-    max_points : int or None
-        Draw at most this many points per map (an evenly strided subset, named in the
-        title); None draws all.
+    aggregate : {"mean", "max |residual|"}
+        Cell value: the signed mean of the cell's residuals, or the signed residual of largest
+        magnitude (:data:`explorer.panels.raster.AGGREGATES`).  Cells with no check point are
+        transparent (a legend entry counts them); cells whose points all lack a residual show their
+        status (refused / not converged / outside the image, named and counted in the legend).
+    max_cells : int
+        At most this many cells per map (:func:`explorer.panels.raster.cell_grid`).
     labels : mapping, optional
         Display names.
     columns : int, optional
@@ -262,11 +268,13 @@ def residual_maps(
     Returns
     -------
     go.Figure
-        Per map one ``scattergl`` trace (``x`` = column, ``y`` = row, ``customdata`` =
-        (residual px, SCP index), ``meta`` = map title), plus traces for points without a
-        residual (named by status) and SCOPs.  ``layout.meta`` holds ``height_over_width``,
-        ``mode`` and ``limits_px`` (per map the colour limit; for the log mode the exponent
-        range).
+        Per map one ``heatmap`` trace (``x`` / ``y`` = cell edges in image columns / rows, ``z`` =
+        the cell aggregate in pixels -- log10 of its magnitude in the log mode -- NaN for no value,
+        ``customdata`` = (points in the cell, SCP index of its worst point), ``meta`` = map name),
+        one heatmap per status of cells without a residual, and the SCOP overlay (``scatter``).
+        Legend-only ``scatter`` entries name the empty cells and the statuses.  ``layout.meta``
+        holds ``height_over_width``, ``mode``, ``aggregate``, ``limits_px`` (per map the colour
+        limit; for the log mode the exponent range), ``titles`` and ``cells`` (rows, columns).
     """
     if mode is None:
         mode = "fixed" if limit_px is not None else "per method"
@@ -274,7 +282,9 @@ def residual_maps(
         raise ValueError(f"mode must be 'per method', 'shared', 'log magnitude' or 'fixed', got {mode!r}")
     if mode == "fixed" and not (limit_px is not None and limit_px > 0):
         raise ValueError(f"the fixed mode needs a positive limit_px, got {limit_px}")
-    panels = _panels(evaluations, check, component, difference, status, labels, max_points)
+    if aggregate not in AGGREGATES:
+        raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+    panels = _panels(evaluations, check, component, difference, status, labels, aggregate)
     if not panels:
         return empty_figure("no method evaluated")
     n = len(panels)
@@ -313,42 +323,59 @@ def residual_maps(
         limits = [float(limit_px or 0.0)]
     else:
         limits = [robust_limit(p.values, percentile) for p in panels]
-    hover_what = "log10 |residual| %{marker.color:.3f}" if mode == "log magnitude" else ""
+    gshape = check.grid_shape
+    grid_rc = (int(gshape[0]), int(gshape[1])) if len(gshape) >= 2 and gshape[0] * gshape[1] > 0 and \
+        (len(gshape) < 3 or gshape[2] == 1) else None
+    image_shape = shape if shape is not None else (
+        int(np.ceil(np.max(check.row) + 0.5)) if len(check) else 1, int(np.ceil(np.max(check.col) + 0.5)) if len(check)
+        else 1)
+    cells = cell_grid(image_shape, len(check), grid_rc, max_cells)
+    all_points = occupied(cells, check.row, check.col)
+    empty_cells = int((all_points == 0).sum())
+    value_word = "mean residual" if aggregate == "mean" else "max |residual| (signed)"
     data: list[dict] = []
     legend_seen: set[str] = set()
+    xe, ye = cells.col_edges, cells.row_edges
     for k, p in enumerate(panels):
         xr, yr = refs[k]
-        pos = decimation_index(p.values.size, max_points)
-        vals, idx = p.values[pos], p.index[pos]
+        field = aggregate_cells(cells, check.row[p.index], check.col[p.index], p.values, p.index, aggregate)
         axis = f"coloraxis{k + 1 if k else ''}" if per_map else "coloraxis"
-        colour = np.log10(np.maximum(np.abs(vals), 1e-300)) if mode == "log magnitude" else vals
+        z = np.log10(np.maximum(np.abs(field.value), 1e-300)) if mode == "log magnitude" else field.value
+        shown = "log10 |px| %{z:.3f}" if mode == "log magnitude" else f"{value_word} %{{z:.4g}} px"
         data.append({
-            "type": "scattergl", "x": check.col[idx], "y": check.row[idx],
-            "customdata": np.stack([vals, idx.astype(np.float64)], axis=1) if vals.size else np.zeros((0, 2)),
-            "mode": "markers", "xaxis": xr, "yaxis": yr,
-            "marker": {"color": colour, "coloraxis": axis, "size": 4},
-            "name": p.title.split(":")[0], "meta": p.title.split(":")[0],
-            "hovertemplate": "row %{y:.2f}<br>col %{x:.2f}<br>residual %{customdata[0]:.4g} px<br>"
-                             f"SCP %{{customdata[1]:.0f}}{'<br>' + hover_what if hover_what else ''}"
-                             "<extra>%{meta}</extra>",
+            "type": "heatmap", "x": xe, "y": ye, "z": z, "coloraxis": axis, "zsmooth": False,
+            "customdata": np.stack([field.count, field.worst_index], axis=-1).astype(np.int32),
+            "xaxis": xr, "yaxis": yr, "name": p.title.split(":")[0], "meta": p.title.split(":")[0],
+            "hoverongaps": False,
+            "hovertemplate": f"row %{{y:.0f}}, col %{{x:.0f}}<br>{shown}<br>%{{customdata[0]}} points; worst: "
+                             "SCP %{customdata[1]}<extra>%{meta}</extra>",
             "showlegend": False,
         })
+        valid_cells = field.count > 0
+        total = len(p.values) + sum(len(v) for v in p.missing.values())
         for what, where in p.missing.items():
-            colour_s, symbol, text = STATUS_STYLE[what]
-            total = len(p.values) + sum(len(v) for v in p.missing.values())
+            colour_s, _, text = STATUS_STYLE[what]
+            cnt = occupied(cells, check.row[where], check.col[where])
+            only = (cnt > 0) & ~valid_cells  # cells with points, none of them with a residual
             group = f"{p.method}: {what}"  # one legend entry per method and status (its row and column maps)
-            data.append({
-                "type": "scattergl", "x": check.col[where], "y": check.row[where], "mode": "markers",
-                "xaxis": xr, "yaxis": yr, "marker": {"color": colour_s, "size": 6, "symbol": symbol},
-                "name": f"{p.method}: {text}: {count_text(len(where), total)}",
-                "legendgroup": group, "showlegend": group not in legend_seen,
-                "hovertemplate": f"row %{{y:.2f}}<br>col %{{x:.2f}}<br>{text}<extra></extra>",
+            data.append({  # 1 byte per cell: 0 transparent, 1 the status colour
+                "type": "heatmap", "x": xe, "y": ye, "z": only.astype(np.uint8), "zmin": 0, "zmax": 1,
+                "colorscale": [[0.0, "rgba(0,0,0,0)"], [0.5, "rgba(0,0,0,0)"], [0.5, colour_s], [1.0, colour_s]],
+                "showscale": False, "zsmooth": False, "xaxis": xr, "yaxis": yr, "legendgroup": group,
+                "showlegend": False, "hoverinfo": "skip",
             })
+            if group not in legend_seen:
+                data.append({
+                    "type": "scatter", "x": [None], "y": [None], "mode": "markers", "xaxis": xr, "yaxis": yr,
+                    "marker": {"color": colour_s, "size": 9, "symbol": "square"}, "legendgroup": group,
+                    "name": f"{p.method}: {text}: {count_text(len(where), total)}", "showlegend": True,
+                    "hoverinfo": "skip",
+                })
             legend_seen.add(group)
         if show_control and control is not None and len(control):
             many = len(control) > MANY_SCOPS
             data.append({
-                "type": "scattergl", "x": control.col, "y": control.row, "mode": "markers",
+                "type": "scatter", "x": control.col, "y": control.row, "mode": "markers",
                 "xaxis": xr, "yaxis": yr,
                 "marker": {"color": rgb_string(SCOP_RGB), "size": 3 if many else 6, "symbol": "cross",
                            "opacity": 0.8},
@@ -358,6 +385,14 @@ def residual_maps(
                 "hovertemplate": "SCOP<br>row %{y:.2f}<br>col %{x:.2f}<extra></extra>",
             })
             legend_seen.add("scop")
+    if empty_cells:
+        data.append({
+            "type": "scatter", "x": [None], "y": [None], "mode": "markers", "xaxis": refs[0][0],
+            "yaxis": refs[0][1], "marker": {"color": PLOT_BG, "size": 9, "symbol": "square",
+                                            "line": {"color": "rgb(160,160,160)", "width": 1}},
+            "name": f"no check point (transparent): {empty_cells:,} of {all_points.size:,} cells",
+            "showlegend": True, "hoverinfo": "skip", "legendgroup": "empty",
+        })
     for k in range(n):
         r, c = divmod(k, ncol)
         sx = "" if k == 0 else str(k + 1)
@@ -405,7 +440,8 @@ def residual_maps(
                 "yanchor": "top", "font": {"size": 9}},
         plot_bgcolor=PLOT_BG,
         meta={"height_over_width": height_px / _REF_WIDTH_PX, "mode": mode, "limits_px": limits,
-              "titles": [p.title for p in panels], "title_px": _TITLE_PX, "axis_px": _AXIS_PX},
+              "titles": [p.title for p in panels], "title_px": _TITLE_PX, "axis_px": _AXIS_PX,
+              "aggregate": aggregate, "cells": list(cells.shape)},
     )
     if any(d.get("showlegend") for d in data):  # room for the legend under the maps
         extra = 18 * (1 + sum(1 for d in data if d.get("showlegend")) // 2)
@@ -529,9 +565,34 @@ def timing_bars(
     return fig
 
 
+CARTESIAN_TRACE_TYPES = frozenset({"bar", "box", "candlestick", "contour", "funnel", "heatmap", "histogram",
+                                   "histogram2d", "histogram2dcontour", "image", "ohlc", "pie", "scatter",
+                                   "scatterternary", "violin", "waterfall"})
+"""Trace types of plotly.js's cartesian partial bundle (``assets/plotlyjs``)."""
+
+
+def _plotlyjs_for(figures: Sequence[go.Figure]) -> str:
+    """The plotly.js source to inline: the cartesian partial bundle (1.5 MB) when every trace is one of its
+    types and it is the plotly.js version plotly.py was built for, else plotly.py's full bundle (4.8 MB)."""
+    from plotly.offline import get_plotlyjs, get_plotlyjs_version
+
+    types = {t.type or "scatter" for fig in figures for t in fig.data}
+    if types <= CARTESIAN_TRACE_TYPES:
+        try:
+            from explorer._resources import asset
+
+            text = asset("plotlyjs", "plotly-cartesian.min.js").read_text(encoding="utf-8")
+        except Exception:  # an installation without the bundle: the full one still works
+            text = ""
+        if f"(cartesian - minified) v{get_plotlyjs_version()}" in text[:200]:
+            return text
+    return get_plotlyjs()
+
+
 def figures_html(figures: Sequence[tuple[str, go.Figure]], title: str, notes: Sequence[str] = ()) -> str:
-    """The figures in one self-contained HTML page: plotly.js inlined once, no script or style
-    loaded from the network (opens offline), deterministic element ids.
+    """The figures in one self-contained HTML page: plotly.js inlined once (its cartesian partial bundle
+    when the figures need nothing else, :func:`_plotlyjs_for`), no script or style loaded from the
+    network (opens offline), deterministic element ids.
 
     Parameters
     ----------
@@ -543,19 +604,21 @@ def figures_html(figures: Sequence[tuple[str, go.Figure]], title: str, notes: Se
     """
     import html
 
+    figs = [go.Figure(fig) for _, fig in figures]
     parts = [f"<h1>{html.escape(title)}</h1>"] + [f"<p>{html.escape(t)}</p>" for t in notes]
-    for k, (heading, fig) in enumerate(figures):
-        fig = go.Figure(fig)
+    if figs:
+        parts.append('<script type="text/javascript">' + _plotlyjs_for(figs) + "</script>")
+    for k, ((heading, _), fig) in enumerate(zip(figures, figs, strict=True)):
         aspect = float((fig.layout.meta or {}).get("height_over_width", 0.6))
         fig.update_layout(width=1000, height=int(1000 * aspect))
         parts.append(f"<h2>{html.escape(heading)}</h2>")
-        parts.append(fig.to_html(full_html=False, include_plotlyjs=(k == 0), div_id=f"panel-{k}",
+        parts.append(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{k}",
                                  config=PLOTLY_CONFIG))
     return ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + html.escape(title)
             + "</title></head><body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
 
 
 __all__ = [
-    "PLOTLY_CONFIG", "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure", "figures_html",
-    "method_colors", "residual_maps", "timing_bars",
+    "CARTESIAN_TRACE_TYPES", "PLOTLY_CONFIG", "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure",
+    "figures_html", "method_colors", "residual_maps", "timing_bars",
 ]

@@ -83,18 +83,25 @@ def test_same_seed_same_predictions():
     assert not np.array_equal(a.row, c.row)
 
 
-def test_non_converged_training_warns_and_flags_points(caplog):
-    """One epoch cannot fit the scanline: validation RMSE is hundreds of pixels.  The warning is one
-    log line on the ``explorer`` logger (issue 18), not a warning record with a file path."""
+def test_training_short_of_its_goal_warns_and_answers_with_its_best_model(caplog):
+    """One epoch on the raw row (the paper's scaling) cannot fit the scanline: the validation RMSE is
+    hundreds of pixels.  The warning is one log line on the ``explorer`` logger (issue 18) naming the
+    RMSE and the stop reason; the best model reached still answers (issue 24: a map of what it
+    reached, never a map of NaN), and its residuals against the exact rows show it is poor."""
     s = _scene("WSU")
-    m = MLPMethod(s, max_epochs=1)
+    m = MLPMethod(s, max_epochs=1, detrend=False)
     with caplog.at_level(logging.WARNING, logger="explorer"):
         m.fit(simulate_points(s, 100, kind="scop"))
-    assert any("mlp: training did not converge" in r.getMessage() and r.name == "explorer" for r in caplog.records)
+    msgs = [r.getMessage() for r in caplog.records if r.name == "explorer"]
+    assert any("mlp: training did not reach its accuracy goal" in t and "stop: max_epochs" in t
+               and "best model is used" in t for t in msgs)
     assert m.fit_info["converged"] is False and m.fit_info["val_rmse_px"] > 1.0
     assert m.fit_info["stop_reason"] == "max_epochs" and m.fit_info["optimizer_converged"] is False
-    res = m.ground_to_image(_scps("WSU", 200).ground)
-    assert not res.converged.any() and not res.valid.any()
+    scps = _scps("WSU", 200)
+    res = m.ground_to_image(scps.ground)
+    assert res.valid.all()
+    rmse = float(np.sqrt(np.mean((res.row - scps.row) ** 2)))
+    assert 1.0 < rmse < 10 * m.fit_info["val_rmse_px"]
 
 
 def test_out_of_image_points_flagged():

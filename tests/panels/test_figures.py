@@ -55,24 +55,51 @@ def test_colour_helpers():
     assert cs[0] == [0.0, "rgb(59,76,192)"] and cs[-1][0] == 1.0
 
 
+def _cell_means(edges_r, edges_c, rows, cols, values, how="mean"):
+    """Brute-force truth of a map raster: a loop over the cells with explicit edge tests."""
+    out = np.full((len(edges_r) - 1, len(edges_c) - 1), np.nan)
+    last_r, last_c = len(edges_r) - 2, len(edges_c) - 2
+    for i in range(len(edges_r) - 1):
+        in_r = (rows >= edges_r[i]) & ((rows < edges_r[i + 1]) | (i == last_r))
+        for j in range(len(edges_c) - 1):
+            sel = in_r & (cols >= edges_c[j]) & ((cols < edges_c[j + 1]) | (j == last_c))
+            v = values[sel & np.isfinite(values)]
+            if v.size:
+                out[i, j] = v.mean() if how == "mean" else v[np.argmax(np.abs(v))]
+    return out
+
+
+def _map(fig, name):
+    (tr,) = [t for t in fig.data if t.name == name and t.type == "heatmap"]
+    return tr
+
+
 def test_residual_maps_hold_the_residuals(results):
+    """Each map is a heatmap of the per-cell mean of the evaluation's residuals (brute-force truth),
+    with cells from the SCP grid: one SCP per cell here (2,000 SCPs), so every cell holds exactly the
+    residual of its point."""
     scene, scops, scps, evs = results
-    fig = F.residual_maps(evs, scps, control=scops, shape=scene.shape, limit_px=0.02, max_points=None)
+    fig = F.residual_maps(evs, scps, control=scops, shape=scene.shape, limit_px=0.02)
     for name, ev in evs.items():
-        (tr,) = [t for t in fig.data if t.name == f"{name} row"]
-        ok = np.isfinite(ev.residual_row)
-        np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 0], ev.residual_row[ok])
-        np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 1], ev.evaluated_index[ok])
-        np.testing.assert_array_equal(np.asarray(tr.marker.color), ev.residual_row[ok])
-        np.testing.assert_array_equal(np.asarray(tr.x), scps.col[ev.evaluated_index[ok]])
-        np.testing.assert_array_equal(np.asarray(tr.y), scps.row[ev.evaluated_index[ok]])
-        assert tr.marker.coloraxis == "coloraxis"
-        for word in ("row", "col", "residual"):
+        tr = _map(fig, f"{name} row")
+        idx = ev.evaluated_index
+        truth = _cell_means(np.asarray(tr.y), np.asarray(tr.x), scps.row[idx], scps.col[idx], ev.residual_row)
+        np.testing.assert_allclose(np.asarray(tr.z), truth, rtol=1e-12, atol=1e-15)
+        assert tr.coloraxis == "coloraxis" and tr.zsmooth is False
+        for word in ("row", "col", "residual", "SCP"):
             assert word in tr.hovertemplate
+    assert tuple(fig.layout.meta["cells"]) == scps.grid_shape[:2]
+    poly = _map(fig, "toy_poly row")
+    z = np.asarray(poly.z)
+    assert np.isfinite(z).all()  # every SCP evaluated: no empty cell
+    # one point per cell: the cell's worst point is that point, and its value the point's residual
+    worst = np.asarray(poly.customdata)[..., 1].ravel()
+    np.testing.assert_array_equal(np.sort(worst), np.arange(len(scps)))
+    np.testing.assert_array_equal(z.ravel(), evs["toy_poly"].residual_row[worst])
     # the residuals themselves against truth: rows minus the SCPs' exact rows
-    poly = evs["toy_poly"]
+    poly_ev = evs["toy_poly"]
     truth = ToyPoly(scene).fit(scops).ground_to_image(scps.ground).row - scps.row
-    np.testing.assert_allclose(poly.residual_row, truth, atol=1e-9)
+    np.testing.assert_allclose(poly_ev.residual_row, truth, atol=1e-9)
     # one shared, fixed, symmetric scale centred at 0
     ca = fig.layout.coloraxis
     assert (ca.cmin, ca.cmax, ca.cmid) == (-0.02, 0.02, 0.0)
@@ -84,34 +111,84 @@ def test_residual_maps_hold_the_residuals(results):
     assert tuple(fig.layout.yaxis.range) == (scene.n_rows - 0.5, -0.5)
     assert fig.layout.xaxis2.matches == "x" and fig.layout.yaxis2.matches == "y"
     titles = [a.text for a in fig.layout.annotations]
-    assert f"500 of {len(scps):,} SCPs" in titles[1]  # the subsample is named
+    assert f"500 of {len(scps):,} SCPs: seeded preview" in titles[1]  # the preview is named
+    assert f"all {len(scps):,} SCPs" in titles[0]
+    # the 1,500 SCPs toy_bisect did not evaluate: transparent cells, named and counted in the legend
+    bis = np.asarray(_map(fig, "toy_bisect row").z)
+    assert np.isnan(bis).sum() == len(scps) - 500
     fig.to_json()
 
 
-def test_residual_maps_decimate_and_name_it(results):
-    scene, scops, scps, evs = results
-    fig = F.residual_maps(evs, scps, shape=scene.shape, max_points=100)
+@pytest.mark.parametrize("how", ["mean", "max |residual|"])
+@pytest.mark.parametrize("layout", ["grid", "grid 2x2 per cell", "grid 3x3 ragged", "random", "wide image"])
+def test_constant_field_draws_the_constant_in_every_cell(how, layout):
+    """Issue 24: no pattern may come from the drawing.  On a residual field that is constant by
+    construction, every drawn cell of the raster holds exactly that constant, for any point layout;
+    the only cells without a value are those without a point, and grid points fill every cell with the
+    same number of points (no stripes from uneven cells)."""
+    scene = build_scene("WSU" if layout != "wide image" else "SCB")
+    n = {"grid": 2000, "grid 2x2 per cell": 40_000, "grid 3x3 ragged": 45_000, "random": 3000,
+         "wide image": 5000}[layout]
+    scps = simulate_points(scene, n, kind="scp")
+    if layout == "random":
+        rng = np.random.default_rng(1)
+        rows = rng.uniform(-0.5, scene.n_rows - 0.5, n)
+        cols = rng.uniform(-0.5, scene.n_columns - 0.5, n)
+        scps = dataclasses.replace(scps, row=rows, col=cols, ground=np.zeros((n, 3)), time=np.zeros(n),
+                                   grid_shape=(0, 0, 1))
+    n = len(scps)
+    c = -0.3712345678901234
+    ev = dataclasses.replace(evaluate_method(ToyPoly(scene), scps.subset(np.arange(10)),
+                                             simulate_points(scene, 50, kind="scop")),
+                             n_scps=n, n_evaluated=n, residual_row=np.full(n, c), residual_col=np.full(n, c),
+                             evaluated_index=np.arange(n))
+    max_cells = {"grid 2x2 per cell": 10_000, "grid 3x3 ragged": 5_000}.get(layout, 15_000)
+    fig = F.residual_maps({"m": ev}, scps, shape=scene.shape, aggregate=how, max_cells=max_cells,
+                          component="row and column")
+    for comp in ("row", "column"):
+        tr = _map(fig, f"m {comp}")
+        z = np.asarray(tr.z)
+        counts = np.asarray(tr.customdata)[..., 0]
+        drawn = np.isfinite(z)
+        assert drawn.any() and (z[drawn] == c).all()
+        np.testing.assert_array_equal(drawn, counts > 0)  # empty only where no point
+        assert counts.sum() == n
+        if layout.startswith("grid") or layout == "wide image":
+            assert drawn.all()
+            inner = counts[:-1, :-1]  # the last row / column of cells may hold fewer grid nodes
+            assert inner.min() == inner.max()
+    if layout == "grid 2x2 per cell":
+        assert np.asarray(_map(fig, "m row").customdata)[..., 0].max() == 4
+    with pytest.raises(ValueError, match="aggregate"):
+        F.residual_maps({"m": ev}, scps, aggregate="median")
+
+
+def test_max_residual_cells_hold_the_worst_point(results):
+    scene, _, scps, evs = results
     ev = evs["toy_poly"]
-    (tr,) = [t for t in fig.data if t.name == "toy_poly row"]
-    assert len(tr.x) == 100
-    pos = F.decimation_index(len(ev.residual_row), 100)
-    np.testing.assert_array_equal(np.asarray(tr.customdata)[:, 0], ev.residual_row[pos])
-    assert "100 drawn" in fig.layout.annotations[0].text
-    assert np.all(np.diff(pos) > 0) and len(np.unique(np.diff(pos))) <= 2  # an even stride
+    fig = F.residual_maps({"m": ev}, scps, shape=scene.shape, aggregate="max |residual|", max_cells=500)
+    tr = _map(fig, "m row")
+    truth = _cell_means(np.asarray(tr.y), np.asarray(tr.x), scps.row, scps.col, ev.residual_row, "max")
+    np.testing.assert_array_equal(np.asarray(tr.z), truth)
+    mean = _map(F.residual_maps({"m": ev}, scps, shape=scene.shape, max_cells=500), "m row")
+    truth = _cell_means(np.asarray(mean.y), np.asarray(mean.x), scps.row, scps.col, ev.residual_row)
+    np.testing.assert_allclose(np.asarray(mean.z), truth, rtol=1e-12, atol=1e-15)
+    assert np.asarray(mean.customdata)[..., 0].max() > 1  # several points per cell here
 
 
-def test_invalid_points_get_their_own_trace(results):
+def test_invalid_points_get_their_own_layer(results):
     scene, _, scps, evs = results
     ev = evs["toy_poly"]
     res = ev.residual_row.copy()
     res[[3, 10]] = np.nan
     bad = dataclasses.replace(ev, residual_row=res)
-    fig = F.residual_maps({"m": bad}, scps, max_points=None)
-    (inv,) = [t for t in fig.data if "not converged" in t.name]
-    np.testing.assert_array_equal(np.asarray(inv.x), scps.col[ev.evaluated_index[[3, 10]]])
-    assert inv.name.endswith(f"2 of {len(res):,}") and "%" not in inv.name  # no percentage of two points
-    (tr,) = [t for t in fig.data if t.name == "m row"]
-    assert len(tr.x) == len(res) - 2
+    fig = F.residual_maps({"m": bad}, scps)
+    (entry,) = [t for t in fig.data if t.type == "scatter" and "not converged" in (t.name or "")]
+    assert entry.name.endswith(f"2 of {len(res):,}") and "%" not in entry.name  # no percentage of two points
+    (layer,) = [t for t in fig.data if t.type == "heatmap" and t.legendgroup == entry.legendgroup]
+    assert (np.asarray(layer.z) == 1).sum() == 2  # the two cells of those points (one point each)
+    tr = _map(fig, "m row")
+    assert np.isnan(np.asarray(tr.z)).sum() == 2
     assert fig.layout.yaxis.autorange == "reversed"
 
 
@@ -164,25 +241,26 @@ def test_automatic_per_map_limits_show_structure_at_1e_10_and_10_px(results):
     unit = ev.residual_row / np.nanmax(np.abs(ev.residual_row))
     tiny = dataclasses.replace(ev, residual_row=unit * 1e-10)
     big = dataclasses.replace(ev, residual_row=unit * 10.0)
-    fig = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None)  # default: per map
+    fig = F.residual_maps({"tiny": tiny, "big": big}, scps)  # default: per map
     assert fig.layout.meta["mode"] == "per method"
     for k, (name, e) in enumerate((("tiny", tiny), ("big", big))):
         axis = fig.layout[f"coloraxis{k + 1 if k else ''}"]
         lim = np.percentile(np.abs(e.residual_row), 99)
         assert axis.cmax == pytest.approx(lim, rel=1e-12) and axis.cmin == pytest.approx(-lim, rel=1e-12)
         assert f"{lim:.2g}" in axis.colorbar.title.text and "p99" in axis.colorbar.title.text
-        (tr,) = [t for t in fig.data if t.name == f"{name} row"]
-        assert tr.marker.coloraxis == f"coloraxis{k + 1 if k else ''}"
-        colours = diverging_rgb(np.asarray(tr.marker.color), axis.cmax)
+        tr = _map(fig, f"{name} row")
+        assert tr.coloraxis == f"coloraxis{k + 1 if k else ''}"
+        colours = diverging_rgb(np.asarray(tr.z).ravel(), axis.cmax)
         assert len(np.unique(colours, axis=0)) > 20  # structure, not one flat colour
     # shared: one limit over both maps -- the tiny map then sits at the centre colour
-    shared = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None, mode="shared")
+    shared = F.residual_maps({"tiny": tiny, "big": big}, scps, mode="shared")
     lim = np.percentile(np.abs(np.concatenate([tiny.residual_row, big.residual_row])), 99)
     assert shared.layout.coloraxis.cmax == pytest.approx(lim, rel=1e-12)
     # log magnitude: log10 |residual| on one scale from the 1st to the 99th percentile
-    log = F.residual_maps({"tiny": tiny, "big": big}, scps, max_points=None, mode="log magnitude")
-    (tr,) = [t for t in log.data if t.name == "tiny row"]
-    np.testing.assert_allclose(np.asarray(tr.marker.color), np.log10(np.abs(tiny.residual_row)), rtol=1e-12)
+    log = F.residual_maps({"tiny": tiny, "big": big}, scps, mode="log magnitude")
+    tr = _map(log, "tiny row")
+    worst = np.asarray(tr.customdata)[..., 1]  # one SCP per cell
+    np.testing.assert_allclose(np.asarray(tr.z), np.log10(np.abs(tiny.residual_row[worst])), rtol=1e-12)
     allv = np.log10(np.abs(np.concatenate([tiny.residual_row, big.residual_row])))
     assert log.layout.coloraxis.cmin == pytest.approx(np.percentile(allv, 1))
     assert log.layout.coloraxis.cmax == pytest.approx(np.percentile(allv, 99))
@@ -192,21 +270,21 @@ def test_automatic_per_map_limits_show_structure_at_1e_10_and_10_px(results):
 
 def test_row_column_and_difference_maps(results):
     _, _, scps, evs = results
-    fig = F.residual_maps(evs, scps, max_points=None, component="row and column",
-                          difference=("toy_poly", "toy_bisect"))
-    names = [t.name for t in fig.data if t.type == "scattergl" and t.showlegend is False]
+    fig = F.residual_maps(evs, scps, component="row and column", difference=("toy_poly", "toy_bisect"))
+    names = [t.name for t in fig.data if t.type == "heatmap" and t.coloraxis]
     assert names == ["toy_poly row", "toy_poly column", "toy_bisect row", "toy_bisect column",
                      "toy_poly minus toy_bisect (row)"]
     poly, bis = evs["toy_poly"], evs["toy_bisect"]
-    (col,) = [t for t in fig.data if t.name == "toy_poly column"]
-    ok = np.isfinite(poly.residual_col)
-    np.testing.assert_array_equal(np.asarray(col.customdata)[:, 0], poly.residual_col[ok])
+    col = _map(fig, "toy_poly column")
+    truth = _cell_means(np.asarray(col.y), np.asarray(col.x), scps.row, scps.col, poly.residual_col)
+    np.testing.assert_allclose(np.asarray(col.z), truth, rtol=1e-12, atol=1e-15)
     (diff,) = [t for t in fig.data if t.name.startswith("toy_poly minus")]
-    idx = np.asarray(diff.customdata)[:, 1].astype(int)  # SCP indexes both methods evaluated
+    z = np.asarray(diff.z)
+    idx = np.asarray(diff.customdata)[..., 1][np.isfinite(z)]  # SCP indexes both methods evaluated
     assert set(idx) <= set(bis.evaluated_index) and len(idx) == np.isfinite(bis.residual_row).sum()
     pos_b = np.searchsorted(bis.evaluated_index, idx)
     expect = poly.residual_row[idx] - bis.residual_row[pos_b]  # toy_poly evaluated every SCP
-    np.testing.assert_allclose(np.asarray(diff.customdata)[:, 0], expect, rtol=0, atol=0)
+    np.testing.assert_allclose(z[np.isfinite(z)], expect, rtol=0, atol=0)
 
 
 def test_refused_points_are_named_refused(results):
@@ -217,17 +295,19 @@ def test_refused_points_are_named_refused(results):
     status = np.zeros(len(res), np.int8)
     status[:37] = 1  # refused (outside the method's domain)
     status[37:40] = 2  # not converged
-    fig = F.residual_maps({"m": dataclasses.replace(ev, residual_row=res)}, scps, status={"m": status},
-                          max_points=None)
-    (ref,) = [t for t in fig.data if "refused" in t.name]
-    (nc,) = [t for t in fig.data if "not converged" in t.name]
-    assert len(ref.x) == 37 and len(nc.x) == 3 and "invalid" not in ref.name
-    assert ref.name.endswith(f"37 ({100 * 37 / len(res):.2g}%)")
-    np.testing.assert_array_equal(np.asarray(ref.x), scps.col[ev.evaluated_index[:37]])
+    fig = F.residual_maps({"m": dataclasses.replace(ev, residual_row=res)}, scps, status={"m": status})
+    (ref,) = [t for t in fig.data if t.type == "scatter" and "refused" in (t.name or "")]
+    (nc,) = [t for t in fig.data if t.type == "scatter" and "not converged" in (t.name or "")]
+    assert "invalid" not in ref.name
+    assert ref.name.endswith(f"37 ({100 * 37 / len(res):.3g} %)")
+    assert nc.name.endswith(f"3 ({100 * 3 / len(res):.3g} %)")
+    (layer,) = [t for t in fig.data if t.type == "heatmap" and t.legendgroup == ref.legendgroup]
+    assert (np.asarray(layer.z) == 1).sum() == 37  # one point per cell here
     both = F.residual_maps({"m": dataclasses.replace(ev, residual_row=res, residual_col=res)}, scps,
-                           status={"m": status}, max_points=None, component="row and column")
-    refused = [t for t in both.data if "refused" in t.name]
-    assert len(refused) == 2 and sum(bool(t.showlegend) for t in refused) == 1  # one entry toggles both maps
+                           status={"m": status}, component="row and column")
+    refused = [t for t in both.data if t.legendgroup == ref.legendgroup]
+    # one layer per map, one legend entry toggles both
+    assert sum(t.type == "heatmap" for t in refused) == 2 and sum(bool(t.showlegend) for t in refused) == 1
 
 
 def test_titles_keep_clear_of_the_maps_and_many_scops_stay_small(results):
@@ -266,7 +346,17 @@ def test_panels_html_opens_offline_and_is_deterministic(results):
     assert page == F.figures_html(figs, "export", ["note"])  # no random element ids
     assert "<script src=" not in page.replace(" ", "") and "cdn.plot.ly" not in page.split("/*")[0]
     assert page.count('id="panel-') == 2 and "Plotly.newPlot" in page
-    assert len(page) > 3_000_000  # plotly.js inlined
+    # plotly.js inlined once: its cartesian partial bundle (heatmaps, scatter and bars need nothing else),
+    # the same plotly.js version as plotly.py's
+    from plotly.offline import get_plotlyjs_version
+
+    assert page.count("* plotly.js") == 1 and f"(cartesian - minified) v{get_plotlyjs_version()}" in page
+    assert 1_400_000 < len(page) < 2_500_000
+    # a trace type outside the partial bundle gets the full one
+    import plotly.graph_objects as go
+
+    full = F.figures_html([("3d", go.Figure(go.Scatter3d(x=[0], y=[0], z=[0])))], "export")
+    assert "(cartesian" not in full and full.count("* plotly.js v") == 1 and len(full) > 4_000_000
     assert F.PLOTLY_CONFIG["showSendToCloud"] is False
     assert "sendDataToCloud" in F.PLOTLY_CONFIG["modeBarButtonsToRemove"]
     assert '"showSendToCloud": false' in page and '"displaylogo": false' in page

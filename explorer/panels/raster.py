@@ -1,0 +1,175 @@
+"""Residual fields as rasters: check-point residuals aggregated per image cell (numpy only).
+
+A residual map is an image of the residual *field*, not a scatter of points: every point falls in one
+cell of a grid laid over the image, and a cell shows an aggregate of the residuals of its points --
+
+* ``"mean"``: the signed mean (a field that is constant by construction maps to that constant in every
+  cell that holds a point, whatever the layout of the points);
+* ``"max |residual|"``: the signed residual of largest magnitude in the cell (the worst point).
+
+Cells without a point have no value (NaN: drawn transparent and counted in the legend).  The cell grid
+follows the check points' own grid when they are one (``PointSet.grid_shape``, as
+:func:`explorer.points.simulate_points` makes them): cell edges lie halfway between grid nodes and a
+cell holds exactly ``f x f`` nodes (the last row / column of cells fewer), ``f`` the smallest integer
+keeping the number of cells at most ``max_cells``.  So no cell is empty because of the drawing and no
+stripe or moire comes from cells holding different numbers of points.  Conventions (pixel centres,
+row/column): ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+AGGREGATES = ("mean", "max |residual|")
+"""How a map cell aggregates the residuals of its check points."""
+MAX_CELLS = 15_000
+"""Default upper bound of the cells of one map (50,000 grid SCPs: 2 x 2 nodes per cell)."""
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    """Cells over an image: ``row_edges`` (R + 1,) and ``col_edges`` (C + 1,), image pixel coordinates
+    (pixel centres at integers, so the image spans -0.5 .. n - 0.5)."""
+
+    row_edges: np.ndarray
+    col_edges: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return len(self.row_edges) - 1, len(self.col_edges) - 1
+
+    @property
+    def row_centres(self) -> np.ndarray:
+        return 0.5 * (self.row_edges[1:] + self.row_edges[:-1])
+
+    @property
+    def col_centres(self) -> np.ndarray:
+        return 0.5 * (self.col_edges[1:] + self.col_edges[:-1])
+
+    def cell_of(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """Flat cell index (N,) of image points (row-major; points on the image edge go to the edge cell)."""
+        nr, nc = self.shape
+        i = np.clip(np.searchsorted(self.row_edges, row, side="right") - 1, 0, nr - 1)
+        j = np.clip(np.searchsorted(self.col_edges, col, side="right") - 1, 0, nc - 1)
+        return i * nc + j
+
+
+def _edges(n_nodes: int, factor: int, n_pixels: int) -> np.ndarray:
+    """Edges of cells holding ``factor`` consecutive nodes of a cell-centred grid of ``n_nodes`` over
+    ``n_pixels`` pixels (node k at ``(k + 0.5) n_pixels / n_nodes - 0.5``)."""
+    k = np.minimum(np.arange(math.ceil(n_nodes / factor) + 1) * factor, n_nodes)
+    return k * (n_pixels / n_nodes) - 0.5
+
+
+def cell_grid(image_shape: tuple[int, int], n_points: int, grid: tuple[int, int] | None = None,
+              max_cells: int = MAX_CELLS) -> CellGrid:
+    """The cells of a residual map.
+
+    Parameters
+    ----------
+    image_shape : (int, int)
+        Image rows and columns.
+    n_points : int
+        Check points to draw (sets the resolution when ``grid`` is not given: about 4 per cell).
+    grid : (int, int), optional
+        (rows, columns) of the check points' cell-centred grid: cells then hold whole blocks of
+        nodes (see the module docstring).
+    max_cells : int
+        At most this many cells.
+
+    Returns
+    -------
+    CellGrid
+    """
+    n_rows, n_cols = int(image_shape[0]), int(image_shape[1])
+    if grid is None or grid[0] < 1 or grid[1] < 1:
+        n = max(1, int(n_points) // 4)
+        gr = max(1, int(round(math.sqrt(n * n_rows / max(n_cols, 1)))))
+        gc = max(1, int(round(n / gr)))
+    else:
+        gr, gc = int(grid[0]), int(grid[1])
+    f = 1
+    while math.ceil(gr / f) * math.ceil(gc / f) > max_cells:
+        f += 1
+    return CellGrid(_edges(gr, f, n_rows), _edges(gc, f, n_cols))
+
+
+@dataclass
+class CellField:
+    """A residual field aggregated on a :class:`CellGrid`.
+
+    Attributes
+    ----------
+    value : ndarray (R, C)
+        The aggregate (pixels); NaN where the cell holds no valid point.
+    count : ndarray of int (R, C)
+        Valid points per cell.
+    worst_index : ndarray of int (R, C)
+        Index (into the caller's point arrays, e.g. the SCP index) of the point of largest |residual| in
+        the cell; -1 where there is none.
+    """
+
+    grid: CellGrid
+    value: np.ndarray
+    count: np.ndarray
+    worst_index: np.ndarray
+
+
+def aggregate(grid: CellGrid, row: np.ndarray, col: np.ndarray, values: np.ndarray, index: np.ndarray,
+              how: str = "mean") -> CellField:
+    """Aggregate residuals at image points per cell (vectorised; NaN values are ignored).
+
+    Parameters
+    ----------
+    grid : CellGrid
+    row, col : ndarray (N,)
+        Image position of each point.
+    values : ndarray (N,)
+        Residuals, pixels.
+    index : ndarray of int (N,)
+        Each point's index to report as the cell's worst point.
+    how : {"mean", "max |residual|"}
+
+    Returns
+    -------
+    CellField
+    """
+    if how not in AGGREGATES:
+        raise ValueError(f"aggregate must be one of {AGGREGATES}, got {how!r}")
+    nr, nc = grid.shape
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(v)
+    cell = grid.cell_of(np.asarray(row)[ok], np.asarray(col)[ok])
+    v, idx = v[ok], np.asarray(index)[ok]
+    count = np.bincount(cell, minlength=nr * nc)
+    value = np.full(nr * nc, np.nan)
+    worst = np.full(nr * nc, -1, dtype=np.int64)
+    if v.size:
+        # the worst point of each cell: sort by (cell, |value|, index) and take the last of each cell
+        order = np.lexsort((idx, np.abs(v), cell))
+        last = np.r_[cell[order][1:] != cell[order][:-1], True]
+        pick = order[last]
+        worst[cell[pick]] = idx[pick]
+        if how == "mean":
+            # shifted by the cell's worst value: exact for a constant field (every v - ref is 0) and
+            # free of cancellation when the residuals are large and nearly equal
+            ref = np.zeros(nr * nc)
+            ref[cell[pick]] = v[pick]
+            sums = np.bincount(cell, weights=v - ref[cell], minlength=nr * nc)
+            has = count > 0
+            value[has] = ref[has] + sums[has] / count[has]
+        else:
+            value[cell[pick]] = v[pick]
+    return CellField(grid, value.reshape(nr, nc), count.reshape(nr, nc), worst.reshape(nr, nc))
+
+
+def occupied(grid: CellGrid, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+    """Points per cell (R, C) of image points (any status)."""
+    nr, nc = grid.shape
+    return np.bincount(grid.cell_of(np.asarray(row), np.asarray(col)), minlength=nr * nc).reshape(nr, nc)
+
+
+__all__ = ["AGGREGATES", "MAX_CELLS", "CellField", "CellGrid", "aggregate", "cell_grid", "occupied"]
