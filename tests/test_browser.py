@@ -148,13 +148,20 @@ MAP_REGIONS = """() => {
   }
   return out;
 }"""
-POINT_PIXEL = """([trace, k]) => {
+POINT_PIXEL = """([trace, col, row]) => {
   const gd = document.querySelector('.js-plotly-plot');
   const box = gd.getBoundingClientRect();
   const t = gd._fullData[trace];
   const xa = gd._fullLayout[t.xaxis.replace('x', 'xaxis')], ya = gd._fullLayout[t.yaxis.replace('y', 'yaxis')];
-  return {x: box.x + xa._offset + xa.l2p(t.x[k]), y: box.y + ya._offset + ya.l2p(t.y[k])};
+  return {x: box.x + xa._offset + xa.l2p(col), y: box.y + ya._offset + ya.l2p(row)};
 }"""
+
+
+def _cell_centre(trace, scp: int) -> tuple[float, float]:
+    """(column, row) of the centre of the raster cell whose worst point is SCP ``scp``."""
+    (i,), (j,) = np.nonzero(np.asarray(trace.customdata)[..., 1] == scp)
+    x, y = np.asarray(trace.x), np.asarray(trace.y)
+    return float(0.5 * (x[j] + x[j + 1])), float(0.5 * (y[i] + y[i + 1]))
 RECORD_CLICKS = """() => {
   const gd = document.querySelector('.js-plotly-plot');
   window.__clicked = [];
@@ -198,7 +205,7 @@ def test_real_scene_maps_have_structure_and_a_click_selects_in_3d(real_explorer,
     assert app.scene.n_rows == 49826 and "Pleiades" in app.handles["preset"].value
     page = _open(browser, app.url)
     page.wait_for_function("() => document.body.innerText.includes('nr row: RMSE')")
-    page.wait_for_timeout(1500)  # scattergl draws after the layout
+    page.wait_for_timeout(1500)  # the rasters draw after the layout
     page.screenshot(path=str(tmp_path / "real.png"))
     regions = page.evaluate(MAP_REGIONS)
     assert len(regions) == 3  # lrm, prm, nr (row residual)
@@ -211,8 +218,9 @@ def test_real_scene_maps_have_structure_and_a_click_selects_in_3d(real_explorer,
     # click a point of the nr map: the 3D selection moves to that SCP
     page.evaluate(RECORD_CLICKS)
     before = np.array(app.nodes["/selected/point"].position)
-    trace = [t.name for t in app.handles["maps"].figure.data].index("nr row")
-    xy = page.evaluate(POINT_PIXEL, [trace, 1234])
+    data = app.handles["maps"].figure.data
+    trace = [t.name for t in data].index("nr row")
+    xy = page.evaluate(POINT_PIXEL, [trace, *_cell_centre(data[trace], 1234)])
     page.mouse.click(xy["x"], xy["y"])
     page.wait_for_function("() => window.__clicked.length > 0")
     clicked = int(page.evaluate("() => window.__clicked[0]"))

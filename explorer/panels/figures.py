@@ -382,7 +382,7 @@ def residual_maps(
                 "visible": "legendonly" if many else True,
                 "name": f"SCOPs ({len(control)}): click to {'show' if many else 'hide'}", "legendgroup": "scop",
                 "showlegend": "scop" not in legend_seen,
-                "hovertemplate": "SCOP<br>row %{y:.2f}<br>col %{x:.2f}<extra></extra>",
+                "hoverinfo": "skip",  # a hover or click always reaches the raster cell under the pointer
             })
             legend_seen.add("scop")
     if empty_cells:
