@@ -275,9 +275,11 @@ class CsmScene(Scene):
     ) -> tuple[np.ndarray, np.ndarray]:
         """The camera's own ground to image (:meth:`CsmCamera.ground_to_image`) of local ENU points (N, 3):
         (row, col) = (line - 0.5, sample - 0.5); NaN where the camera solves no line (behind it, no root
-        in its search window).  ``row_guess`` is not needed (the camera seeds itself)."""
+        in its search window) and where that line is outside the ISD's ephemeris tables (status 5: flagged,
+        never extrapolated).  ``row_guess`` is not needed (the camera seeds itself)."""
         g = self.camera.ground_to_image(self.frame.enu_to_ecef(as_points(ground)))
-        return g.line - 0.5, g.sample - 0.5
+        solved = g.status == 0
+        return np.where(solved, g.line - 0.5, np.nan), np.where(solved, g.sample - 0.5, np.nan)
 
     def project(self, ground: np.ndarray) -> Projection:
         """:meth:`ground_to_image` with the camera's validity flags (solved, and on the image)."""

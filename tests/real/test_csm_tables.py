@@ -214,3 +214,18 @@ def test_search_methods_run_on_the_covered_lines(hrsc):
         assert r.valid.all(), name
         assert np.max(np.abs(r.row - grid.row)) < 1e-6, name
         assert np.max(np.abs(r.col - grid.col)) < 1e-6, name
+
+
+def test_sensor_projection_flags_lines_past_the_tables(hrsc):
+    """Through the Sensor (CsmScene.project), a ground point the camera would see past its tables is flagged,
+    not given the extrapolated line; one on a covered line is the camera's own."""
+    from explorer.real.csm_sensor import csm_scene
+
+    scene = csm_scene(hrsc)
+    lines = np.array([1000.0, 2300.0, 2500.0, 2800.0])
+    xyz, hit = hrsc._image_to_ground_raw(lines, np.full(4, 600.0), 0.0)
+    assert hit.all()
+    p = scene.project(scene.from_body_fixed(xyz))
+    np.testing.assert_array_equal(p.valid, [True, True, False, False])
+    np.testing.assert_allclose(p.row[:2], lines[:2] - 0.5, rtol=0, atol=1e-6)
+    assert np.isnan(p.row[2:]).all()
