@@ -655,24 +655,8 @@ def _image_rows(image: Any, i0: int, n: int, width: int) -> np.ndarray:
     return image.read(1, window=Window(0, i0, width, n))
 
 
-def measure_geolocation(
-    ortho: Any, grid: OrthoGrid, pattern: GroundPattern, *, block: int = 64, reference: Any = None
-) -> dict:
-    """Geolocation error of an orthoimage of ``pattern`` by least-squares matching.
-
-    With ``reference`` (another orthoimage of the same pattern on the same grid) the shift
-    between the two images is measured instead of the shift against the pattern.  ``ortho`` and
-    ``reference`` are arrays (grid.height, grid.width) or open rasterio datasets; a dataset is read
-    ``block`` rows at a time (memory in a strip of tiles, not in the image).
-
-    In each ``block`` x ``block`` tile the shift d (metres) minimising
-    ``|ortho(p) - pattern(p - d)|`` is solved from the linearised model
-    ``ortho - pattern = -grad(pattern) . d``; returned in output pixels.
-
-    Returns
-    -------
-    dict with ``mean_shift_px`` (e, n), ``rms_px``, ``max_px`` over tiles and ``n_tiles``.
-    """
+def _geolocation_shifts(ortho: Any, grid: OrthoGrid, pattern: GroundPattern, block: int, reference: Any) -> list:
+    """Per-tile shifts (e, n) in output pixels, :func:`measure_geolocation` with ``block`` x ``block`` tiles."""
     shifts = []
     for i0 in range(0, grid.height - block + 1, block):
         strip = _image_rows(ortho, i0, block, grid.width)
@@ -692,12 +676,60 @@ def measure_geolocation(
             a = -np.column_stack([ge[ok], gn[ok]])
             d, *_ = np.linalg.lstsq(a, diff, rcond=None)
             shifts.append(d / grid.gsd)
+    return shifts
+
+
+#: Tile sizes :func:`measure_geolocation` tries, largest first, when none is given (output pixels).
+GEOLOCATION_TILES = (64, 32, 16, 8)
+
+#: Tiles a measurement should have before a smaller tile size is tried.
+GEOLOCATION_MIN_TILES = 4
+
+
+def measure_geolocation(
+    ortho: Any, grid: OrthoGrid, pattern: GroundPattern, *, block: int | None = None, reference: Any = None
+) -> dict:
+    """Geolocation error of an orthoimage of ``pattern`` by least-squares matching.
+
+    With ``reference`` (another orthoimage of the same pattern on the same grid) the shift
+    between the two images is measured instead of the shift against the pattern.  ``ortho`` and
+    ``reference`` are arrays (grid.height, grid.width) or open rasterio datasets; a dataset is read
+    ``block`` rows at a time (memory in a strip of tiles, not in the image).
+
+    ``block=None`` takes the largest of :data:`GEOLOCATION_TILES` giving at least
+    :data:`GEOLOCATION_MIN_TILES` tiles fully inside the footprint (a coarse output grid has few large
+    tiles), else the size giving the most.
+
+    In each ``block`` x ``block`` tile the shift d (metres) minimising
+    ``|ortho(p) - pattern(p - d)|`` is solved from the linearised model
+    ``ortho - pattern = -grad(pattern) . d``; returned in output pixels.
+
+    Returns
+    -------
+    dict with ``mean_shift_px`` (e, n), ``rms_px``, ``max_px`` over tiles, ``n_tiles`` and ``tile_px``.
+
+    Raises
+    ------
+    InputError
+        No tile lies fully inside the footprint, even of the smallest size.
+    """
+    sizes = GEOLOCATION_TILES if block is None else (int(block),)
+    best: tuple[int, list] = (sizes[0], [])
+    for size in sizes:
+        shifts = _geolocation_shifts(ortho, grid, pattern, size, reference)
+        if len(shifts) > len(best[1]):
+            best = (size, shifts)
+        if len(shifts) >= GEOLOCATION_MIN_TILES:
+            break
+    size, shifts = best
     if not shifts:
-        raise ValueError("no tile fully inside the footprint to measure the geolocation")
+        raise InputError(f"no tile of {sizes[-1]} x {sizes[-1]} output pixels lies fully inside the footprint "
+                         f"({grid.width} x {grid.height} pixels of {grid.gsd:g} m): nothing to measure the "
+                         "geolocation on")
     s = np.array(shifts)
     norm = np.hypot(s[:, 0], s[:, 1])
     return {"mean_shift_px": s.mean(axis=0).tolist(), "rms_px": float(np.sqrt(np.mean(norm**2))),
-            "max_px": float(norm.max()), "n_tiles": int(len(s))}
+            "max_px": float(norm.max()), "n_tiles": int(len(s)), "tile_px": int(size)}
 
 
 def gdal_rpc_orthoimage(source: np.ndarray, rpc: Any, grid: OrthoGrid, dem_path: str | Path | None = None,

@@ -296,23 +296,32 @@ def cmd_ortho(args: argparse.Namespace) -> int:
             bar.refresh()
 
         t0 = time.perf_counter()
+        geolocation: dict | None = None
         try:
-            with atomic_path(args.out) as partial:
+            with atomic_path(args.out) as partial:  # nothing under the final name unless all of this succeeds
                 stats = write_orthoimage(arr, grid, partial, scheduler=args.scheduler, progress=progress)
+                if stats["valid_pixels"] == 0:
+                    raise InputError(f"{_surface_option(args)}: no output pixel sees the image (every ground point "
+                                     f"is off the image or off the DEM); {args.out} not written")
+                dt = time.perf_counter() - t0
+                if pattern is not None:
+                    import rasterio
+
+                    from explorer.ortho import measure_geolocation
+
+                    with rasterio.open(partial) as ds:  # read by strips of tiles, not as one array
+                        try:
+                            geolocation = measure_geolocation(ds, grid, pattern)
+                        except InputError as exc:  # a coarse grid: the orthoimage stands, unmeasured
+                            geolocation = {"n_tiles": 0, "note": str(exc)}
         finally:
             bar.close()
-        dt = time.perf_counter() - t0
         pixels = grid.width * grid.height
         report = {"out": args.out, "width": grid.width, "height": grid.height, "epsg": grid.epsg,
                   "gsd_m": grid.gsd, "setup_s": t_setup, "ortho_s": dt,
                   "s_per_1e8_px": dt / pixels * 1e8, **stats}
-        if pattern is not None:
-            import rasterio
-
-            from explorer.ortho import measure_geolocation
-
-            with rasterio.open(args.out) as ds:  # read by strips of tiles, not as one array
-                report["geolocation"] = measure_geolocation(ds, grid, pattern)
+        if geolocation is not None:
+            report["geolocation"] = geolocation
         print(json.dumps(report, indent=1))
     return 0
 
