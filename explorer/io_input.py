@@ -43,6 +43,7 @@ __all__ = [
     "decode_text",
     "file_kind",
     "load_json_file",
+    "load_xml_file",
     "loads_json",
     "read_input_bytes",
     "read_input_text",
@@ -353,3 +354,24 @@ def _is_float(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+_XML_DECLARATION = re.compile(r"^\s*<\?xml[^>]*\?>", re.S)
+
+
+def load_xml_file(path: str | os.PathLike[str], what: str = "XML file") -> Any:
+    """The root element of an XML input file, decoded by :func:`decode_text` (any BOM, UTF-8, UTF-16,
+    Latin-1: a declaration naming another encoding than the bytes does not matter) and parsed.
+
+    Raises
+    ------
+    SceneFileError
+        Not a regular file, binary, or not well-formed XML (the message names the file and why).
+    """
+    from xml.etree import ElementTree
+
+    text = _XML_DECLARATION.sub("", read_input_text(path, what), count=1)
+    try:
+        return ElementTree.fromstring(text)
+    except (ElementTree.ParseError, LookupError, ValueError, RecursionError) as exc:
+        raise SceneFileError(f"{path}: is not well-formed XML ({type(exc).__name__}: {str(exc)[:80]})") from None

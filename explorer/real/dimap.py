@@ -47,6 +47,7 @@ from explorer.geometry.exterior import LineTiming
 from explorer.geometry.frames import LocalFrame
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.terrain import FlatTerrain
+from explorer.io_input import load_xml_file
 from explorer.real.linescan import AttitudeTable, Ephemeris, LineScanExterior, RigorousLineScanScene
 from explorer.real.timeutil import parse_utc, seconds_between
 
@@ -77,10 +78,7 @@ def read_dimap_v1_geometry(path: str | Path) -> dict:
         ``tai_utc_s``.
     """
     path = Path(path)
-    try:
-        root = ElementTree.parse(path).getroot()
-    except ElementTree.ParseError as exc:
-        raise InputError(f"{path.name}: not well-formed XML ({exc})") from exc
+    root = load_xml_file(path, "DIMAP file")  # regular file, any text encoding (explorer.io_input)
     if root.tag != "PHR_Dimap_Document":
         raise InputError(f"{path.name}: not a Pleiades DIMAP v1.4 document (root {root.tag!r})")
     points = root.findall(".//Data_Strip/Ephemeris/Point_List/Point")

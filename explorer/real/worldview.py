@@ -37,6 +37,7 @@ from explorer.geometry.exterior import LineTiming
 from explorer.geometry.frames import LocalFrame, ecef_to_geodetic
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.terrain import FlatTerrain
+from explorer.io_input import load_xml_file
 from explorer.real.linescan import (
     AttitudeTable,
     Ephemeris,
@@ -91,10 +92,7 @@ def read_dg_metadata(path: str | Path) -> DGMetadata:
         ``camera_quaternion`` (q1..q4), ``perspective_center`` (3,), ``distortion_order``.
     """
     path = Path(path)
-    try:
-        root = ElementTree.parse(path).getroot()
-    except ElementTree.ParseError as exc:
-        raise InputError(f"{path.name}: not well-formed XML ({exc})") from exc
+    root = load_xml_file(path, "DigitalGlobe XML")  # regular file, any text encoding (explorer.io_input)
     missing = [t for t in ("IMD", "EPH", "ATT", "GEO") if root.find(t) is None]
     if missing:
         raise InputError(f"{path.name}: no rigorous model (missing {', '.join(missing)}); use the RPC instead")
