@@ -17,6 +17,7 @@ from explorer.commands import parsed_paths
 __all__ = [
     "existing_file",
     "finite_float",
+    "float_in_range",
     "height_m",
     "pixel_coordinate",
     "random_seed",
@@ -43,6 +44,26 @@ def finite_float(text: str) -> float:
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
     return value
+
+
+def float_in_range(low: float, high: float, what: str, unit: str = ""):
+    """An argument type for finite numbers in ``[low, high]``; the message names ``what``, the bounds, the unit."""
+
+    def parse(text: str) -> float:
+        value = finite_float(text)
+        if not low <= value <= high:
+            suffix = f" {unit}" if unit else ""
+            raise argparse.ArgumentTypeError(f"{what} {text!r} is outside {low:g} .. {high:g}{suffix}")
+        return value
+
+    parse.__name__ = f"float_in_range_{low:g}_{high:g}"
+    return parse
+
+
+#: Largest synthetic relief (m), attitude-rate and jitter scale factors: beyond them no satellite images.
+MAX_RELIEF_M = 10_000.0
+MAX_ATTITUDE_RATE_SCALE = 100.0
+MAX_JITTER_SCALE = 1000.0
 
 
 def latitude(text: str) -> float:

@@ -20,9 +20,11 @@ from explorer.bench_defaults import (
     DEFAULT_SLOW_SECONDS,
 )
 from explorer.commands._args import (
+    MAX_ATTITUDE_RATE_SCALE,
+    MAX_RELIEF_M,
     existing_file,
+    float_in_range,
     method_list,
-    non_negative_float,
     non_negative_int,
     output_file,
     positive_float,
@@ -160,10 +162,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="SCOP counts for learned methods (default 10,30,50,100)")
     p.add_argument("--scps", type=positive_int, default=DEFAULT_SCPS, help="SCPs per preset (default 5000000)")
     p.add_argument("--seed", type=random_seed, default=0)
-    p.add_argument("--relief", type=non_negative_float, default=0.0,
+    p.add_argument("--relief", type=float_in_range(0.0, MAX_RELIEF_M, "--relief", "m"), default=0.0,
                    help="synthetic relief amplitude, metres (default 0)")
     p.add_argument("--relief-seed", type=random_seed, default=0)
-    p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0,
+    p.add_argument("--attitude-rate-scale",
+                   type=float_in_range(0.0, MAX_ATTITUDE_RATE_SCALE, "--attitude-rate-scale"), default=1.0,
                    help="multiplies the presets' body rates (0: orbit-following attitude)")
     p.add_argument("--max-points-slow", type=positive_int, default=DEFAULT_MAX_POINTS_SLOW,
                    help="subsample size for slow methods (default 20000)")

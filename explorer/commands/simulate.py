@@ -8,8 +8,11 @@ import time
 from typing import TYPE_CHECKING
 
 from explorer.commands._args import (
+    MAX_ATTITUDE_RATE_SCALE,
+    MAX_JITTER_SCALE,
+    MAX_RELIEF_M,
     existing_file,
-    non_negative_float,
+    float_in_range,
     output_file,
     positive_int,
     random_seed,
@@ -36,10 +39,12 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The options every command that builds a scene accepts."""
     p.add_argument("--preset", default=None, help="preset id (default: the presets file's default, WSU)")
     p.add_argument("--scene", default=None, type=existing_file, help="scene JSON file (instead of --preset)")
-    p.add_argument("--relief", type=non_negative_float, default=0.0, help="synthetic relief amplitude, metres")
+    p.add_argument("--relief", type=float_in_range(0.0, MAX_RELIEF_M, "--relief", "m"), default=0.0,
+                   help="synthetic relief amplitude, metres")
     p.add_argument("--relief-seed", type=random_seed, default=0)
-    p.add_argument("--attitude-rate-scale", type=non_negative_float, default=1.0)
-    p.add_argument("--jitter-scale", type=non_negative_float, default=1.0)
+    p.add_argument("--attitude-rate-scale",
+                   type=float_in_range(0.0, MAX_ATTITUDE_RATE_SCALE, "--attitude-rate-scale"), default=1.0)
+    p.add_argument("--jitter-scale", type=float_in_range(0.0, MAX_JITTER_SCALE, "--jitter-scale"), default=1.0)
 
 
 def scene_from_args(args: argparse.Namespace, preset: str | None = None) -> Scene:
