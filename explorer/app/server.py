@@ -11,6 +11,7 @@ is ``pushbroom explore`` (source validation first, then ``--export`` or serving)
 from __future__ import annotations
 
 import errno
+import logging
 import signal
 import socket
 import threading
@@ -159,6 +160,42 @@ def check_listen_address(host: str, port: int) -> None:
     raise InputError(f"cannot listen on {host}:{port}: {last}")
 
 
+class _OneLineClientErrors(logging.Filter):
+    """Turn the websocket server's per-connection tracebacks (a malformed frame or message from a client: not
+    a bug of the explorer, and any client can send them) into one line each, at most one per second."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._last = 0.0
+        self.dropped = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.exc_info and record.exc_info[1] is not None:
+            exc = record.exc_info[1]
+            record.msg = (f"pushbroom explorer: closed a client connection after a malformed message "
+                          f"({type(exc).__name__}: {' '.join(str(exc).split())[:120]})")
+            record.args = None
+            record.exc_info = None
+            record.exc_text = None
+        now = time.monotonic()
+        if now - self._last < 1.0:
+            self.dropped += 1
+            return False
+        self._last = now
+        return True
+
+
+def quiet_client_errors() -> _OneLineClientErrors:
+    """Install :class:`_OneLineClientErrors` on the ``websockets`` server logger (idempotent); return it."""
+    logger = logging.getLogger("websockets.server")
+    for existing in logger.filters:
+        if isinstance(existing, _OneLineClientErrors):
+            return existing
+    one_line = _OneLineClientErrors()
+    logger.addFilter(one_line)
+    return one_line
+
+
 def serve(preset: str | None = None, host: str = "127.0.0.1", port: int = 8080, *,
           methods: list[str] | None = None, ready: Callable[[Any], None] | None = None,
           stop_event: threading.Event | None = None, sources: list | None = None, **app_kwargs: Any) -> int:
@@ -192,6 +229,7 @@ def serve(preset: str | None = None, host: str = "127.0.0.1", port: int = 8080, 
         0 after a clean stop (worker joined, server stopped, port released).
     """
     check_listen_address(host, port)
+    quiet_client_errors()  # a malformed websocket frame: one line, not a traceback per frame
     import viser
 
     from explorer.app.gui import ExplorerApp
@@ -288,4 +326,5 @@ def run_explore(args: Any) -> int:
         progress.uninstall()
         progress.finish()
 
-__all__ = ["check_listen_address", "limit_malloc_arenas", "release_freed_memory", "run_explore", "serve"]
+__all__ = ["check_listen_address", "limit_malloc_arenas", "quiet_client_errors", "release_freed_memory", "run_explore",
+           "serve"]
