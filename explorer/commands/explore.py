@@ -20,6 +20,10 @@ from explorer.commands._args import (
 
 def cmd_explore(args: argparse.Namespace) -> int:
     """Handler of ``explore``: validate the source and address, then export or serve."""
+    if getattr(args, "pair", None):  # a stereo pair: its own scene and panels (explorer.app.pair)
+        from explorer.app.pair import run_pair
+
+        return run_pair(args)
     from explorer.memory import check_allocation
     from explorer.points import BYTES_PER_POINT
 
@@ -48,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--dimap", default=None, metavar="FILE", help="a Pleiades DIMAP v1.4 PHRDIMAP_*.XML")
     src.add_argument("--dg", default=None, metavar="FILE", help="a DigitalGlobe / Maxar XML (EPH, ATT, GEO, IMD)")
     src.add_argument("--isd", default=None, metavar="FILE", help="a USGS CSM line-scan ISD (JSON)")
+    src.add_argument("--pair", nargs=2, default=None, metavar=("LEFT", "RIGHT"),
+                     help="a stereo pair (RPC files, scene JSONs or ISDs): both trajectories and footprints, a "
+                          "pixel's lines of sight and epipolar curve, the approximation maps (docs/stereo.md)")
     p.add_argument("--dem", default=None, metavar="DEM",
                    help="DEM for --rpc / --dimap / --dg (GeoTIFF with EGM96 heights, or SRTM .hgt); must cover "
                         "the image footprint")

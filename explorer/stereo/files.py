@@ -23,7 +23,8 @@ from explorer.sensor import Sensor
 SENSOR_KINDS = ("auto", "rpc", "scene", "dimap", "dg", "isd")
 
 
-def _json_kind(path: Path) -> str:
+def json_kind(path: str | Path) -> str:
+    """"isd" for an ALE ISD (it holds ``instrument_pointing``), else "scene" (a JSON file)."""
     from explorer.io_input import load_json_file
 
     data = load_json_file(path, "JSON file")
@@ -42,7 +43,7 @@ def load_sensor(path: str | Path, kind: str = "auto") -> Sensor:
         raise InputError(f"unknown sensor kind {kind!r}; one of {', '.join(SENSOR_KINDS)}")
     path = Path(path)
     if kind == "auto":
-        kind = _json_kind(path) if path.suffix.lower() == ".json" else "rpc"
+        kind = json_kind(path) if path.suffix.lower() == ".json" else "rpc"
     if kind == "rpc":
         from explorer.rpc import read_rpc
         from explorer.rpc.sensor import RPCSensor
@@ -66,4 +67,4 @@ def load_sensor(path: str | Path, kind: str = "auto") -> Sensor:
     return csm_scene(read_isd(path))
 
 
-__all__ = ["SENSOR_KINDS", "load_sensor"]
+__all__ = ["SENSOR_KINDS", "json_kind", "load_sensor"]
