@@ -143,3 +143,45 @@ def test_registered_as_learned():
     assert "mlp" in learned
     m = create("mlp", _scene("WSU"))
     assert m.needs_fit and m.exactness == "approximate" and m.reference
+
+
+REAL_SOURCES = {
+    "dimap": ("dimap", "PHRDIMAP_P1BP--2017030824934340CP.XML", "MNT_P1BP--2017030824934340CP.tif"),
+    "isd": ("isd", "../usgscsm/ctxLineScan.json", None),
+    "rpc": ("rpc", "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML", None),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(REAL_SOURCES))
+def real_scene(request):
+    from explorer.sources import load_source
+    from tests.real.conftest import DEM_DIR, RPC_DIR
+
+    kind, name, dem = REAL_SOURCES[request.param]
+    src = load_source(kind, str(RPC_DIR / name), dem=str(DEM_DIR / dem) if dem else None)
+    scps = simulate_points(src.scene, 20_000, kind="scp")
+    return request.param, src.scene, scps
+
+
+@pytest.mark.slow
+def test_mlp_converges_on_real_scenes_at_the_gui_densities(real_scene):
+    """Issue 24: mlp on the DIMAP (rigorous model on its DEM), the CTX ISD and a Pleiades RPC at the densities
+    the explorer offers.  Truth: the SCPs' exact rows (the sensor's own image to ground, never a training point).
+    The paper reports sub-pixel RMSE from 100 SCOPs on (one hidden layer of 5-10 neurons); that holds here on
+    every source, and every density gives finite residuals on every in-domain point (never a map of NaN)."""
+    name, scene, scps = real_scene
+    for density in (10, 30, 100, 300):
+        scops = simulate_points(scene, density, kind="scop")
+        assert len(scops) == density
+        m = MLPMethod(scene).fit(scops)
+        res = m.ground_to_image(scps.ground)
+        dom = res.info["in_domain"]  # outside the SCOPs' box (few SCOPs on a DEM): refused, not guessed
+        assert np.isfinite(res.row[dom]).all() and res.converged[dom].all(), (name, density)
+        rmse = float(np.sqrt(np.mean((res.row[dom] - scps.row[dom]) ** 2)))
+        if density >= 100:
+            assert dom.mean() > 0.95, (name, density)
+            # the paper's criterion, sub-pixel (measured RMSE: DIMAP 0.0025 / 0.0013 px, CTX 0.2 / 6e-5 px,
+            # RPC 0.0012 / 0.0009 px at 100 / 300 SCOPs)
+            assert rmse < 1.0 and m.fit_info["converged"], (name, density, rmse, m.fit_info["stop_reason"])
+        else:
+            assert rmse < 50.0, (name, density, rmse)
