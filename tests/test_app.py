@@ -641,3 +641,51 @@ def test_reset_view_frames_every_client_on_the_footprint(server):
     centre_track = app.frame.sensor(app.scene.exterior.position(app.scene.scanline_time(
         np.array([(app.scene.n_rows - 1) / 2.0]))))[0]
     np.testing.assert_allclose(look, 0.5 * centre_track, rtol=0.05, atol=0.05 * app.frame.diagonal_km)
+
+
+def test_controls_reach_the_app_through_its_public_methods_only(server):
+    """Issue 23: the controls own their handles and call only the host's public methods (a host that has
+    nothing else receives every request)."""
+    import contextlib
+
+    from explorer.app.controls import Controls
+
+    class Host:
+        def __init__(self) -> None:
+            self.calls: list[str] = []
+            self._quiet = False
+
+        def request_update(self) -> int:
+            self.calls.append("update")
+            return len(self.calls)
+
+        def reset_view(self) -> None:
+            self.calls.append("reset")
+
+        def export_to_client(self, client=None) -> None:
+            self.calls.append("export")
+
+        @contextlib.contextmanager
+        def quiet(self):
+            old, self._quiet = self._quiet, True
+            try:
+                yield
+            finally:
+                self._quiet = old
+
+        def is_quiet(self) -> bool:
+            return self._quiet
+
+    host = Host()
+    c = Controls(host, server.gui, scene_ids=["WSU"], scene_id="WSU", scp_count=1000, scop_density=30, sweep=False)
+    c.handles["relief"].value = 200
+    assert host.calls == ["update"]
+    with host.quiet():
+        c.handles["relief"].value = 300
+    assert host.calls == ["update"]
+    c.handles["pick"].value = "scp 12"
+    assert c.pick_index() == 12 and c.handles["sel_mode"].value == "picked SCP" and host.calls[-1] == "update"
+    c.add_method_boxes(["a", "b"], ["b"], lambda n: n)
+    assert c.checked_methods() == ["b"]
+    c.set_method_options(c.checked_methods())
+    assert c.handles["color_method"].options == ("b",) and c.handles["diff_a"].options == ("(none)", "b")

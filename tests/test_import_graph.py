@@ -200,17 +200,14 @@ def test_a_circle_closed_only_by_a_type_checking_import_is_found(tmp_path):
     assert cycles(graph) == [["explorer.rpc.inverse", "explorer.rpc.model"]]
 
 
-#: Circles known and being removed in this round (issue 23: the explorer's controls use only the app's public
-#: methods -- the ``maps`` part); any other circle fails.  Remove the entry when the circle is gone.
-PENDING_CIRCLES = [["explorer.app.controls", "explorer.app.gui"]]
-
-
 def test_no_import_circle_among_explorer_modules():
     graph = import_graph()
     assert len(graph) > 50  # the whole package was read
-    found = [c for c in cycles(graph) if c not in PENDING_CIRCLES]
+    found = cycles(graph)
     detail = [[f"{m} -> {t} (line {graph[m][t]})" for m in comp for t in graph[m] if t in comp] for comp in found]
     assert found == [], f"import circles: {detail}"
+    # the explorer's controls reach the app through its public methods only (issue 23)
+    assert "explorer.app.gui" not in graph["explorer.app.controls"]
 
 
 def test_imports_go_one_way_between_layers():

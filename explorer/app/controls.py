@@ -1,9 +1,10 @@
 """The explorer's controls in the viser panel, and the bridge that turns a click on a residual map
 into a selected point in the 3D view.
 
-:func:`build_controls` adds every control and returns ``{key: handle}``; the callbacks it
-wires only *request* work from the :class:`~explorer.app.gui.ExplorerApp` (the worker thread
-debounces and computes).  Control -> cache table: ``docs/explorer.md#controls``.
+:class:`Controls` adds every control and owns the handles (``controls.handles``, ``{key: handle}``);
+its callbacks only *request* work from their host -- any object with the public methods of
+:class:`ControlsHost` (the :class:`~explorer.app.gui.ExplorerApp`; this module never imports it), whose
+worker thread debounces and computes.  Control -> cache table: ``docs/explorer.md#controls``.
 
 Map clicks: viser draws Plotly figures in the browser but reports no Plotly events, so a small
 script (run once per page by an HTML element's ``onerror`` handler, the only way viser's HTML
@@ -15,13 +16,15 @@ control, as a user would; its callback selects that SCP.  Nothing is loaded from
 from __future__ import annotations
 
 import contextlib
-from typing import TYPE_CHECKING, Any
+import re
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
+from typing import Any, Protocol
+
+import numpy as np
 
 from explorer.app.model import COLOUR_LIMITS_PX, COLOUR_MODES, COMPONENTS, SCOP_DENSITIES, SCP_COUNTS
 from explorer.panels.raster import AGGREGATES
-
-if TYPE_CHECKING:  # pragma: no cover
-    from explorer.app.gui import ExplorerApp
 
 NO_DIFFERENCE = "(none)"
 """Difference-map dropdown entry: no difference map."""
@@ -70,127 +73,196 @@ def click_bridge_html(uuid: str) -> str:
     return f'<img src="data:," alt="" style="display:none" onerror="{script}">'
 
 
-def build_controls(app: ExplorerApp, *, scene_ids: list[str], scene_id: str, scp_count: int,
-                   scop_density: int, sweep: bool) -> dict[str, Any]:
-    """Add the controls and panels to ``app.server.gui``; returns the handles by key.
+class ControlsHost(Protocol):
+    """What the controls need from the app: its public methods only."""
+
+    def request_update(self) -> int: ...
+
+    def reset_view(self) -> None: ...
+
+    def export_to_client(self, client: Any = None) -> None: ...
+
+    def quiet(self) -> AbstractContextManager[None]: ...
+
+    def is_quiet(self) -> bool: ...
+
+
+def color_options(methods: Sequence[str]) -> tuple[str, ...]:
+    """Entries of the colour-by dropdown for the checked ``methods``."""
+    return tuple(methods) if methods else ("(none)",)
+
+
+class Controls:
+    """The explorer's controls and panels in ``gui`` (a viser GUI API); owns their handles.
 
     Parameters
     ----------
-    app : ExplorerApp
+    host : ControlsHost
+        Receives the requests (update, reset view, export); programmatic changes made inside
+        ``host.quiet()`` trigger nothing.
+    gui : viser GuiApi
     scene_ids : list of str
         Entries of the scene dropdown (the loaded sources' labels, then the presets).
     scene_id : str
         The entry shown first.
+    scp_count, scop_density : int
+    sweep : bool
     """
-    F = app._F  # noqa: N806
-    gui = app.server.gui
-    gui.configure_theme(control_width="medium", show_share_button=False)
-    with contextlib.suppress(Exception):
-        gui.main_panel.dock_left()
-    h: dict[str, Any] = {}
-    h["status"] = gui.add_markdown("**Status:** starting")
-    h["progress"] = gui.add_progress_bar(0.0, animated=False)
-    h["run"] = gui.add_button("Run", hint="recompute now (also after changes with auto update off)")
-    h["auto"] = gui.add_checkbox("Update on change", True)
-    with gui.add_folder("Scene"):
-        h["preset"] = gui.add_dropdown("Scene", scene_ids, initial_value=scene_id,
-                                       hint="a loaded file (named by file and sensor) or a synthetic preset")
-        h["relief"] = gui.add_slider("Relief (m)", 0, 3000, 100, 0, hint="presets only")
-        h["rates"] = gui.add_slider("Attitude rate scale", 0.0, 5.0, 0.1, 1.0, hint="presets only")
-        h["jitter"] = gui.add_slider("Jitter amplitude scale", 0.0, 10.0, 0.5, 1.0, hint="presets only")
-    with gui.add_folder("Points"):
-        densities = sorted(set(SCOP_DENSITIES) | {int(scop_density)})
-        h["density"] = gui.add_dropdown("SCOPs", [str(d) for d in densities], initial_value=str(int(scop_density)))
-        counts = sorted(set(SCP_COUNTS) | {int(scp_count)})
-        h["scps"] = gui.add_dropdown("SCPs (maps)", [str(c) for c in counts], initial_value=str(int(scp_count)))
-    with gui.add_folder("Methods") as folder:
-        app._methods_folder = folder
-        h["method_boxes"] = {}
-        h["methods_note"] = gui.add_markdown("*Loading the methods...*")
-        h["color_method"] = gui.add_dropdown("Colour by", app._color_options([]))
-        h["layers"] = gui.add_slider("MLP layers", 1, 5, 1, 1, hint="hidden layers, for methods that take them")
-        h["neurons"] = gui.add_slider("MLP neurons", 2, 50, 1, 10,
-                                      hint="neurons per hidden layer, for methods that take them")
-        h["sweep"] = gui.add_checkbox("Accuracy vs SCOPs sweep", sweep)
-    with gui.add_folder("Residual maps"):
-        h["colour_mode"] = gui.add_dropdown(
-            "Colour scale", COLOUR_MODES, initial_value=COLOUR_MODES[0],
-            hint="per method / shared: symmetric limit from the 99th percentile of |residual| (named on the "
-                 "colour bar); log magnitude: log10 |residual|; fixed: the limit below")
-        h["limit"] = gui.add_dropdown("Fixed limit +- px", [f"{v:g}" for v in COLOUR_LIMITS_PX], initial_value="1")
-        h["component"] = gui.add_dropdown("Residual", COMPONENTS, initial_value=COMPONENTS[0],
-                                          hint="row (scanline) residual, column residual, or both")
-        h["aggregate"] = gui.add_dropdown("Cell value", AGGREGATES, initial_value=AGGREGATES[0],
-                                          hint="each map cell: the signed mean of its check points' residuals, or "
-                                               "the (signed) residual of largest magnitude among them")
-        h["diff_a"] = gui.add_dropdown("Difference: A", (NO_DIFFERENCE,), hint="map of A minus B (row residual)")
-        h["diff_b"] = gui.add_dropdown("Difference: B", (NO_DIFFERENCE,))
-        h["show_scops"] = gui.add_checkbox("SCOP overlay on maps", True)
-        h["export"] = gui.add_button("Export (summary, residuals, panels)",
-                                     hint="every check point, no subsample: a zip of summary.json, residuals.csv "
-                                          "and panels.html (as `pushbroom explore --export`)")
-    with gui.add_folder("View"):
-        h["distance"] = gui.add_dropdown("Sensor distance", ("compressed", "true"))
-        h["exaggeration"] = gui.add_slider("Height exaggeration", 1.0, 10.0, 0.5, 1.0)
-        h["reset_view"] = gui.add_button("Reset view", hint="frame the footprint and the track again")
-    with gui.add_folder("Selected point"):
-        h["sel_mode"] = gui.add_dropdown("Select", ("worst SCP", "image point", "picked SCP"))
-        h["sel_row"] = gui.add_slider("Row", 0.0, 1e6, 0.5, 0.0)
-        h["sel_col"] = gui.add_slider("Column", 0.0, 1e6, 0.5, 0.0)
-        h["pick"] = gui.add_text("Picked SCP", "", hint="click a point in a residual map (or type `scp <index>`)")
-        h["sel_text"] = gui.add_markdown("")
-    h["click_bridge"] = gui.add_html(click_bridge_html(h["pick"]._impl.uuid))
-    h["cloud_text"] = gui.add_markdown("")
-    app.handles = h
 
-    app.panel = gui.add_panel()
-    config = F.PLOTLY_CONFIG
-    with app.panel.add_tab("Residual maps"):
-        h["maps"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
-        h["maps_note"] = gui.add_markdown("")
-        h["summary"] = gui.add_markdown("")
-    with app.panel.add_tab("Accuracy vs SCOPs"):
-        h["accuracy"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
-    with app.panel.add_tab("Timing"):
-        h["timing"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
-    with contextlib.suppress(Exception):
-        app.panel.dock_right()
-        app.panel.set_width(560)
+    def __init__(self, host: ControlsHost, gui: Any, *, scene_ids: list[str], scene_id: str, scp_count: int,
+                 scop_density: int, sweep: bool) -> None:
+        from explorer.panels import figures as F  # noqa: N812  (plotly: imported with the GUI only)
 
-    def changed(_event: Any = None) -> None:
-        if getattr(app._local, "quiet", False):
+        self.host = host
+        self.gui = gui
+        gui.configure_theme(control_width="medium", show_share_button=False)
+        with contextlib.suppress(Exception):
+            gui.main_panel.dock_left()
+        h: dict[str, Any] = {}
+        self.handles = h
+        h["status"] = gui.add_markdown("**Status:** starting")
+        h["progress"] = gui.add_progress_bar(0.0, animated=False)
+        h["run"] = gui.add_button("Run", hint="recompute now (also after changes with auto update off)")
+        h["auto"] = gui.add_checkbox("Update on change", True)
+        with gui.add_folder("Scene"):
+            h["preset"] = gui.add_dropdown("Scene", scene_ids, initial_value=scene_id,
+                                           hint="a loaded file (named by file and sensor) or a synthetic preset")
+            h["relief"] = gui.add_slider("Relief (m)", 0, 3000, 100, 0, hint="presets only")
+            h["rates"] = gui.add_slider("Attitude rate scale", 0.0, 5.0, 0.1, 1.0, hint="presets only")
+            h["jitter"] = gui.add_slider("Jitter amplitude scale", 0.0, 10.0, 0.5, 1.0, hint="presets only")
+        with gui.add_folder("Points"):
+            densities = sorted(set(SCOP_DENSITIES) | {int(scop_density)})
+            h["density"] = gui.add_dropdown("SCOPs", [str(d) for d in densities],
+                                            initial_value=str(int(scop_density)))
+            counts = sorted(set(SCP_COUNTS) | {int(scp_count)})
+            h["scps"] = gui.add_dropdown("SCPs (maps)", [str(c) for c in counts], initial_value=str(int(scp_count)))
+        with gui.add_folder("Methods") as folder:
+            self.methods_folder = folder
+            h["method_boxes"] = {}
+            h["methods_note"] = gui.add_markdown("*Loading the methods...*")
+            h["color_method"] = gui.add_dropdown("Colour by", color_options([]))
+            h["layers"] = gui.add_slider("MLP layers", 1, 5, 1, 1, hint="hidden layers, for methods that take them")
+            h["neurons"] = gui.add_slider("MLP neurons", 2, 50, 1, 10,
+                                          hint="neurons per hidden layer, for methods that take them")
+            h["sweep"] = gui.add_checkbox("Accuracy vs SCOPs sweep", sweep)
+        with gui.add_folder("Residual maps"):
+            h["colour_mode"] = gui.add_dropdown(
+                "Colour scale", COLOUR_MODES, initial_value=COLOUR_MODES[0],
+                hint="per method / shared: symmetric limit from the 99th percentile of |residual| (named on the "
+                     "colour bar); log magnitude: log10 |residual|; fixed: the limit below")
+            h["limit"] = gui.add_dropdown("Fixed limit +- px", [f"{v:g}" for v in COLOUR_LIMITS_PX], initial_value="1")
+            h["component"] = gui.add_dropdown("Residual", COMPONENTS, initial_value=COMPONENTS[0],
+                                              hint="row (scanline) residual, column residual, or both")
+            h["aggregate"] = gui.add_dropdown("Cell value", AGGREGATES, initial_value=AGGREGATES[0],
+                                              hint="each map cell: the signed mean of its check points' residuals, "
+                                                   "or the (signed) residual of largest magnitude among them")
+            h["diff_a"] = gui.add_dropdown("Difference: A", (NO_DIFFERENCE,), hint="map of A minus B (row residual)")
+            h["diff_b"] = gui.add_dropdown("Difference: B", (NO_DIFFERENCE,))
+            h["show_scops"] = gui.add_checkbox("SCOP overlay on maps", True)
+            h["export"] = gui.add_button("Export (summary, residuals, panels)",
+                                         hint="every check point, no subsample: a zip of summary.json, "
+                                              "residuals.csv and panels.html (as `pushbroom explore --export`)")
+        with gui.add_folder("View"):
+            h["distance"] = gui.add_dropdown("Sensor distance", ("compressed", "true"))
+            h["exaggeration"] = gui.add_slider("Height exaggeration", 1.0, 10.0, 0.5, 1.0)
+            h["reset_view"] = gui.add_button("Reset view", hint="frame the footprint and the track again")
+        with gui.add_folder("Selected point"):
+            h["sel_mode"] = gui.add_dropdown("Select", ("worst SCP", "image point", "picked SCP"))
+            h["sel_row"] = gui.add_slider("Row", 0.0, 1e6, 0.5, 0.0)
+            h["sel_col"] = gui.add_slider("Column", 0.0, 1e6, 0.5, 0.0)
+            h["pick"] = gui.add_text("Picked SCP", "", hint="click a cell of a residual map (or type `scp <index>`)")
+            h["sel_text"] = gui.add_markdown("")
+        h["click_bridge"] = gui.add_html(click_bridge_html(h["pick"]._impl.uuid))
+        h["cloud_text"] = gui.add_markdown("")
+
+        self.panel = gui.add_panel()
+        config = F.PLOTLY_CONFIG
+        with self.panel.add_tab("Residual maps"):
+            h["maps"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+            h["maps_note"] = gui.add_markdown("")
+            h["summary"] = gui.add_markdown("")
+        with self.panel.add_tab("Accuracy vs SCOPs"):
+            h["accuracy"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+        with self.panel.add_tab("Timing"):
+            h["timing"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
+        with contextlib.suppress(Exception):
+            self.panel.dock_right()
+            self.panel.set_width(560)
+
+        for key in ("preset", "relief", "rates", "jitter", "density", "scps", "color_method", "layers",
+                    "neurons", "limit", "colour_mode", "component", "aggregate", "diff_a", "diff_b", "show_scops",
+                    "distance", "exaggeration", "sweep", "sel_mode"):
+            h[key].on_update(self.changed)
+        h["sel_row"].on_update(self._selection_changed)
+        h["sel_col"].on_update(self._selection_changed)
+        h["pick"].on_update(self._picked)
+        h["run"].on_click(lambda _e: host.request_update())
+        h["reset_view"].on_click(lambda _e: host.reset_view())
+        h["export"].on_click(lambda e: host.export_to_client(getattr(e, "client", None)))
+
+    # ------------------------------------------------------------- callbacks
+    def changed(self, _event: Any = None) -> None:
+        """A control changed: request an update (unless quiet or auto update is off)."""
+        if self.host.is_quiet():
             return
-        if h["auto"].value:
-            app.request_update()
+        if self.handles["auto"].value:
+            self.host.request_update()
 
-    for key in ("preset", "relief", "rates", "jitter", "density", "scps", "color_method", "layers",
-                "neurons", "limit", "colour_mode", "component", "aggregate", "diff_a", "diff_b", "show_scops",
-                "distance", "exaggeration", "sweep", "sel_mode"):
-        h[key].on_update(changed)
-    app._changed_cb = changed
-
-    def selection_changed(_event: Any = None) -> None:
-        if getattr(app._local, "quiet", False):
+    def _selection_changed(self, _event: Any = None) -> None:
+        if self.host.is_quiet():
             return
-        with app.quiet():
-            h["sel_mode"].value = "image point"
-        changed()
+        with self.host.quiet():
+            self.handles["sel_mode"].value = "image point"
+        self.changed()
 
-    def picked(_event: Any = None) -> None:
-        if getattr(app._local, "quiet", False):
+    def _picked(self, _event: Any = None) -> None:
+        if self.host.is_quiet():
             return
-        if app.pick_index() is not None:
-            with app.quiet():
-                h["sel_mode"].value = "picked SCP"
-            app.request_update()
+        if self.pick_index() is not None:
+            with self.host.quiet():
+                self.handles["sel_mode"].value = "picked SCP"
+            self.host.request_update()
 
-    h["sel_row"].on_update(selection_changed)
-    h["sel_col"].on_update(selection_changed)
-    h["pick"].on_update(picked)
-    h["run"].on_click(lambda _e: app.request_update())
-    h["reset_view"].on_click(lambda _e: app.reset_view())
-    h["export"].on_click(lambda e: app.export_to_client(getattr(e, "client", None)))
-    return h
+    def _methods_changed(self, _event: Any = None) -> None:
+        if self.host.is_quiet():
+            return
+        with self.host.quiet():
+            self.set_method_options(self.checked_methods())
+        self.changed()
+
+    # ---------------------------------------------------------------- methods
+    def add_method_boxes(self, names: Sequence[str], checked: Sequence[str], hints: Callable[[str], str]) -> None:
+        """One checkbox per method (``checked`` ticked), after the methods note."""
+        h = self.handles
+        base = float(h["methods_note"].order)
+        with self.methods_folder:
+            for k, name in enumerate(names):
+                box = self.gui.add_checkbox(name, name in checked, order=base + (k + 1) / (len(names) + 1),
+                                            hint=hints(name)[:300])
+                box.on_update(self._methods_changed)
+                h["method_boxes"][name] = box
+
+    def checked_methods(self) -> list[str]:
+        return [n for n, b in self.handles["method_boxes"].items() if b.value]
+
+    def set_method_options(self, methods: Sequence[str]) -> None:
+        """Offer the checked methods in the colour-by and difference dropdowns."""
+        h = self.handles
+        h["color_method"].options = color_options(methods)
+        opts = (NO_DIFFERENCE, *methods)
+        for key in ("diff_a", "diff_b"):
+            if h[key].value not in opts:
+                h[key].value = NO_DIFFERENCE
+            h[key].options = opts
+
+    def set_mlp_defaults(self, layers: int, neurons: int) -> None:
+        self.handles["layers"].value = int(np.clip(layers, 1, 5))
+        self.handles["neurons"].value = int(np.clip(neurons, 2, 50))
+
+    def pick_index(self) -> int | None:
+        """The SCP index typed into (or clicked into) the *Picked SCP* control, if any."""
+        m = re.fullmatch(r"\s*(?:scp\s*)?(\d+)\s*", str(self.handles["pick"].value))
+        return int(m.group(1)) if m else None
 
 
-__all__ = ["CLICK_SCRIPT", "NO_DIFFERENCE", "build_controls", "click_bridge_html"]
+__all__ = ["CLICK_SCRIPT", "NO_DIFFERENCE", "Controls", "ControlsHost", "click_bridge_html", "color_options"]

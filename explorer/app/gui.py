@@ -11,7 +11,6 @@ the Plotly panels through :mod:`explorer.panels.figures`).  All numbers come fro
 from __future__ import annotations
 
 import contextlib
-import re
 import sys
 import threading
 import time
@@ -21,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from explorer.app.controls import NO_DIFFERENCE, build_controls
+from explorer.app.controls import Controls
 from explorer.app.jobs import FitPool
 from explorer.app.model import (
     DEFAULT_METHODS,
@@ -146,9 +145,6 @@ class ExplorerApp(Views):
         self._last_request = 0.0
         self._worker: threading.Thread | None = None
         self.fits: FitPool | None = None
-        self.panel: Any = None
-        self._methods_folder: Any = None
-        self._changed_cb: Any = None
         self.trimmer: Any = None
         """Set by :func:`explorer.app.server.serve`: hands freed memory back after browsers leave."""
         self.compile_progress = compile_progress
@@ -162,8 +158,11 @@ class ExplorerApp(Views):
         labels = [s.label for s in self.sources]
         scene_ids = labels + [p for p in preset_ids() if p not in labels]
         first = preset or (labels[0] if labels else default_preset_id())
-        build_controls(self, scene_ids=scene_ids, scene_id=first, scp_count=scp_count,
-                       scop_density=scop_density, sweep=sweep)
+        self.controls = Controls(self, server.gui, scene_ids=scene_ids, scene_id=first, scp_count=scp_count,
+                                 scop_density=scop_density, sweep=sweep)
+        self.handles: dict[str, Any] = self.controls.handles
+        """The controls' handles by key (owned by :attr:`controls`)."""
+        self.panel = self.controls.panel
         if compile_progress is not None:
             compile_progress.observers.append(self._show_compiling)
         self.server.scene.set_up_direction("+z")
@@ -194,28 +193,17 @@ class ExplorerApp(Views):
             self.errors.append(msg)
             print(f"pushbroom explorer: {msg}", file=sys.stderr, flush=True)
             wanted = [m for m in wanted if m in names]
-        gui, h = self.server.gui, self.handles
-        base = float(h["methods_note"].order)
+        h = self.handles
 
-        def methods_changed(_event: Any = None) -> None:
-            if getattr(self._local, "quiet", False):
-                return
-            with self.quiet():
-                self._method_options(self.checked_methods())
-            self._changed_cb()
+        def hint(name: str) -> str:
+            cls = registry()[name]
+            return f"{cls.label} -- {cls.reference}"
 
-        with self._methods_folder:
-            for k, name in enumerate(names):
-                cls = registry()[name]
-                box = gui.add_checkbox(name, name in wanted, order=base + (k + 1) / (len(names) + 1),
-                                       hint=f"{cls.label} -- {cls.reference}"[:300])
-                box.on_update(methods_changed)
-                h["method_boxes"][name] = box
+        self.controls.add_method_boxes(names, wanted, hint)
         order = wanted + [n for n in names if n not in wanted]
         with self.quiet():
-            self._method_options(wanted)
-            h["layers"].value = int(np.clip(control_default("layers", order, 1), 1, 5))
-            h["neurons"].value = int(np.clip(control_default("neurons", order, 10), 2, 50))
+            self.controls.set_method_options(wanted)
+            self.controls.set_mlp_defaults(control_default("layers", order, 1), control_default("neurons", order, 10))
         h["methods_note"].content = ("" if not err else f"*some method modules failed to load: {err}*")
         self.method_names = names
         self._methods_gen = self.request_update()
@@ -226,24 +214,9 @@ class ExplorerApp(Views):
         uses them (for :meth:`wait_update`), 0 on timeout."""
         return self._methods_gen if self.methods_ready.wait(timeout) else 0
 
-    @staticmethod
-    def _color_options(methods: list[str]) -> tuple[str, ...]:
-        return tuple(methods) if methods else ("(none)",)
-
-    def _method_options(self, methods: list[str]) -> None:
-        """Offer the checked methods in the colour-by and difference dropdowns."""
-        h = self.handles
-        h["color_method"].options = self._color_options(methods)
-        opts = (NO_DIFFERENCE, *methods)
-        for key in ("diff_a", "diff_b"):
-            if h[key].value not in opts:
-                h[key].value = NO_DIFFERENCE
-            h[key].options = opts
-
     def pick_index(self) -> int | None:
         """The SCP index typed into (or clicked into) the *Picked SCP* control, if any."""
-        m = re.fullmatch(r"\s*(?:scp\s*)?(\d+)\s*", str(self.handles["pick"].value))
-        return int(m.group(1)) if m else None
+        return self.controls.pick_index()
 
     @contextlib.contextmanager
     def quiet(self) -> Iterator[None]:
@@ -255,8 +228,12 @@ class ExplorerApp(Views):
         finally:
             self._local.quiet = old
 
+    def is_quiet(self) -> bool:
+        """True inside :meth:`quiet` on this thread (the controls' callbacks then request nothing)."""
+        return bool(getattr(self._local, "quiet", False))
+
     def checked_methods(self) -> list[str]:
-        return [n for n, b in self.handles["method_boxes"].items() if b.value]
+        return self.controls.checked_methods()
 
     def settings(self) -> Settings:
         """The current control values."""
