@@ -80,3 +80,20 @@ def test_served_scene_and_selector(view):
         assert "/pair/selected/point" in handles["selection"]
     finally:
         server.stop()
+
+
+def test_selection_on_a_dem(tmp_path):
+    """With --dem the selected pixel's ground point is on the DEM: its height is the DEM's under it."""
+    from explorer.app.pair import load_pair
+    from explorer.stereo.pairview import select
+    from explorer.terrain_io import read_geotiff_dem
+    from tests.commands.test_stereo import _synthetic_dem
+
+    dem_path = tmp_path / "dem.tif"
+    _synthetic_dem(dem_path)
+    view = load_pair(LEFT, RIGHT, str(dem_path))
+    sel = select(view, 9000.0, 23000.0)
+    lon, lat, h = view.left.frame.enu_to_geodetic(sel.ground[None, :])
+    assert abs(h[0] - sel.height) < 1e-6
+    assert read_geotiff_dem(dem_path).height(lon, lat)[0] == pytest.approx(sel.height, abs=1e-3)
+    assert float(sel.check.ray_distance_m[0]) < 1e-3
