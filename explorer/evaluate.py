@@ -118,7 +118,11 @@ def evaluate_method(
     )
 
 
-def evaluate_stand_in(stand_in: StandIn, check: PointSet, name: str = "stand-in") -> tuple[Evaluation, np.ndarray]:
+STAND_IN_METHOD = "stand-in"
+"""Method name of a stand-in's evaluation (maps, ``residuals.csv``)."""
+
+
+def evaluate_stand_in(stand_in: StandIn, check: PointSet, name: str = STAND_IN_METHOD) -> tuple[Evaluation, np.ndarray]:
     """A stand-in model's error against the sensor at check points (exact rows / columns: the sensor's).
 
     Parameters

@@ -689,3 +689,20 @@ def test_controls_reach_the_app_through_its_public_methods_only(server):
     assert c.checked_methods() == ["b"]
     c.set_method_options(c.checked_methods())
     assert c.handles["color_method"].options == ("b",) and c.handles["diff_a"].options == ("(none)", "b")
+
+
+def test_a_file_source_shows_its_truth_and_the_stand_in_map(server):
+    """An ISD source: the maps measure against the camera itself, and the MPC fitted to it is drawn beside the
+    methods' maps as the stand-in (its own error against the camera), named in the notes."""
+    import json
+    from pathlib import Path
+
+    from explorer.sources import load_source
+
+    isd = Path(__file__).resolve().parent / "data" / "usgscsm" / "orbitalLineScan.json"
+    src = load_source("isd", str(isd))
+    app = make_app(server, sources=[src], methods=("toy_poly",))
+    fig = json.loads(app.handles["maps"]._plotly_json_str)
+    titles = " ".join(a.get("text", "") for a in fig["layout"].get("annotations", []))
+    assert "stand-in" in titles, titles
+    assert "Truth: USGS CSM" in app.handles["maps_note"].content and "stand-in" in app.handles["maps_note"].content

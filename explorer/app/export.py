@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, sensor_truth
-from explorer.evaluate import Evaluation, evaluate_stand_in
+from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
 from explorer.io_atomic import atomic_folder
 from explorer.sensor import StandIn
 
@@ -39,8 +39,7 @@ CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "co
                "x_m", "y_m", "z_m")
 """Columns of ``residuals.csv``; an ISD source adds ``line, sample`` (:data:`NATIVE_PIXEL_COLUMNS`)."""
 NATIVE_PIXEL_COLUMNS = ("line", "sample")
-STAND_IN_METHOD = "stand-in"
-"""``residuals.csv`` method name of the stand-in's rows (its error against the sensor)."""
+# STAND_IN_METHOD (explorer.evaluate): the method name of the stand-in's rows and map
 
 
 def _num(a: np.ndarray) -> np.ndarray:

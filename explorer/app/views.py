@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from explorer.app.model import SCOP_DENSITIES, MethodRun, Selection, Settings, summary_markdown
+from explorer.evaluate import STAND_IN_METHOD, evaluate_stand_in
 from explorer.methods import registry
 from explorer.panels import diverging_rgb
 from explorer.points import PointSet
@@ -236,12 +237,19 @@ class Views:
                     s.show_scops, s.aggregate, s.scop_density, tuple(pending), self.methods_ready.is_set())
         if not self._changed("maps", maps_key):
             return
+        src = self._source(s)
+        stand_in = self._stand_in_map(s, src, scps) if src is not None and src.stand_in is not None else None
         if ok:
-            fig = F.residual_maps(ok, scps, control=scops if s.show_scops else None, shape=scene.shape,
+            maps, status = dict(ok), {n: runs[n].status for n in ok}
+            labels = None
+            if stand_in is not None:  # the stand-in's own error against the sensor, beside the methods' maps
+                maps[STAND_IN_METHOD], status[STAND_IN_METHOD] = stand_in
+                labels = {STAND_IN_METHOD: f"stand-in: {src.stand_in.label}"}
+            fig = F.residual_maps(maps, scps, control=scops if s.show_scops else None, shape=scene.shape,
                                   limit_px=s.limit_px if s.colour_mode == "fixed" else None,
                                   mode=s.colour_mode, component=s.component, difference=s.diff,
-                                  status={n: runs[n].status for n in ok}, aggregate=s.aggregate,
-                                  max_cells=self.max_map_cells)
+                                  status=status, aggregate=s.aggregate, max_cells=self.max_map_cells,
+                                  labels=labels)
         else:
             fig = F.empty_figure("waiting for " + ", ".join(pending) if pending else self._no_method_text())
         self._set_figure("maps", fig)
@@ -256,6 +264,14 @@ class Views:
         if ok:
             notes.append(f"Each map cell shows the {s.aggregate} of the residuals of the check points in it "
                          "(transparent: no check point). Click a cell to select its worst point in the 3D view.")
+        if src is not None:
+            notes.append(f"Truth: {src.info.get('truth')}; every residual is measured against its own "
+                         "ground to image.")
+            if src.stand_in is not None:
+                notes.append(f"The map 'stand-in' is the error of the {src.stand_in.label} against it.")
+            coverage = src.info.get("dem_coverage")
+            if coverage:
+                notes.append(f"The DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}.")
         self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
         text = summary_markdown(runs, len(scps))
         if pending:
@@ -399,13 +415,29 @@ class Views:
         from explorer.app.export import export_files
 
         s = s or self.settings()
+        src = self._source(s)
         files = export_files(self.model.scene(s), s, source=self._source_info(s), seed=self.model.seed,
-                             fits={n: self.model.fit(n, s) for n in s.methods})
+                             fits={n: self.model.fit(n, s) for n in s.methods},
+                             stand_in=src.stand_in if src is not None else None,
+                             native_pixels=src is not None and src.kind == "isd")
         buf = io.BytesIO()
         with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
             for name, data in files.items():
                 zf.writestr(zipfile.ZipInfo(name, date_time=(2000, 1, 1, 0, 0, 0)), data)
         return buf.getvalue()
+
+    def _source(self, s: Settings) -> Any:
+        """The loaded file source shown by ``s`` (an :class:`explorer.sources.Source`), or None for a preset."""
+        return next((src for src in getattr(self, "sources", []) if src.label == s.preset), None)
+
+    def _stand_in_map(self, s: Settings, src: Any, scps: Any) -> tuple[Any, Any]:
+        """The stand-in's evaluation against the sensor on the current SCPs (cached per SCP set)."""
+        key = (s.preset, int(s.scp_count))
+        cache = self.__dict__.setdefault("_stand_in_cache", {})
+        if key not in cache:
+            cache.clear()
+            cache[key] = evaluate_stand_in(src.stand_in, scps, STAND_IN_METHOD)  # SCPs: the sensor's points
+        return cache[key]
 
     def _source_info(self, s: Settings) -> dict:
         for src in getattr(self, "sources", []):
