@@ -637,7 +637,7 @@ class CsmCamera:
         # slope of the residual at the centre, and the curvature constant C = max |g''| / (2 |g'|) around
         # the grid points' lines (times a safety factor of 4), for the secant's acceptance test
         in_tables = np.concatenate(covered_rows)
-        mid_line = self._middle_covered_line()
+        mid_line = self.covered_centre_line()
         k = int(np.argmin(np.where(in_tables, np.abs(line - mid_line), np.inf)))
         c = ground[k][None, :]
         mid = np.array([line[k]])
@@ -690,14 +690,16 @@ class CsmCamera:
         """usgscsm intersects the whole line of sight (the root nearest the camera on either side); here
         the look direction is the one of ``+-(-x, -y, -f)`` that points at the body at the centre line
         (``look_sign``), so that points behind the camera and rays that miss can be told apart."""
-        centre, look = self.rays(np.array([self._middle_covered_line()]), np.array([0.5 * self.n_samples]))
+        centre, look = self.rays(np.array([self.covered_centre_line()]), np.array([0.5 * self.n_samples]))
         self._cam[K.C_LOOK] = 1.0 if float(np.dot(look[0], -centre[0])) > 0 else -1.0
 
-    def _middle_covered_line(self) -> float:
-        """The centre of the image, or of its longest stretch of lines covered by the tables."""
+    def covered_centre_line(self) -> float:
+        """The image's centre line (CSM), or the centre of its longest stretch of lines covered by the ephemeris
+        tables when the centre is not covered: where frames and set-ups anchor."""
+        centre = 0.5 * self.n_lines
         ranges = self.covered_line_ranges()
-        if not ranges or ranges == [(0.0, float(self.n_lines))]:
-            return 0.5 * self.n_lines
+        if not ranges or bool(self.line_covered(np.array([centre]))[0]):
+            return centre
         a, b = max(ranges, key=lambda r: r[1] - r[0])
         return 0.5 * (a + b)
 

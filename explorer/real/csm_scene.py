@@ -123,7 +123,7 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
     cam = camera
     n_rows, n_cols = cam.n_lines, cam.n_samples
     # ---- frame: ENU at the ground point of the image centre
-    centre = cam.image_to_ground([0.5 * n_rows], [0.5 * n_cols], 0.0)
+    centre = cam.image_to_ground([cam.covered_centre_line()], [0.5 * n_cols], 0.0)
     if not centre.hit[0]:
         raise SceneFileError(f"{cam.source}: the image centre does not see the body")
     origin = centre.ground[0]

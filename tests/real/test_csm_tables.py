@@ -217,8 +217,8 @@ def test_search_methods_run_on_the_covered_lines(hrsc):
 
 
 def test_sensor_projection_flags_lines_past_the_tables(hrsc):
-    """Through the Sensor (CsmScene.project), a ground point the camera would see past its tables is flagged,
-    not given the extrapolated line; one on a covered line is the camera's own."""
+    """Through the Sensor (CsmScene.project / ground_to_image), a ground point the camera would see past its
+    tables is flagged (invalid; no line from ground_to_image), one on a covered line is the camera's own."""
     from explorer.real.csm_sensor import csm_scene
 
     scene = csm_scene(hrsc)
@@ -228,4 +228,33 @@ def test_sensor_projection_flags_lines_past_the_tables(hrsc):
     p = scene.project(scene.from_body_fixed(xyz))
     np.testing.assert_array_equal(p.valid, [True, True, False, False])
     np.testing.assert_allclose(p.row[:2], lines[:2] - 0.5, rtol=0, atol=1e-6)
-    assert np.isnan(p.row[2:]).all()
+    row, col = scene.ground_to_image(scene.from_body_fixed(xyz))
+    np.testing.assert_allclose(row[:2], lines[:2] - 0.5, rtol=0, atol=1e-6)
+    assert np.isnan(row[2:]).all() and np.isnan(col[2:]).all()
+
+
+def test_scenes_of_a_camera_whose_centre_line_is_not_covered():
+    """The pointing table starts after the image centre (the first 60 % of the lines flagged): the MPC scene
+    and the camera's Sensor anchor their frame on the covered lines instead of refusing 'the image centre
+    does not see the body', and the Sensor projects covered points to the camera's own lines."""
+    from explorer.real.csm_scene import scene_from_camera
+    from explorer.real.csm_sensor import csm_scene
+
+    isd = copy.deepcopy(CTX)
+    table = isd["instrument_pointing"]
+    start = CTX["center_ephemeris_time"] + T0 + 0.6 * CTX["image_lines"] * DT
+    keep = [k for k, t in enumerate(table["ephemeris_times"]) if t >= start]
+    table["ephemeris_times"] = [table["ephemeris_times"][k] for k in keep]
+    table["quaternions"] = [table["quaternions"][k] for k in keep]
+    cam = camera_from_isd(isd, source="late_pointing.json")
+    assert not cam.line_covered(np.array([0.5 * cam.n_lines]))[0]
+    (a, b), = cam.covered_line_ranges()
+    assert cam.covered_centre_line() == 0.5 * (a + b) and b == cam.n_lines
+    mpc = scene_from_camera(cam, n_check=200)
+    assert mpc.metadata["csm_fit"]["n"] > 0
+    scene = csm_scene(cam)
+    lines = np.array([a + 10.0, 0.5 * (a + b), b - 10.0])
+    g = cam.image_to_ground(lines, np.full(3, 2500.0), 0.0)
+    p = scene.project(scene.from_body_fixed(g.ground))
+    assert p.valid.all()
+    np.testing.assert_allclose(p.row, lines - 0.5, rtol=0, atol=1e-6)
