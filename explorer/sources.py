@@ -133,9 +133,7 @@ def check_dem_covers(scene: Any, dem_path: str, n: int = COVERAGE_GRID) -> None:
     rows = np.linspace(-0.5, scene.n_rows - 0.5, n)
     cols = np.linspace(-0.5, scene.n_columns - 0.5, n)
     rr, cc = np.repeat(rows, n), np.tile(cols, n)
-    h = np.asarray(scene.terrain.heights, dtype=np.float64) if hasattr(scene.terrain, "heights") else None
-    h_ref = float(np.nanmean(h)) if h is not None and np.isfinite(h).any() else scene.terrain.mean_height
-    g = scene.image_to_ground(rr, cc, height=h_ref)
+    g = scene.image_to_ground(rr, cc, height=scene.terrain.mean_height)  # (Terrain: the mean of its heights)
     z = scene.terrain.height(g[:, 0], g[:, 1])
     missing = int((~np.isfinite(z)).sum())
     if missing:
