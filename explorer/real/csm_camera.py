@@ -261,7 +261,9 @@ def _distortion(isd: _Isd) -> tuple[str, int, np.ndarray]:
         if extra:  # a radial term under another name must not be dropped in silence
             raise isd.fail(f"optical_distortion.{name}", f"has unknown key(s) {', '.join(extra)}; "
                            f"read are {', '.join(known)}")
-        k = isd.array(*key, "coefficients", shape=(None,), default=[0.0, 0.0])  # usgscsm reads only the first 4
+        # ALE writes the perspective factors and the point of symmetry only (its Lunar Orbiter ISDs carry no k;
+        # ISIS takes k0, k1 from the instrument kernel): k0 = k1 = 0 unless the ISD gives them
+        k = isd.array(*key, "coefficients", shape=(None,), default=[0.0, 0.0])
         if not 1 <= k.size <= 2:
             raise isd.fail(f"optical_distortion.{name}.coefficients", f"must hold 1 or 2 values, got {k.size}")
         coef = np.array([isd.number(*key, "perspective_x"), isd.number(*key, "perspective_y"),

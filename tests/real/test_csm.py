@@ -426,6 +426,21 @@ def test_cahvor_matches_usgscsm(offset):
         assert abs(x[0] - 4.0) < 1e-8 and abs(y[0]) < 1e-8
 
 
+def test_lunarorbiter_block_as_ale_writes_it():
+    """ALE's Lunar Orbiter 3 ISD (DOI-USGS/ale tests/pytests/data/isds/lohighcamera_isd.json) carries the
+    perspective factors and the point of symmetry only (no k): read as such, the removal is ISIS's perspective
+    correction x (1 + px x + py y), the radial term zero."""
+    spec = {"lunarorbiter": {"perspective_x": -3e-06, "perspective_y": 8e-07, "center_point_x": -1.11,
+                             "center_point_y": 0.3}}
+    cam = camera_from_isd(flyby_isd(distortion=spec), source="lo3")
+    np.testing.assert_array_equal(cam.distortion_coefficients, [-3e-06, 8e-07, -1.11, 0.3, 0.0, 0.0])
+    x, y = np.linspace(-40, 40, 9), np.linspace(30, -30, 9)
+    ux, uy = cam.remove_distortion(x, y)
+    pf = 1 + -3e-06 * x + 8e-07 * y
+    np.testing.assert_allclose(ux, x * pf, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(uy, y * pf, rtol=0, atol=1e-13)
+
+
 @pytest.mark.parametrize("band", range(1, 11))
 def test_themis_ir_apply_is_isis_forward_map(band):
     """ISIS ThemisIrDistortionMap::SetUndistortedFocalPlane is closed form: x k(band), y (1 + alpha1) +
