@@ -252,6 +252,7 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, dem: A
         h = float(h_origin)
     step = float(step)
     # shareloc's prepare_rectification, in package pixels (its physical point = ours + 0.5)
+    _check_overlap(left_s, right_s, h)
     origin = np.array([0.0, 0.0])  # shareloc: physical (0.5, 0.5) of index (0, 0), our (0, 0)
     alpha, _, _, _, _ = local_epipolar(left_s, right_s, origin[:1], origin[1:], h, elevation_offset_m)
     if not np.isfinite(alpha[0]):
@@ -329,6 +330,17 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, dem: A
                          grid_height, angles, ratios, ground)
 
 
+def _check_overlap(left: Sensor, right: Sensor, h: float, n: int = 7) -> None:
+    """Raise :class:`InputError` unless some of an n x n sample of left pixels is seen by the right image."""
+    from explorer.stereo.sensors import inside_image
+
+    rr, cc = np.meshgrid(np.linspace(0, left.n_rows - 1, n), np.linspace(0, left.n_columns - 1, n), indexing="ij")
+    r, c, _ = _coloc(left, right, rr.ravel(), cc.ravel(), np.full(rr.size, h))
+    if not np.any(inside_image(right, r, c)):
+        raise InputError(f"the images do not overlap at height {h:g} m: no left pixel of a {n} x {n} sample "
+                         "is seen by the right image")
+
+
 def _dem_heights(left: Sensor, dem: Any) -> Any:
     """Function (rows, cols) -> ellipsoidal height of the DEM under left pixels (NaN off the DEM)."""
     from explorer.rpc.dem import localization_on_dem
@@ -376,6 +388,8 @@ def write_grids(grids: EpipolarGrids, out_dir: str | Path, *, prefix: str = "") 
     from explorer.io_atomic import atomic_path
 
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {str(out)!r} is a file, not a folder")
     out.mkdir(parents=True, exist_ok=True)
     transform = Affine(grids.step, 0.0, -grids.step / 2.0, 0.0, grids.step, -grids.step / 2.0)
     paths: dict[str, Path] = {}

@@ -103,3 +103,21 @@ def test_grids_refuse_height_and_dem_together(tmp_path, capsys):
     code = main(["stereo", "grids", LEFT, RIGHT, "--height", "1", "--dem", str(dem_path), "--out", str(tmp_path)])
     assert code == 2
     assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_hostile_pair_and_outputs(tmp_path, capsys):
+    ikonos = str(PHR_PAIRS["xml"][0].parent / "rpc_IKONOS.txt")
+    assert main(["stereo", "grids", LEFT, ikonos, "--height", "300", "--out", str(tmp_path / "g")]) == 2
+    assert "do not overlap" in capsys.readouterr().err
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    assert main(["stereo", "grids", LEFT, RIGHT, "--height", "300", "--step", "900", "--out", str(a_file)]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    assert main(["stereo", "grids", LEFT, str(a_file), "--height", "300", "--out", str(tmp_path / "g")]) == 2
+    assert "not a recognised RPC format" in capsys.readouterr().err
+    matches = tmp_path / "m.csv"
+    matches.write_text("left_row,left_col\n1,2\n")
+    assert main(["stereo", "triangulate", LEFT, RIGHT, "--matches", str(matches), "--out",
+                 str(tmp_path / "p.csv")]) == 2
+    assert "missing column(s) right_row, right_col" in capsys.readouterr().err
+    assert not (tmp_path / "p.csv").exists()
