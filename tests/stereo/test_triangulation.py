@@ -120,3 +120,24 @@ def test_bad_input_is_a_clear_error():
         triangulate(left, right, [1.0, 2.0], [1.0], [1.0], [1.0])
     with pytest.raises(InputError, match="right must be a Sensor"):
         triangulate(left, "right.xml", [1.0], [1.0], [1.0], [1.0])
+
+
+def test_mixed_pair_rpc_and_mpc_scene():
+    """Left: the Pleiades RPC (rpcm projects the truth); right: an MPC scene fitted to the right image's RPC by
+    resection, a sensor with an orbit, in its own frame (its own ground to image projects the truth).  The
+    generic path, with the perspective-centre (behind) check, recovers the points."""
+    from explorer.real.from_rpc import scene_from_rpc
+
+    peer_l, _ = rpcm_pair()
+    left = read_rpc(PHR_PAIRS["xml"][0])
+    right, _ = scene_from_rpc(PHR_PAIRS["xml"][1], n_gcps=60, n_check=50, seed=0)
+    lon, lat, h = _ground_points(300, seed=4)
+    lcol, lrow = peer_l.projection(lon, lat, h)
+    truth = geodetic_to_ecef(lon, lat, h)
+    rrow, rcol = right.ground_to_image(right.frame.ecef_to_enu(truth))
+    out = triangulate(left, right, lrow, lcol, rrow, rcol)
+    inside = (rrow >= 0) & (rrow <= right.n_rows - 1) & (rcol >= 0) & (rcol <= right.n_columns - 1)
+    assert inside.sum() > 250
+    assert out.valid[inside].all(), out.flag_counts()
+    assert np.max(np.linalg.norm(out.xyz[inside] - truth[inside], axis=1)) < 1e-3
+    assert np.max(out.ray_distance_m[inside]) < 1e-3
