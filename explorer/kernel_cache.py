@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any, TextIO
 
 __all__ = ["CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "expected_compiles", "is_cached", "kernels",
-           "manifest", "needed_units", "reporting_compiles", "uncached"]
+           "manifest", "needed_units", "package_kernels", "reporting_compiles", "uncached", "unrecorded_uncached"]
 
 WARMUP_HINT = "run `pushbroom warmup` once to skip this"
 
@@ -188,6 +188,82 @@ def is_cached(kernel: Kernel) -> bool:
         return any(key[1] == magic and key[2] == hashes for key in index)
     except Exception:  # numba's private cache API changed: say it may compile (only a count is affected)
         return False
+
+
+def _has_cache_entry(disp: Any) -> bool:
+    """True if ``disp`` is compiled in memory, or numba's index holds any entry for this CPU and this bytecode."""
+    if getattr(disp, "overloads", None):
+        return True
+    try:
+        index = _index(disp)
+        if index is None:
+            return False
+        if not index:
+            return False
+        _, magic, hashes = disp._cache._index_key((), disp.targetctx.codegen())
+        return any(key[1] == magic and key[2] == hashes for key in index)
+    except Exception:  # numba's private cache API changed: say it may compile
+        return False
+
+
+def package_kernels() -> list[tuple[str, str]]:
+    """``(module, name)`` of every numba kernel of the package (modules whose source uses numba -- ``jit``,
+    ``explorer._numba.kernel`` -- are imported to find their dispatchers; the explorer's GUI modules are not)."""
+    from importlib.resources import files
+
+    from explorer._numba import NUMBA_AVAILABLE
+
+    if not NUMBA_AVAILABLE:
+        return []
+    found = []
+    root = files("explorer")
+    stack = [(root, "explorer")]
+    while stack:
+        folder, dotted = stack.pop()
+        for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+            if entry.is_dir() and entry.name not in ("app", "__pycache__") and not entry.name.startswith("."):
+                stack.append((entry, f"{dotted}.{entry.name}"))
+            elif entry.name.endswith(".py"):
+                text = entry.read_text(encoding="utf-8")
+                if "jit" not in text and "@kernel" not in text and "numba" not in text:
+                    continue
+                module_name = dotted if entry.name == "__init__.py" else f"{dotted}.{entry.name[:-3]}"
+                try:
+                    module = importlib.import_module(module_name)
+                except Exception:  # an optional dependency missing: not this machine's kernels
+                    continue
+                for name, obj in sorted(vars(module).items()):
+                    if hasattr(obj, "overloads") and _is_package_kernel(obj) and obj.py_func.__module__ == module_name:
+                        found.append((module_name, name))
+    return found
+
+
+def unrecorded_uncached() -> list[str]:
+    """Labels of the package's kernels that the manifest does not list and numba's cache does not hold for
+    this CPU and source: they compile at first use, and ``pushbroom warmup`` (which compiles the manifest)
+    cannot compile them ahead.  Kernels called only from other kernels compile and are cached with their
+    caller, so after one use they no longer appear."""
+    import inspect
+    import re
+
+    recorded = {(k.module, k.name) for k in kernels(list(manifest()))}
+    found = [(m, n, getattr(importlib.import_module(m), n)) for m, n in package_kernels()]
+    sources = {}
+    for m, n, disp in found:
+        try:
+            sources[(m, n)] = inspect.getsource(disp.py_func)
+        except (OSError, TypeError):
+            sources[(m, n)] = ""
+    out = set()
+    for m, n, disp in found:
+        if (m, n) in recorded or disp.targetoptions.get("inline") == "always":
+            continue
+        called = re.compile(rf"\b{re.escape(disp.py_func.__name__)}\s*\(|\b{re.escape(n)}\s*\(")
+        if any(called.search(src) for key, src in sources.items() if key != (m, n)):
+            continue  # called from another kernel: compiled (and cached) with it, never on its own
+        if not _has_cache_entry(disp):
+            out.add(_label(disp))
+    return sorted(out)
 
 
 def uncached(units_or_kernels: Iterable[str] | Iterable[Kernel]) -> list[Kernel]:

@@ -303,3 +303,35 @@ def test_explore_in_an_empty_numba_cache_says_it_compiles_then_says_nothing(tmp_
                               capture_output=True, text=True, timeout=900)
     assert warm_run.returncode == 0, warm_run.stderr
     assert "compiling kernels" not in warm_run.stderr
+
+
+def test_check_names_package_kernels_the_manifest_does_not_know_until_they_are_compiled(monkeypatch):
+    """Issue 25 class 9: ``warmup --check`` said "nothing will compile" while kernels missing from the manifest
+    compiled for seconds; a kernel outside the manifest is now listed until it is really compiled."""
+    import types
+
+    numba = pytest.importorskip("numba")
+    from explorer import kernel_cache
+
+    module = types.ModuleType("explorer._fake_kernels")
+
+    def twice(x):
+        return 2.0 * x
+
+    twice.__module__, twice.__qualname__ = module.__name__, "twice"
+    module.twice = numba.njit(cache=False)(twice)
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    monkeypatch.setattr(kernel_cache, "package_kernels", lambda: [(module.__name__, "twice")])
+    assert kernel_cache.unrecorded_uncached() == ["_fake_kernels.twice"]
+    assert module.twice(1.5) == 3.0  # compiles now
+    assert kernel_cache.unrecorded_uncached() == []
+
+
+def test_package_kernels_finds_the_compiled_kernels_of_the_package():
+    pytest.importorskip("numba")
+    from explorer.kernel_cache import manifest, package_kernels
+
+    found = set(package_kernels())
+    recorded = {(k.module, k.name) for unit in manifest().values() for k in unit}
+    assert recorded <= found  # every kernel the manifest names is one of the package's
+    assert ("explorer.real.csm_kernels", "ground_to_image_nb") in found

@@ -26,16 +26,22 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 
 def check_cache() -> int:
     """``pushbroom warmup --check``: list the kernels (of every unit of the manifest) numba's cache lacks."""
-    from explorer.kernel_cache import kernels, manifest, uncached
+    from explorer.kernel_cache import kernels, manifest, uncached, unrecorded_uncached
 
     every = kernels(list(manifest()))
     missing = uncached(every)
+    unrecorded = unrecorded_uncached()  # kernels the manifest does not know: warmup cannot compile them
     if not missing:
-        print(f"all {len(every)} kernel signatures of the manifest are in numba's cache: nothing will compile")
-        return 0
-    names = sorted({k.label for k in missing})
-    print(f"{len(missing)} of {len(every)} kernel signatures are not in numba's cache ({len(names)} kernels: "
-          f"{', '.join(names)}); `pushbroom warmup` compiles them")
+        print(f"all {len(every)} kernel signatures of the manifest are in numba's cache")
+    else:
+        names = sorted({k.label for k in missing})
+        print(f"{len(missing)} of {len(every)} kernel signatures are not in numba's cache ({len(names)} kernels: "
+              f"{', '.join(names)}); `pushbroom warmup` compiles them")
+    if unrecorded:
+        print(f"{len(unrecorded)} kernel(s) of the package are not in the manifest and not in numba's cache; they "
+              f"compile at first use (`pushbroom warmup` does not know them): {', '.join(sorted(unrecorded))}")
+    elif not missing:
+        print("nothing will compile")
     return 0
 
 
