@@ -19,7 +19,9 @@ The robust loss acts on the whitened 2-D residual of each image observation, ``s
 or ``linear`` (least squares), ``c`` the stated ``loss_scale`` in sigmas.  It is solved by iteratively
 reweighted Gauss-Newton steps inside Levenberg-Marquardt.  After it converges, an observation with
 ``s^2`` above the chi-square (2 degrees of freedom) quantile ``outlier_probability`` is flagged an
-outlier (and a tie point left in a single image by its outliers is dropped whole, its other
+outlier -- in units of the stated sigma, or of the robust a posteriori sigma (``median(s^2) / (2 ln 2)``)
+where that is larger, so that a model too poor for the data (or too optimistic a sigma) flags nothing and
+says so by its ``sigma0`` -- (and a tie point left in a single image by its outliers is dropped whole, its other
 observations flagged too); the flagged observations are dropped and a last least-squares pass gives the estimate,
 the a posteriori ``sigma0`` and the covariances (``sigma0^2 S^-1`` for the parameters, the blocks
 ``sigma0^2 (V_j^-1 + V_j^-1 W_j^T S^-1 W_j V_j^-1)`` for the ground points).
@@ -339,7 +341,7 @@ def _check_determined(problem: BundleProblem, s: np.ndarray, names: list[str]) -
         involved = [names[i] for i in np.argsort(-np.abs(null))[:3] if abs(null[i]) > 0.2]
         raise InputError("degenerate configuration: the points do not determine "
                          f"{' / '.join(involved)} (condition {eigenvalues[-1] / max(eigenvalues[0], 1e-300):.1e}; "
-                         "spread the points over the image or choose a simpler --model)")
+                         "spread the points over the image or choose a simpler model)")
 
 
 def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _State, use: np.ndarray,
@@ -415,7 +417,8 @@ def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: fl
         Its scale ``c``, in stated sigmas (default 1.5).
     outlier_probability : float
         An observation whose ``s^2`` exceeds the chi-square(2) quantile of this probability after the
-        robust solution is an outlier (default 0.999: ``s > 3.72`` sigmas).
+        robust solution is an outlier (default 0.999: ``s > 3.72`` sigmas, or that many robust a posteriori
+        sigmas when they are larger).
     max_iterations : int
         Of each Levenberg-Marquardt run (robust, then the final least-squares pass).
     parameter_names : list of str, optional
@@ -473,8 +476,12 @@ def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: fl
                           names, history)
     projected, _ = _evaluate(problem, scale, state, False)
     e = (problem.measured - projected) / problem.sigma_px[:, None]
-    threshold = -2.0 * math.log(1.0 - outlier_probability)  # chi-square(2) quantile
-    outlier = (e**2).sum(axis=1) > threshold
+    s2 = (e**2).sum(axis=1)
+    # chi-square(2) quantile, in units of the stated sigma or of the robust a posteriori one (the median of
+    # s^2 over chi-square(2)'s median 2 ln 2) when that is larger: a model that does not fit flags nothing
+    robust_variance = float(np.median(s2)) / (2.0 * math.log(2.0)) if s2.size else 1.0
+    threshold = -2.0 * math.log(1.0 - outlier_probability) * max(1.0, robust_variance)
+    outlier = s2 > threshold
     # a tie point left in one image by its outliers no longer has a determined ground: drop it whole
     seen = np.bincount(problem.point_index[~outlier], minlength=m)
     outlier |= (tie & (seen < 2))[problem.point_index]

@@ -116,3 +116,16 @@ def test_bad_sigmas_and_models():
                             ({"loss": "l1"}, "unknown robust loss"), ({"loss_scale": 0.0}, "loss scale")):
         with pytest.raises(InputError, match=message):
             refine_images([rpc], control=pts, **kwargs)
+
+
+def test_a_model_too_poor_for_the_bias_flags_nothing_and_says_so():
+    """A shift fitted to an affine bias leaves residuals of several px for a stated 0.3 px: the outlier test
+    scales with the robust a posteriori sigma, so no point is flagged and sigma0 tells the misfit."""
+    rpc = pleiades()
+    pts = simulate_points(rpc, 30, noise_px=0.3, seed=8)
+    ref = refine_images([rpc], model="shift", control=pts, sigma_px=0.3, loss="linear")
+    assert not ref.result.outlier.any()
+    assert ref.result.sigma0 > 5.0
+    pts.row[5] += 200.0  # a blunder far beyond the misfit is still caught
+    ref = refine_images([rpc], model="shift", control=pts, sigma_px=0.3)
+    assert np.flatnonzero(ref.result.outlier).tolist() == [5]
