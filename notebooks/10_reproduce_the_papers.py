@@ -21,8 +21,9 @@
 import os
 
 SMALL = os.environ.get("PUSHBROOM_NB_SMALL", "0") == "1"
-FULL_PROTOCOL = False  # True: 5,000,000 SCPs per image, all ten images (hours for the slow methods)
-PRESETS = ["WSU", "linear"] if SMALL else ["ISB", "PMA", "PAU", "QII", "SJB", "SAN", "SCB", "WBU", "WSA", "WSU"]
+FULL_PROTOCOL = False  # True: 5,000,000 SCPs per image, the ten images and `linear` (hours for the slow methods)
+PRESETS = ["WSU", "linear"] if SMALL else ["ISB", "PMA", "PAU", "QII", "SJB", "SAN", "SCB", "WBU", "WSA", "WSU",
+                                           "linear"]
 METHODS = ["nr", "bws", "lrm", "mlp"]
 SCOPS = [10, 30, 50, 100]
 N_SCPS = 5_000_000 if FULL_PROTOCOL else (2000 if SMALL else 200_000)
@@ -95,7 +96,9 @@ for name in ("nr", "hybrid"):
 # ## The orbit model decides the LRM's accuracy
 # The LRM paper (Table 3) reports RMSE between 1e-10 and 5e-9 px on all ten images. Notebook 06
 # showed the LRM is exact only for a straight orbit at constant attitude; on our Keplerian presets
-# with attitude rates it leaves about 0.01 px. Our `linear` preset reproduces the paper's numbers.
+# with attitude rates it leaves between a few thousandths and a few hundredths of a pixel (asserted:
+# 0.001 to 0.1 px on every such preset run here), while our `linear` preset (straight orbit, constant
+# attitude) stays at or below the paper's largest WSU value.
 
 # %%
 lrm_paper = [row for row in paper_tables.LRM_TABLE3["rows"] if row[1] == "WSU"]
@@ -103,9 +106,10 @@ print("paper, WSU (SDWV):", [(n, rmse) for _, _, n, rmse, _, _ in lrm_paper])
 for preset in PRESETS:
     ours = [(r["n_scops"], r["rmse_px"]) for r in report.runs if r["preset"] == preset and r["method"] == "lrm"]
     print(f"ours, {preset}:", [(n, f"{v:.1e}") for n, v in ours])
-if "linear" in PRESETS:
-    ours_linear = [r["rmse_px"] for r in report.runs if r["preset"] == "linear" and r["method"] == "lrm"]
-    assert max(ours_linear) <= max(rmse for *_, rmse, _, _ in lrm_paper)
+ours_linear = [r["rmse_px"] for r in report.runs if r["preset"] == "linear" and r["method"] == "lrm"]
+assert ours_linear and max(ours_linear) <= max(rmse for *_, rmse, _, _ in lrm_paper)
+keplerian = [r["rmse_px"] for r in report.runs if r["preset"] != "linear" and r["method"] == "lrm"]
+assert keplerian and all(1e-3 <= v <= 0.1 for v in keplerian)
 
 # %% [markdown]
 # ## Interactive: our RMSE beside the paper's, per method
