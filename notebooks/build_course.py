@@ -62,12 +62,13 @@ _CODE = re.compile(r"(```.*?```|~~~.*?~~~|`[^`\n]*`)", re.S)
 _MATH = re.compile(r"\$\$(.+?)\$\$|(?<![\\$])\$(?![\s$])(.+?)(?<![\s\\$])\$(?!\d)", re.S)
 
 
-def course_files(include_solutions: bool = True, only: list[str] | None = None) -> list[Path]:
+def course_files(include_solutions: bool = True, only: list[str] | None = None, *,
+                 include_notebooks: bool = True) -> list[Path]:
     """Notebooks in course order, then their solutions; ``only`` filters by the two-digit number.
 
     Every ``NN_*.py`` in ``notebooks/`` and ``notebooks/solutions/`` is a course file: a new notebook needs
     no registration here."""
-    files = sorted(HERE.glob("[0-9][0-9]_*.py"))
+    files = sorted(HERE.glob("[0-9][0-9]_*.py")) if include_notebooks else []
     if include_solutions:
         files += sorted((HERE / "solutions").glob("[0-9][0-9]_*.py"))
     if only:
@@ -169,13 +170,15 @@ def to_html(nb) -> str:
 
 
 def build(out_dir: Path, *, small: bool = False, include_solutions: bool = True, only: list[str] | None = None,
-          write_ipynb: bool = False, timeout: int = 900) -> list[dict]:
-    """Execute and export every course file; returns one record per file (name, seconds, error)."""
+          write_ipynb: bool = False, timeout: int = 900, include_notebooks: bool = True) -> list[dict]:
+    """Execute and export every course file; returns one record per file (name, seconds, error).
+
+    ``include_notebooks=False`` builds the solutions alone (CI builds the two halves in parallel tests)."""
     import nbformat
 
     out_dir.mkdir(parents=True, exist_ok=True)
     records = []
-    for path in course_files(include_solutions, only):
+    for path in course_files(include_solutions, only, include_notebooks=include_notebooks):
         sub = "solutions" if path.parent.name == "solutions" else ""
         dest = out_dir / sub
         dest.mkdir(parents=True, exist_ok=True)
