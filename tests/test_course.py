@@ -79,7 +79,10 @@ def test_every_course_file_is_in_the_canonical_form_jupytext_writes():
     for path in COURSE_FILES:
         text = path.read_text(encoding="utf-8")
         nb = jupytext.reads(text, fmt="py:percent")
-        assert jupytext.writes(nb, fmt="py:percent", config=config) == text, path.name
+        assert jupytext.writes(nb, fmt="py:percent", config=config) == text, (
+            f"{path.name} is not in the form notebooks/jupytext.toml writes, so saving it from JupyterLab would "
+            "change it: remove its '# ---' YAML header and any cell metadata but tags (docs/course.md, rules for "
+            "a new notebook)")
 
 
 # ------------------------------------------------------------------------------------------ the built course
