@@ -27,7 +27,8 @@ collinearity refinement follows: a Newton step on the along-track residual with 
 slope carried over from the plane iteration (``dx/dt = -sqrt(f^2 + x0^2) (dd/dt) / v_z``),
 then secant steps, one CE each, until the step is below ``refine_tol``.  By default
 (``refine=None``) the refinement runs only when the detector is not a straight
-undistorted line.
+undistorted line, or the sensor's lines of sight are its own (no MPC polynomials: a rigorous model with
+aberration / refraction, a CSM camera), whose residual the planes do not reproduce.
 
 Roots outside the window of rows ``[-1, rows]`` (the model extrapolated beyond the
 image) are returned as the method's estimate with ``converged=False``; the base class
@@ -43,6 +44,7 @@ from explorer.geometry.collinearity import sensor_vectors
 from explorer.methods._common import residual_px
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.scene import CHUNK, Scene
+from explorer.sensor import has_polynomial_exterior
 
 
 @register
@@ -101,7 +103,11 @@ class CentralPerspectivePlane(BestScanlineMethod):
         self.start_row = (scene.n_rows - 1) / 2.0 if start_row is None else float(start_row)
         self.tol = float(tol)
         self.max_iter = int(max_iter)
-        self.refine = (not scene.interior.is_straight_line) if refine is None else bool(refine)
+        # refine on the sensor's own residual where the planes are not the whole model: a curved detector or
+        # distortion, or a sensor whose lines of sight are its own (aberration, refraction, a CSM camera: no
+        # MPC polynomials)
+        self.refine = (not scene.interior.is_straight_line or not has_polynomial_exterior(scene)) \
+            if refine is None else bool(refine)
         self.refine_tol = float(refine_tol)
         self.max_refine = int(max_refine)
         f = scene.interior.focal_length_m

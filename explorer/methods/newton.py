@@ -45,10 +45,13 @@ import numpy as np
 
 from explorer.geometry.collinearity import sensor_vectors
 from explorer.geometry.rotations import rotation_from_opk
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
 from explorer.scene import CHUNK, Scene
+from explorer.sensor import has_polynomial_exterior
 
 DERIVATIVES = ("analytic", "central")
+TABLE_MODEL_TOL_PX = 1e-8
+"""Least step tolerance (rows) on a sensor without MPC polynomials (the round-off floor of its residual)."""
 
 
 def residual_and_derivative(
@@ -163,7 +166,9 @@ class NewtonRaphson(BestScanlineMethod):
         found and flagged outside; roots farther out give ``converged=False``.
     derivative : {"analytic", "central"}
         Analytic chain-rule derivative (1 CE per iteration, default) or a central difference of
-        the residual over +-``fd_step_px`` rows (3 CE per iteration).
+        the residual over +-``fd_step_px`` rows (3 CE per iteration).  A sensor without MPC polynomials
+        (``has_polynomial_exterior`` False: rigorous DIMAP / DG models, CSM cameras) always takes the central
+        difference of its own residual: the analytic derivative is the MPC collinearity's.
     fd_step_px : float
         Step of the central difference, rows (default 0.5).
     evaluator : {"auto", "compiled", "numpy"}
@@ -212,6 +217,15 @@ class NewtonRaphson(BestScanlineMethod):
             self.kernel_params = _kernel_params(scene, required=evaluator == "compiled")
         if self.kernel_params is None:
             self.chunk_points = 1_000_000  # the numpy active-set loop keeps several (N,) arrays per iteration
+        require_line_geometry(self.name, scene)
+        if derivative == "analytic" and not has_polynomial_exterior(scene):
+            # the analytic chain rule is that of the MPC collinearity; a sensor with interpolated tables and its
+            # own lines of sight (aberration, refraction; a CSM camera) has its own residual, which the central
+            # difference differentiates exactly as the model defines it
+            derivative = "central"
+            # and the residual of such a model (interpolated tables, iterated corrections) carries round-off of
+            # a few 1e-10 px, so a step below 1e-10 rows is not always reached: its floor is the tolerance
+            tol_px = max(float(tol_px), TABLE_MODEL_TOL_PX)
         self.start = start
         self.tol_px = float(tol_px)
         self.max_iter = int(max_iter)

@@ -140,12 +140,13 @@ def phr():
 @pytest.mark.parametrize(
     ("which", "name"),
     [("wv1", "bws-interp"), ("wv1", "hybrid"), ("phr", "bws-interp"), ("phr", "hybrid"), ("phr", "cpp"),
-     ("wv1", "exact"), ("phr", "exact"), ("wv1", "csm-secant"), ("phr", "csm-secant")],
+     ("wv1", "exact"), ("phr", "exact"), ("wv1", "csm-secant"), ("phr", "csm-secant"), ("wv1", "nr"),
+     ("phr", "nr"), ("wv1", "cpp"), ("wv1", "gdp")],
 )
 def test_registered_methods_run_unchanged_on_rigorous_scenes(request, which, name):
-    """Methods that evaluate the collinearity through the scene are exact on a rigorous scene.
-    (``cpp`` builds its own perspective planes, so it only sees the corrections through its
-    refinement: it is tested on the Pleiades scene, which has none.)"""
+    """Every search method is exact on a rigorous scene's own residual (aberration and refraction included):
+    ``exact`` and ``csm-secant`` through their line-geometry solvers, ``nr`` with the central difference of the
+    scene's residual, ``cpp`` with its refinement on it (its planes alone miss the corrections)."""
     from explorer.methods.base import available, create
 
     if name not in available():
