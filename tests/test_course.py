@@ -238,3 +238,33 @@ def test_a_double_click_in_jupyterlab_opens_a_course_file_as_a_notebook(tmp_path
             server.wait(10)
     assert _files(root) == set(before)
     assert all((root / name).read_bytes() == data for name, data in before.items())
+
+
+def test_the_build_renders_markdown_math_to_mathml_and_leaves_code_alone():
+    pytest.importorskip("latex2mathml")
+    build_course = _load_build_course(NOTEBOOK_DIR)
+    rendered: dict[str, str] = {}
+    text = ("Inline $x_i^2$ and `$HOME` in code, an escaped \\$5, then\n\n$$ t = \\frac{a}{b} $$\n\n"
+            "```\necho $PATH $x$\n```\n")
+    out = build_course._math_to_placeholders(text, rendered)
+    assert len(rendered) == 2 and "`$HOME`" in out and "echo $PATH $x$" in out and "\\$5" in out
+    inline, display = (rendered[k] for k in sorted(rendered))
+    assert inline.startswith("<math ") and 'display="inline"' in inline and "<msubsup>" in inline
+    assert 'display="block"' in display and "<mfrac>" in display and 'alttext="t = \\frac{a}{b}"' in display
+
+
+def test_the_build_draws_plotly_json_outputs_with_the_pages_plotly_js():
+    nbformat = pytest.importorskip("nbformat")
+    build_course = _load_build_course(NOTEBOOK_DIR)
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("fig")
+    spec = {"data": [{"type": "bar", "y": [1, 2]}], "layout": {"height": 300, "title": {"text": "</script>"}}}
+    cell.outputs = [nbformat.v4.new_output("display_data", data={build_course.PLOTLY_MIME: spec})]
+    nb.cells = [nbformat.v4.new_markdown_cell("# T\n\n$a$"), cell]
+    page_nb, rendered = build_course.prepare_for_html(nb)
+    html = page_nb.cells[1].outputs[0]["data"]["text/html"]
+    assert 'Plotly.newPlot("pbx-fig-' in html and "height:300px" in html and "</script>\"" not in html
+    assert "<script src=" not in html and nb.cells[0].source == "# T\n\n$a$"  # the original is untouched
+    page = build_course.to_html(nb)
+    assert page.count("plotly.js v") == 1 and "cdnjs" not in page and "require.min.js" not in page
+    assert "<math " in page and "$a$" not in page
