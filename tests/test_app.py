@@ -655,8 +655,8 @@ def test_controls_reach_the_app_through_its_public_methods_only(server):
             self.calls: list[str] = []
             self._quiet = False
 
-        def request_update(self) -> int:
-            self.calls.append("update")
+        def request_update(self, *, debounce: bool = True) -> int:
+            self.calls.append("update" if not debounce else "debounced update")
             return len(self.calls)
 
         def reset_view(self) -> None:
@@ -678,11 +678,12 @@ def test_controls_reach_the_app_through_its_public_methods_only(server):
 
     host = Host()
     c = Controls(host, server.gui, scene_ids=["WSU"], scene_id="WSU", scp_count=1000, scop_density=30, sweep=False)
-    c.handles["relief"].value = 200
-    assert host.calls == ["update"]
+    c.handles["relief"].value = 200  # a slider: debounced
+    c.handles["density"].value = "50"  # a dropdown: at once
+    assert host.calls == ["debounced update", "update"]
     with host.quiet():
         c.handles["relief"].value = 300
-    assert host.calls == ["update"]
+    assert host.calls == ["debounced update", "update"]
     c.handles["pick"].value = "scp 12"
     assert c.pick_index() == 12 and c.handles["sel_mode"].value == "picked SCP" and host.calls[-1] == "update"
     c.add_method_boxes(["a", "b"], ["b"], lambda n: n)

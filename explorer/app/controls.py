@@ -27,6 +27,8 @@ from explorer.app.model import COLOUR_LIMITS_PX, COLOUR_MODES, COMPONENTS, SCOP_
 from explorer.panels.raster import AGGREGATES
 
 NO_DIFFERENCE = "(none)"
+SLIDERS = ("relief", "rates", "jitter", "layers", "neurons", "exaggeration")
+"""Controls dragged through many values (their updates are debounced)."""
 """Difference-map dropdown entry: no difference map."""
 
 CLICK_SCRIPT = r"""
@@ -76,7 +78,7 @@ def click_bridge_html(uuid: str) -> str:
 class ControlsHost(Protocol):
     """What the controls need from the app: its public methods only."""
 
-    def request_update(self) -> int: ...
+    def request_update(self, *, debounce: bool = True) -> int: ...
 
     def reset_view(self) -> None: ...
 
@@ -189,31 +191,36 @@ class Controls:
             self.panel.dock_right()
             self.panel.set_width(560)
 
-        for key in ("preset", "relief", "rates", "jitter", "density", "scps", "color_method", "layers",
-                    "neurons", "limit", "colour_mode", "component", "aggregate", "diff_a", "diff_b", "show_scops",
-                    "distance", "exaggeration", "sweep", "sel_mode"):
-            h[key].on_update(self.changed)
+        for key in ("preset", "density", "scps", "color_method", "limit", "colour_mode", "component", "aggregate",
+                    "diff_a", "diff_b", "show_scops", "distance", "sweep", "sel_mode"):
+            h[key].on_update(self.changed)  # one value per change: computed at once
+        for key in SLIDERS:
+            h[key].on_update(self.slid)  # a value per frame while dragged: debounced
         h["sel_row"].on_update(self._selection_changed)
         h["sel_col"].on_update(self._selection_changed)
         h["pick"].on_update(self._picked)
-        h["run"].on_click(lambda _e: host.request_update())
+        h["run"].on_click(lambda _e: host.request_update(debounce=False))
         h["reset_view"].on_click(lambda _e: host.reset_view())
         h["export"].on_click(lambda e: host.export_to_client(getattr(e, "client", None)))
 
     # ------------------------------------------------------------- callbacks
-    def changed(self, _event: Any = None) -> None:
+    def changed(self, _event: Any = None, *, debounce: bool = False) -> None:
         """A control changed: request an update (unless quiet or auto update is off)."""
         if self.host.is_quiet():
             return
         if self.handles["auto"].value:
-            self.host.request_update()
+            self.host.request_update(debounce=debounce)
+
+    def slid(self, _event: Any = None) -> None:
+        """A slider moved: request a debounced update."""
+        self.changed(debounce=True)
 
     def _selection_changed(self, _event: Any = None) -> None:
         if self.host.is_quiet():
             return
         with self.host.quiet():
             self.handles["sel_mode"].value = "image point"
-        self.changed()
+        self.changed(debounce=True)
 
     def _picked(self, _event: Any = None) -> None:
         if self.host.is_quiet():
@@ -221,7 +228,7 @@ class Controls:
         if self.pick_index() is not None:
             with self.host.quiet():
                 self.handles["sel_mode"].value = "picked SCP"
-            self.host.request_update()
+            self.host.request_update(debounce=False)
 
     def _methods_changed(self, _event: Any = None) -> None:
         if self.host.is_quiet():

@@ -125,6 +125,9 @@ class ExplorerApp(Views):
         self.cloud_index: np.ndarray | None = None
         self.cloud_residual: np.ndarray | None = None
         self.last_update_s: float | None = None
+        self.request_started: float | None = None
+        """``time.monotonic()`` of the first request not yet fully shown (the status line states the time
+        from it to the scene and maps on screen, the whole update; None when idle)."""
         self.last_times: dict[str, float] = {}
         self.errors: list[str] = []
         self.url: str | None = None
@@ -266,15 +269,21 @@ class ExplorerApp(Views):
         )
 
     # ------------------------------------------------------------ requests
-    def request_update(self) -> int:
+    def request_update(self, *, debounce: bool = True) -> int:
         """Ask for a recomputation with the current controls (the newest request wins).
 
-        Returns the request's generation number (see :meth:`wait_update`).
+        ``debounce=False`` (a dropdown, a checkbox, a button: one value per change) starts at once;
+        otherwise the worker waits until the controls have been still for ``debounce_s`` (a slider
+        drag sends a value per frame).  Returns the request's generation number (see
+        :meth:`wait_update`).
         """
         with self._lock:
             self._gen += 1
             gen = self._gen
-            self._last_request = time.monotonic()
+            now = time.monotonic()
+            if self.request_started is None:  # the first request since the app was last idle
+                self.request_started = now
+            self._last_request = now - (0.0 if debounce else self.debounce_s)
             self._lock.notify_all()
         if not self.background:
             self._run(gen)

@@ -279,7 +279,7 @@ class ExplorerModel:
         self,
         *,
         preview_after_s: float | None = 2.0,
-        preview_points: int = 20_000,
+        preview_points: int = 5_000,
         probe_points: int = 2000,
         sweep_points: int = 5000,
         seed: int = 0,

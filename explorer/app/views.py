@@ -26,6 +26,18 @@ from explorer.panels import diverging_rgb
 from explorer.points import PointSet
 from explorer.scene import Scene
 
+STATUS_NAME_CHARS = 48
+"""Scene names longer than this are shortened in the status line (the Scene control shows them whole)."""
+
+
+def short_name(name: str, limit: int = STATUS_NAME_CHARS) -> str:
+    """``name`` shortened in its middle to at most ``limit`` characters (a file name keeps its start, its
+    end and the sensor in brackets)."""
+    if len(name) <= limit:
+        return name
+    head = (limit - 1) * 3 // 5
+    return name[:head] + "\u2026" + name[len(name) - (limit - 1 - head):]
+
 
 class Superseded(Exception):
     """A newer update request arrived; the current one stops at its next checkpoint."""
@@ -52,6 +64,7 @@ class Views:
         cloud_index: np.ndarray | None
         cloud_residual: np.ndarray | None
         last_update_s: float | None
+        request_started: float | None
         last_times: dict[str, float]
         camera_pose: tuple | None
         exports: int
@@ -64,6 +77,7 @@ class Views:
         background: bool
         _lock: threading.Condition
         _completed_gen: int
+        _gen: int
         _status: Callable[..., None]
         _check: Callable[[int | None], None]
         _get_fits: Callable[..., dict]
@@ -110,14 +124,19 @@ class Views:
             self._check(gen)
         self.last_update_s = time.perf_counter() - t_start
         times["total"] = self.last_update_s
+        if self.request_started is not None:
+            times["since_request"] = time.monotonic() - self.request_started
         self.last_times = times
         scps = self.model.scps(s)
         self._status(self._done_text(self.runs, self.pending, scps), 100.0 if not self.pending else 70.0,
                      busy=bool(self.pending))
-        if gen is not None:
-            with self._lock:  # the scene and panels now show this request (see wait_update)
+        with self._lock:
+            if gen is not None:  # the scene and panels now show this request (see wait_update)
                 self._completed_gen = max(self._completed_gen, gen)
                 self._lock.notify_all()
+            previews = any(r.preview for r in self.runs.values())
+            if (gen is None or self._gen == gen) and not self.pending and not previews:
+                self.request_started = None  # the whole update is on screen
         self._check(gen)
         t0 = time.perf_counter()
         self._update_sweep(s, gen)
@@ -336,7 +355,8 @@ class Views:
         failed = [n for n, r in runs.items() if not r.ok]
         sub = [n for n, r in runs.items() if r.preview]
         name = self.handles["preset"].value if self.scene is not None else ""
-        txt = f"{name}: updated in {self.last_update_s:.2f} s ({len(scps):,} SCPs)"
+        whole = self.last_times.get("since_request", self.last_update_s)
+        txt = f"{short_name(name)}: updated in {whole:.2f} s ({len(scps):,} SCPs)"
         if sub:
             txt += f"; preview on a seeded subset (full result computing): {', '.join(sub)}"
         if pending:
@@ -468,4 +488,4 @@ class Views:
             run()
 
 
-__all__ = ["Superseded", "Views"]
+__all__ = ["Superseded", "Views", "short_name"]

@@ -1,0 +1,188 @@
+"""The explorer's residual maps as a user meets them in a browser (issue 24), headless Chromium.
+
+On the Pleiades DIMAP scene with its DEM (``--dimap PHRDIMAP_...XML --dem MNT_...tif``), with
+``--scps`` check points (default 50,000) and ``--methods`` checked (default lrm, prm, nr, exact):
+
+1. **First complete maps**: from the moment the server listens (the URL) until the browser shows a
+   map title for every method and no preview or "waiting";
+2. **SCOP change**: the SCOP count is changed (30, 100, 50, 300, 100 by default) and we time from the
+   change until the browser shows the new SCOP overlay count and every method's map on all SCPs (drawing
+   included); the app's own update time and the resident memory (``VmRSS``) after each change are kept;
+3. **Export**: ``export_files`` of the same settings in the process (the scene loaded), and the whole
+   ``pushbroom explore --dimap ... --dem ... --export DIR --methods ...`` command in a fresh process.
+
+The machine's load average is recorded with every figure (the machine may be shared: say so when
+quoting them).  ``--root`` runs another checkout of the package (for before/after figures), driven only
+through what every version offers (``explorer.sources.load_source``, ``explorer.app.serve``, the
+controls' handles).
+
+Usage::
+
+    python benchmarks/explorer_browser.py --json benchmarks/results/explorer_browser.json
+    python benchmarks/explorer_browser.py --root /path/to/old/checkout --json before.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DIMAP = ROOT / "tests" / "data" / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
+DEM = ROOT / "assets" / "dem" / "MNT_P1BP--2017030824934340CP.tif"
+CHROMIUM = "/usr/bin/chromium"
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--no-first-run",
+        "--disable-component-update", "--disable-sync"]
+
+MAPS_DONE = """([names]) => {
+  const gd = document.querySelector('.js-plotly-plot');
+  if (!gd || !gd._fullLayout) return null;
+  const text = gd.innerText || gd.textContent || '';
+  if (!names.every(n => text.includes(n + ' row: RMSE'))) return null;
+  if (/preview|waiting|computing/.test(text)) return null;
+  const m = text.match(/SCOPs \\((\\d+)\\)/);
+  return m ? Number(m[1]) : -1;
+}"""
+
+
+def _rss_mib() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _load() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def _wait_maps(page, names: list[str], not_scops: int | None, timeout_s: float) -> tuple[float, int]:
+    """Seconds until the maps show every method (and a SCOP count other than ``not_scops``)."""
+    t0 = time.perf_counter()
+    while True:
+        n = page.evaluate(MAPS_DONE, [names])
+        if n is not None and (not_scops is None or n != not_scops):
+            return time.perf_counter() - t0, int(n)
+        if time.perf_counter() - t0 > timeout_s:
+            raise TimeoutError(f"maps not complete after {timeout_s} s")
+        time.sleep(0.02)
+
+
+def run(args: argparse.Namespace) -> dict:
+    sys.path.insert(0, str(Path(args.root).resolve()))
+    from playwright.sync_api import sync_playwright
+
+    from explorer.app import serve
+    from explorer.sources import load_source
+
+    methods = args.methods.split(",")
+    out: dict = {"root": str(Path(args.root).resolve()), "scps": args.scps, "methods": methods,
+                 "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "load_start": _load()}
+    t0 = time.perf_counter()
+    src = load_source("dimap", str(DIMAP), dem=str(DEM))
+    out["load_source_s"] = time.perf_counter() - t0
+    box: dict = {}
+    stop = threading.Event()
+    ready_at: dict = {}
+
+    def ready(app) -> None:
+        ready_at["t"] = time.perf_counter()
+        box["app"] = app
+
+    th = threading.Thread(target=lambda: box.setdefault("rc", serve(
+        src.label, port=args.port, methods=methods, sources=[src], stop_event=stop, ready=ready,
+        scp_count=args.scps, scop_density=100, sweep=args.sweep)), daemon=True)
+    th.start()
+    while "app" not in box and th.is_alive():
+        time.sleep(0.01)
+    app = box["app"]
+    changes = []
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            page = browser.new_context(viewport={"width": 1400, "height": 900}).new_page()
+            page.set_default_timeout(args.timeout * 1000)
+            page.goto(app.url)
+            first_s, scops = _wait_maps(page, methods, None, args.timeout)
+            out["first_maps_s"] = time.perf_counter() - ready_at["t"]
+            out["first_maps_load"] = _load()
+            app.wait_idle(args.timeout)
+            out["rss_after_start_mib"] = _rss_mib()
+            for d in args.densities:
+                before = scops
+                load = _load()
+                t0 = time.perf_counter()
+                app.handles["density"].value = str(d)
+                dt, scops = _wait_maps(page, methods, before, args.timeout)
+                app.wait_idle(args.timeout)
+                runs = {n: (r.evaluation.n_evaluated if r.ok else 0) for n, r in app.runs.items()}
+                n_scps = len(app.model.scps(app.settings()))
+                changes.append({"scops_chosen": d, "scops_shown": scops, "browser_s": dt,
+                                "app_update_s": app.last_update_s, "load": load, "rss_mib": _rss_mib(),
+                                "n_scps": n_scps, "evaluated": runs,
+                                "all_points": all(v == n_scps for v in runs.values())})
+                print(f"  SCOPs {d:>4} (shown {scops}): {dt:.2f} s in the browser, app {app.last_update_s:.2f} s, "
+                      f"load {load}, RSS {changes[-1]['rss_mib']:.0f} MiB, all points {changes[-1]['all_points']}",
+                      flush=True)
+            browser.close()
+        out["scop_changes"] = changes
+        from explorer.app.export import export_files
+
+        s = app.settings()
+        load = _load()
+        t0 = time.perf_counter()
+        files = export_files(app.model.scene(s), s, source=src.to_dict())
+        out["export_in_process_s"] = time.perf_counter() - t0
+        out["export_in_process_load"] = load
+        out["panels_html_bytes"] = len(files["panels.html"])
+    finally:
+        stop.set()
+        th.join(60)
+    if args.cli_export:
+        with tempfile.TemporaryDirectory() as tmp:
+            cmd = [sys.executable, "-m", "explorer", "explore", "--dimap", str(DIMAP), "--dem", str(DEM),
+                   "--methods", args.export_methods, "--export", tmp]
+            load = _load()
+            t0 = time.perf_counter()
+            env = dict(os.environ, PYTHONPATH=str(Path(args.root).resolve()))
+            proc = subprocess.run(cmd, cwd=args.root, capture_output=True, text=True, env=env)
+            out["export_cli_s"] = time.perf_counter() - t0
+            out["export_cli_load"] = load
+            out["export_cli_rc"] = proc.returncode
+            out["export_cli_methods"] = args.export_methods
+            if proc.returncode == 0:
+                out["export_cli_panels_html_bytes"] = (Path(tmp) / "panels.html").stat().st_size
+    out["load_end"] = _load()
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--root", default=str(ROOT), help="checkout whose explorer package is measured")
+    p.add_argument("--scps", type=int, default=50_000)
+    p.add_argument("--methods", default="lrm,prm,nr,exact")
+    p.add_argument("--densities", type=lambda t: [int(v) for v in t.split(",")], default=[30, 100, 50, 300, 100])
+    p.add_argument("--sweep", action="store_true", help="also run the accuracy-vs-SCOPs sweep (off by default)")
+    p.add_argument("--port", type=int, default=8140)
+    p.add_argument("--timeout", type=float, default=300.0)
+    p.add_argument("--cli-export", action="store_true", help="also time the whole --export command")
+    p.add_argument("--export-methods", default="lrm,prm,mlp,nr")
+    p.add_argument("--json", help="write the results here")
+    args = p.parse_args()
+    out = run(args)
+    print(json.dumps({k: v for k, v in out.items() if k != "scop_changes"}, indent=1))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
