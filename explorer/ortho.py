@@ -12,7 +12,9 @@ file is byte-identical whatever the scheduler.  Pixel convention:
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -447,6 +449,48 @@ def ortho_dask_array(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGr
                          meta=np.empty((0, 0), np.float32))
 
 
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """One pool of worker processes for a whole ``--scheduler processes`` run.
+
+    dask's ``processes`` scheduler starts a new pool for every ``compute`` call unless it is given one; each
+    new worker imports the package and loads its compiled kernels again (about 2 s a batch of blocks: the
+    25x slowdown of issue 25), so the pool is made once and handed to every batch.  Workers are spawned
+    (dask's default context), initialised as dask does, and leave when the run is killed (:func:`_init_worker`).
+    """
+    from dask.multiprocessing import get_context
+
+    if os.environ.get("PYTHONHASHSEED") in (None, "0"):  # as dask.multiprocessing.get: consistent hashing
+        os.environ["PYTHONHASHSEED"] = "6640"
+    return ProcessPoolExecutor(max(1, workers), mp_context=get_context(), initializer=_init_worker,
+                               initargs=(os.getpid(),))
+
+
+#: Seconds between a pool worker's checks that the run that started it is alive.
+PARENT_POLL_S = 0.2
+
+
+def _init_worker(parent_pid: int) -> None:
+    """Initialise a pool worker as dask does, and make it leave when its run is gone.
+
+    A worker holds its own end of the pool's queues, so it never sees them close when the run is killed
+    (SIGKILL, the out-of-memory killer): left alone it would wait forever, or finish its block, beside the
+    next run.  A daemon thread watches the parent's pid and ends the process once it changes.
+    """
+    import threading
+    import time
+
+    from dask.multiprocessing import initialize_worker_process
+
+    initialize_worker_process()
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="pushbroom-parent-watch", daemon=True).start()
+
+
 def write_orthoimage(
     array: da.Array,
     grid: OrthoGrid,
@@ -486,6 +530,7 @@ def write_orthoimage(
     blocks = [(i, j) for i in range(array.numblocks[0]) for j in range(array.numblocks[1])]
     ncpu = 2 if client is None else max(1, len(client.scheduler_info()["workers"]))
     batch = max(1, 2 * ncpu)
+    pool = process_pool(ncpu) if scheduler == "processes" else None
     profile = {
         "driver": "GTiff", "dtype": "float32", "count": 1, "width": grid.width, "height": grid.height,
         "crs": f"EPSG:{grid.epsg}", "transform": rasterio.Affine(*grid.transform), "nodata": float(NODATA),
@@ -494,6 +539,7 @@ def write_orthoimage(
     row_edges = np.concatenate([[0], np.cumsum(array.chunks[0])])
     col_edges = np.concatenate([[0], np.cumsum(array.chunks[1])])
     valid = 0
+    completed = False
     try:
         with rasterio.open(out, "w", **profile) as dst:
             for k in range(0, len(blocks), batch):
@@ -501,6 +547,8 @@ def write_orthoimage(
                 parts = [array.blocks[i, j] for i, j in todo]
                 if client is not None:
                     results = client.gather(client.compute(parts))
+                elif pool is not None:
+                    results = dask.compute(*parts, scheduler="processes", pool=pool)
                 else:
                     results = dask.compute(*parts, scheduler=scheduler)
                 for (i, j), res in zip(todo, results, strict=True):
@@ -509,7 +557,10 @@ def write_orthoimage(
                     valid += int(np.count_nonzero(res != NODATA))
                 if progress is not None:
                     progress(min(k + batch, len(blocks)), len(blocks))
+        completed = True
     finally:
+        if pool is not None:  # the workers leave with the run (on an error or Ctrl-C without waiting for them)
+            pool.shutdown(wait=completed, cancel_futures=True)
         if client is not None:
             cluster = getattr(client, "cluster", None)
             client.close()

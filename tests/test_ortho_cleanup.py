@@ -92,3 +92,62 @@ def test_an_interrupted_ortho_run_removes_its_folder_and_partial_output(tmp_path
     interrupt_when(proc, lambda: bool(list(root.glob(WORK_PREFIX + "*/synthetic_source.npy"))), sig)  # rendering
     assert list(root.iterdir()) == []
     assert list(tmp_path.glob("*ortho.tif*")) == []
+
+
+def _children(pid: int) -> list[int]:
+    """Live (not zombie) processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_a_sigkilled_process_pool_run_leaves_no_worker_and_the_rerun_starts_clean(tmp_path):
+    """Issue 25 class 7: the workers of a SIGKILLed ``--scheduler processes`` run leave with it (they used to
+    wait forever beside the next run), and the next run removes the killed run's partial GeoTIFF and folder."""
+    import time
+
+    root = tmp_path / "tmp"
+    root.mkdir()
+    out = tmp_path / "o.tif"
+    argv = [sys.executable, "-m", "explorer", "ortho", "--preset", "SCB", "--synthetic", "--chunk", "128",
+            "--scheduler", "processes", "--out", str(out)]
+    proc = subprocess.Popen(argv + ["--gsd", "4"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=_env(root))
+    deadline = time.monotonic() + 300
+    workers: list[int] = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = [p for p in _children(proc.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()]
+        if workers and list(tmp_path.glob(".o.tif.partial-*")):
+            break
+        time.sleep(0.1)
+    assert proc.poll() is None and workers, "the run ended before its pool was at work"
+    helpers = _children(proc.pid)
+    proc.kill()
+    proc.wait(timeout=60)
+    deadline = time.monotonic() + 30  # a hang guard, not a speed assertion
+    while time.monotonic() < deadline and any(_alive(p) for p in helpers):
+        time.sleep(0.1)
+    left = [p for p in helpers if _alive(p)]
+    for p in left:  # do not leave them to the next test
+        os.kill(p, signal.SIGKILL)
+    assert left == [], "worker processes outlived the killed run"
+    assert list(tmp_path.glob(".o.tif.partial-*")) and list(root.glob(WORK_PREFIX + "*"))  # nobody cleaned up
+    rerun = subprocess.run(argv + ["--gsd", "60"], capture_output=True, text=True, env=_env(root), timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.tif", "tmp"]
+    assert list(root.iterdir()) == []
