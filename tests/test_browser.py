@@ -8,6 +8,7 @@ thread ended and the port is free.  Skipped without /usr/bin/chromium.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import socket
@@ -26,6 +27,7 @@ sync_api = pytest.importorskip("playwright.sync_api")
 Image = pytest.importorskip("PIL.Image")
 
 from explorer.app import serve  # noqa: E402
+from explorer.methods.base import BestScanlineMethod  # noqa: E402
 from explorer.panels import NEGATIVE_END, POSITIVE_END  # noqa: E402
 from tests.test_app import toy_registry  # noqa: E402
 
@@ -250,3 +252,140 @@ def test_real_scene_maps_have_structure_and_a_click_selects_in_3d(real_explorer,
     assert len(cams) == 2 and all(np.allclose(c, pos, atol=1e-3) for c in cams)
     for p in (page, page2):
         p.context.close()
+
+
+# ------------------------------------------------------ issue 24: maps a person can trust
+class ToyConstant(BestScanlineMethod):
+    """Test-only method whose residual is constant by construction: the sensor's own image position of each
+    point plus 0.25 px in row and column (x + 0.25 - x is exactly 0.25 for image coordinates)."""
+
+    name = "toy_constant"
+    label = "toy constant residual"
+    reference = "test only"
+    family = "search"
+    needs_fit = False
+    exactness = "approximate"
+    OFFSET_PX = 0.25
+
+    def _locate(self, ground, *, trace):
+        proj = self.scene.project(ground)
+        row, col = proj.row + self.OFFSET_PX, proj.col + self.OFFSET_PX
+        n = len(row)
+        return self._result(ground, row, np.asarray(proj.valid, bool), np.zeros(n, int), col=col)
+
+
+TRUST_METHODS = ["lrm", "prm", "nr", "toy_constant"]
+MAP_STATE = """() => {
+  const gd = document.querySelector('.js-plotly-plot');
+  if (!gd || !gd._fullLayout || !gd._fullLayout.annotations) return null;
+  return gd._fullLayout.annotations.map(a => a.text);
+}"""
+
+
+def _serve_real(src, methods, scps):
+    box: dict = {}
+    stop = threading.Event()
+    th = threading.Thread(target=lambda: box.setdefault("rc", serve(
+        src.label, port=0, methods=methods, sources=[src], stop_event=stop,
+        ready=lambda a: box.setdefault("app", a), scp_count=scps, sweep=False)), daemon=True)
+    th.start()
+    t0 = time.monotonic()
+    while "app" not in box and th.is_alive() and time.monotonic() - t0 < 120:
+        time.sleep(0.05)
+    return box["app"], stop, th
+
+
+def _titles_when_complete(page, methods, scops: int, timeout: float = 240.0) -> list[str]:
+    """The map titles once every method is drawn on all SCPs (no preview) with ``scops`` SCOPs."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        titles = page.evaluate(MAP_STATE)
+        text = page.locator(".js-plotly-plot").first.inner_text() if titles else ""
+        if titles and all(any(t.startswith(f"{m} row: RMSE") and "all " in t for t in titles) for m in methods) \
+                and f"SCOPs ({scops})" in text:
+            return titles
+        time.sleep(0.2)
+    raise AssertionError(f"maps not complete: {page.evaluate(MAP_STATE)}")
+
+
+@pytest.mark.slow
+def test_real_scene_maps_are_trustworthy(browser, tmp_path):
+    """Issue 24 acceptance, on the Pleiades DIMAP scene with its DEM in headless Chromium:
+
+    * no stripes or any pattern from the drawing: a residual constant by construction (toy_constant,
+      +0.25 px) is drawn as one uniform colour over its whole map (the raster of cell means), the colour of
+      +0.25 px on its scale;
+    * two runs in a row (two servers, fresh caches) give equal map titles and summary tables;
+    * after a SCOP change under artificial CPU load (two busy-loop processes), every method still reports
+      every check point (titles "all N SCPs", evaluations of every SCP).
+    """
+    import subprocess
+    import sys
+
+    from explorer.panels import POSITIVE_END
+    from explorer.sources import load_source
+    from tests.real.conftest import DEM_DIR, PHR_2017
+
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"))
+    states = []
+    with toy_registry(), pytest.MonkeyPatch.context() as mp:
+        from explorer.methods import base as methods_base
+
+        mp.setitem(methods_base._REGISTRY, ToyConstant.name, ToyConstant)
+        for run in range(2):
+            app, stop, th = _serve_real(src, TRUST_METHODS, 10_000)
+            try:
+                assert app.wait_idle(240)
+                page = _open(browser, app.url)
+                titles = _titles_when_complete(page, TRUST_METHODS, 100)
+                states.append((titles, app.handles["summary"].content))
+                if run == 1:
+                    break
+                # the constant field: every drawn cell holds +0.25 px, the map is one colour
+                app.handles["show_scops"].value = False
+                assert app.wait_idle(120)
+                page.wait_for_function("() => !document.querySelector('.js-plotly-plot').innerText.includes('SCOPs (')")
+                page.wait_for_timeout(1500)
+                fig = app.handles["maps"].figure
+                (tr,) = [t for t in fig.data if t.name == "toy_constant row"]
+                z = np.asarray(tr.z)
+                assert (z[np.isfinite(z)] == ToyConstant.OFFSET_PX).all()
+                regions = page.evaluate(MAP_REGIONS)
+                k = [t.name for t in fig.data if t.type == "heatmap" and t.coloraxis].index("toy_constant row")
+                r = regions[k]
+                png = page.screenshot(clip=r)
+                px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)[3:-3, 3:-3]
+                colours, counts = np.unique(px.reshape(-1, 3), axis=0, return_counts=True)
+                empty = np.isnan(z).mean()  # cells without a check point (the DEM's holes) show the background
+                main = colours[np.argmax(counts)]
+                assert np.abs(main - np.array(POSITIVE_END)).sum() <= 6  # +0.25 px at the top of its scale
+                others = counts.sum() - counts.max()
+                bg = np.all(np.abs(colours - 64) <= 2, axis=1)
+                assert others - counts[bg].sum() <= 0.002 * counts.sum(), (colours, counts)  # no stripes
+                assert counts[bg].sum() <= (empty + 0.002) * counts.sum()
+                page.screenshot(path=str(tmp_path / "constant.png"))
+                app.handles["show_scops"].value = True
+                assert app.wait_idle(120)
+
+                # a SCOP change under CPU load: every method still on every SCP
+                busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+                try:
+                    app.handles["density"].value = "30"
+                    titles = _titles_when_complete(page, TRUST_METHODS, 30)
+                    assert app.wait_idle(240)
+                finally:
+                    for p in busy:
+                        p.kill()
+                        p.wait()
+                n = len(app.model.scps(app.settings()))
+                assert all(app.runs[m].evaluation.n_evaluated == n and not app.runs[m].preview for m in TRUST_METHODS)
+                assert all(f"all {n:,} SCPs" in t for t in titles if "row: RMSE" in t)
+                app.handles["density"].value = "100"
+                assert app.wait_idle(240)
+            finally:
+                with contextlib.suppress(Exception):
+                    page.context.close()
+                stop.set()
+                th.join(60)
+    (titles_a, table_a), (titles_b, table_b) = states
+    assert titles_a == titles_b and table_a == table_b
