@@ -318,13 +318,27 @@ def run_explore(args: Any) -> int:
                 raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(names)}")
         from explorer.app.model import ExplorerModel
 
+        ready = _refine_folder(args, source) if getattr(args, "gcps", None) else None
         # the GUI shows its own line (ExplorerApp; each update counts what it needs, _expect_compiles)
-        return serve(source.label, host=args.host, port=args.port, methods=methods,
+        return serve(source.label, host=args.host, port=args.port, methods=methods, ready=ready,
                      sources=[source] if source.scene is not None else [],
                      model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops, compile_progress=progress)
     finally:
         progress.uninstall()
         progress.finish()
+
+def _refine_folder(args: Any, source: Any) -> Callable[[Any], None]:
+    """``--gcps``: read the points and the sensor now (errors before serving); the *Refinement* folder
+    (:mod:`explorer.app.refine_view`) is added once the app is up."""
+    from explorer.app.refine_view import RefineView, refine_sensor_of
+    from explorer.refine.points_io import read_points_csv
+
+    sensor = refine_sensor_of(source)
+    control = read_points_csv(args.gcps)
+    check = read_points_csv(args.check) if getattr(args, "check", None) else None
+    return lambda app: setattr(app, "refine_view", RefineView(app.server.gui, sensor, control, check,
+                                                              sigma_px=getattr(args, "sigma_px", 0.5)))
+
 
 __all__ = ["check_listen_address", "limit_malloc_arenas", "quiet_client_errors", "release_freed_memory", "run_explore",
            "serve"]

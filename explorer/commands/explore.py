@@ -13,6 +13,7 @@ import argparse
 from explorer.commands._args import (
     method_list,
     port_number,
+    positive_float,
     positive_int,
     random_seed,
 )
@@ -68,4 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=random_seed, default=0, help="seed of the point heights and subsamples (default 0)")
     p.add_argument("--export", default=None, metavar="DIR",
                    help="write DIR/summary.json, residuals.csv and panels.html (every SCP) and exit without serving")
+    p.add_argument("--gcps", default=None, metavar="CSV",
+                   help="control points id,lon,lat,h,row,col: a Refinement folder adjusts the --rpc or --scene "
+                        "source to them, live (docs/refine.md)")
+    p.add_argument("--check", default=None, metavar="CSV", help="check points for --gcps (never adjusted to)")
+    p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a GCP's pixel, px (default 0.5)")
     p.set_defaults(func=cmd_explore)
