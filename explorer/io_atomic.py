@@ -1,7 +1,7 @@
 """Atomic result files: a writer fills a temporary file beside the target and renames it into place only
 when it is complete, so a failed, interrupted (Ctrl-C, SIGTERM) or killed run never leaves a file under the
 final name. A killed run (SIGKILL) can leave only the hidden ``.<name>.partial-<pid>`` file, which the next
-write of the same name removes once no process with that pid is alive.
+write into the same folder (of any name, by any command) removes once no process with that pid is alive.
 
 Safety rules (``docs/validation.md``): an output is never written over an existing non-regular file (a
 device such as ``/dev/null``, a FIFO, a socket: refused by its kind, never replaced by a file), nor over a
@@ -13,6 +13,7 @@ a temporary folder renamed as a whole, under a lock that a concurrent writer of 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import stat
 from collections.abc import Iterator
@@ -21,7 +22,8 @@ from pathlib import Path
 
 from explorer.errors import OutputError
 
-__all__ = ["atomic_folder", "atomic_path", "check_output_path", "note_input", "protect_inputs", "write_text_atomic"]
+__all__ = ["atomic_folder", "atomic_path", "check_output_path", "note_input", "protect_inputs", "remove_stale_partials",
+           "write_text_atomic"]
 
 #: (device, inode) of the files the running command reads, when :func:`protect_inputs` is on (else None).
 _INPUTS: dict[tuple[int, int], str] | None = None
@@ -158,18 +160,45 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _remove_stale_partials(target: Path) -> None:
-    """Remove ``.<name>.partial-<pid>`` files of ``target`` left by killed writers (their pid is not alive)."""
-    prefix = f".{target.name}.partial-"
-    parent = target.parent if str(target.parent) else Path(".")
+_LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(?:partial|old)-(?P<pid>\d+)$")
+
+
+def remove_stale_partials(folder: str | os.PathLike[str]) -> list[Path]:
+    """Remove what killed writers left in ``folder``: ``.<name>.partial-<pid>`` files and folders (and the
+    ``.<name>.old-<pid>`` folder of a folder swap) whose process is no longer alive.  Every atomic write
+    calls it for its folder, so the next run of any command that writes there cleans up after a SIGKILL.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    parent = Path(folder) if str(folder) else Path(".")
     try:
         entries = list(parent.iterdir())
     except OSError:
-        return
+        return []
+    removed = []
     for entry in entries:
-        pid_text = entry.name[len(prefix):] if entry.name.startswith(prefix) else ""
-        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
-            entry.unlink(missing_ok=True)
+        match = _LEFTOVER.match(entry.name)
+        if match is None:
+            continue
+        pid = int(match.group("pid"))
+        if pid == os.getpid() or _pid_alive(pid):
+            continue
+        try:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+        except OSError:
+            continue
+        removed.append(entry)
+    return removed
+
+
+def _remove_stale_partials(target: Path) -> None:
+    remove_stale_partials(target.parent if str(target.parent) else Path("."))
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
@@ -219,19 +248,6 @@ def _unlock_folder(target: Path, fd: int) -> None:
         os.close(fd)
 
 
-def _remove_stale_partial_folders(target: Path) -> None:
-    parent = target.parent if str(target.parent) else Path(".")
-    for prefix in (f".{target.name}.partial-", f".{target.name}.old-"):
-        try:
-            entries = list(parent.iterdir())
-        except OSError:
-            return
-        for entry in entries:
-            pid_text = entry.name[len(prefix):] if entry.name.startswith(prefix) else ""
-            if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
-                shutil.rmtree(entry, ignore_errors=True)
-
-
 @contextmanager
 def atomic_folder(path: str | os.PathLike[str], names: tuple[str, ...]) -> Iterator[Path]:
     """Yield a temporary folder beside ``path``; when the block ends without an error it becomes ``path``.
@@ -273,7 +289,7 @@ def atomic_folder(path: str | os.PathLike[str], names: tuple[str, ...]) -> Itera
     tmp = target.with_name(f".{target.name}.partial-{os.getpid()}")
     old = target.with_name(f".{target.name}.old-{os.getpid()}")
     try:
-        _remove_stale_partial_folders(target)
+        _remove_stale_partials(target)
         if target.is_dir():
             foreign = sorted(p.name for p in target.iterdir() if p.name not in names)
             if foreign:

@@ -30,12 +30,17 @@ def test_partial_of_a_killed_writer_is_removed_by_the_next_write(tmp_path):
     stale.write_text("left by a SIGKILL")
     live = tmp_path / f".out.json.partial-{os.getppid()}"  # a live process (our parent): kept
     live.write_text("another writer, still running")
-    other = tmp_path / f".other.json.partial-{dead}"  # another file's leftover: not ours to judge
+    other = tmp_path / f".other.json.partial-{dead}"  # another file's leftover (issue 25: any write cleans up)
     other.write_text("x")
+    folder = tmp_path / f".export.partial-{dead}"  # a killed folder writer's temporary folder
+    folder.mkdir()
+    (folder / "summary.json").write_text("{}")
+    unrelated = tmp_path / ".notes.partial"  # not a leftover's name: kept
+    unrelated.write_text("x")
     write_text_atomic(target, "{}")
     assert target.read_text() == "{}"
-    assert not stale.exists()
-    assert live.exists() and other.exists()
+    assert not stale.exists() and not other.exists() and not folder.exists()
+    assert live.exists() and unrelated.exists()
 
 
 # ---------------------------------------------------------------------------------------------- issue 25
