@@ -104,7 +104,9 @@ def check_paths(args: argparse.Namespace, inputs: list[str], outputs: list[str])
                 return (f"{' and '.join(names)} name the same file {out!r}; give each output its own name")
         for src in inputs:
             if _same_file(out, src):
-                return (f"{_option_of(args, out)} {out!r} is the input {_option_of(args, src)}; "
+                out_option = next((o for o in _options_of(args, out) if o != "file"), "an output")
+                src_option = next((o for o in _options_of(args, src) if o != out_option), "")
+                return (f"{out_option} {out!r} is the input {src_option or repr(src)}; "
                         "refusing to overwrite an input")
     return None
 
