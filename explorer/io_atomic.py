@@ -22,8 +22,10 @@ from pathlib import Path
 
 from explorer.errors import OutputError
 
-__all__ = ["atomic_folder", "atomic_path", "check_output_path", "note_input", "protect_inputs", "remove_stale_partials",
-           "write_text_atomic"]
+__all__ = [
+    "atomic_folder", "atomic_path", "check_output_folder", "check_output_path", "note_input", "protect_inputs",
+    "remove_stale_partials", "write_text_atomic",
+]
 
 #: (device, inode) of the files the running command reads, when :func:`protect_inputs` is on (else None).
 _INPUTS: dict[tuple[int, int], str] | None = None
@@ -248,6 +250,26 @@ def _unlock_folder(target: Path, fd: int) -> None:
         os.close(fd)
 
 
+def check_output_folder(path: str | os.PathLike[str]) -> Path:
+    """Validate a folder output before any work starts: not an existing file or device, a writable parent.
+
+    Raises
+    ------
+    OutputError
+        Naming the path and the problem.
+    """
+    target = Path(path)
+    if str(path).strip() == "":
+        raise OutputError("output folder is empty")
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"output folder {str(path)!r} exists and is not a folder")
+    parent = target.parent if str(target.parent) else Path(".")
+    existing = next((p for p in (parent, *parent.parents) if p.exists()), Path("/"))
+    if not existing.is_dir() or not os.access(existing, os.W_OK):
+        raise OutputError(f"output folder {str(path)!r} cannot be created ({str(existing)!r} is not writable)")
+    return target
+
+
 @contextmanager
 def atomic_folder(path: str | os.PathLike[str], names: tuple[str, ...]) -> Iterator[Path]:
     """Yield a temporary folder beside ``path``; when the block ends without an error it becomes ``path``.
@@ -272,11 +294,7 @@ def atomic_folder(path: str | os.PathLike[str], names: tuple[str, ...]) -> Itera
         ``path`` is a file, a folder holding other files, or locked by another run; its parent is missing
         or not writable.
     """
-    target = Path(path)
-    if str(path).strip() == "":
-        raise OutputError("output folder is empty")
-    if target.exists() and not target.is_dir():
-        raise OutputError(f"output folder {str(path)!r} exists and is not a folder")
+    target = check_output_folder(path)
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         try:

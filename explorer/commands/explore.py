@@ -25,8 +25,12 @@ def cmd_explore(args: argparse.Namespace) -> int:
         from explorer.app.pair import run_pair
 
         return run_pair(args)
+    from explorer.io_atomic import check_output_folder
     from explorer.memory import check_allocation
     from explorer.points import BYTES_PER_POINT
+
+    if args.export is not None:
+        check_output_folder(args.export)  # before the source is loaded and the methods run
 
     n_methods = len(args.methods.split(",")) if args.methods else 4
     check_allocation(float(args.scps) * (BYTES_PER_POINT + EXPLORE_BYTES_PER_SCP_METHOD * n_methods),

@@ -88,6 +88,9 @@ def hostile(tmp_path):
     fifo = tmp_path / "pipe.txt"
     os.mkfifo(fifo)
     paths["fifo"] = fifo
+    isd = tmp_path / "isd.json"
+    isd.write_bytes((ROOT / "tests" / "data" / "usgscsm" / "orbitalLineScan.json").read_bytes())
+    paths["isd"] = isd
     paths["dir"] = tmp_path
     return paths
 
@@ -141,6 +144,10 @@ CASES = [
     ("out-dev-null", ["simulate", "--n", "16", "--out", "/dev/null"], ["/dev/null", "device"]),
     ("out-fifo", ["simulate", "--n", "16", "--out", "{fifo}"], ["FIFO"]),
     ("out-is-the-input", ["simulate", "--scene", "{scene_ok}", "--n", "16", "--out", "{scene_ok}"], ["input"]),
+    ("from-isd-out-is-the-input", ["scene", "from-isd", "{isd}", "--out", "{isd}"], ["--out", "input"]),
+    ("from-isd-out-dev-null", ["scene", "from-isd", "{isd}", "--out", "/dev/null"], ["device"]),
+    ("explore-export-dev-null", ["explore", "--export", "/dev/null"], ["/dev/null", "not a folder"]),
+    ("explore-export-into-a-file", ["explore", "--export", "{isd}"], ["not a folder"]),
     ("out-equals-report", ["scene", "from-rpc", str(IKONOS), "--out", "{dir}/x.json", "--report",
                            "{dir}/x.json"], ["--out", "--report"]),
 ]
