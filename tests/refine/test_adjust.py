@@ -114,3 +114,13 @@ def test_point_files_and_hostile_points(tmp_path):
     far.lon[2] += 3.0
     with pytest.raises(InputError, match="'p2' .* outside the RPC's validity domain"):
         refine_images([rpc], control=far)
+
+
+def test_torch_is_imported_only_when_an_adjustment_runs():
+    import subprocess
+    import sys
+
+    code = ("import sys, explorer, explorer.refine.adjust, explorer.refine.bundle, explorer.commands.refine; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

@@ -129,3 +129,37 @@ def test_a_model_too_poor_for_the_bias_flags_nothing_and_says_so():
     pts.row[5] += 200.0  # a blunder far beyond the misfit is still caught
     ref = refine_images([rpc], model="shift", control=pts, sigma_px=0.3)
     assert np.flatnonzero(ref.result.outlier).tolist() == [5]
+
+
+def test_ground_sigma_is_the_generalised_least_squares_of_the_effective_covariance():
+    """GCPs whose ground is known to 2 m: eliminating each ground point (the Schur complement) must give the
+    generalised least squares of the shift with the effective covariance sigma^2 I + J S_g J^T of each point
+    (J the pixel / metre Jacobian of the projection, by central differences here)."""
+    from explorer.refine.bundle import metres_per_degree
+
+    rpc = pleiades()
+    n, sigma, sigma_g = 25, 0.3, 2.0
+    pts = simulate_points(rpc, n, model="shift", params=np.array([2.0, -1.0]), noise_px=sigma, seed=12)
+    rng = np.random.default_rng(13)
+    m_lon, m_lat = metres_per_degree(pts.lat, pts.h)
+    noisy = PointTable(pts.ids, pts.row, pts.col, pts.lon + rng.normal(0, sigma_g, n) / m_lon,
+                       pts.lat + rng.normal(0, sigma_g, n) / m_lat, pts.h + rng.normal(0, sigma_g, n))
+    ref = refine_images([rpc], model="shift", control=noisy, sigma_px=sigma, sigma_ground_m=sigma_g, loss="linear")
+    r0, c0 = rpc.projection(noisy.lon, noisy.lat, noisy.h)
+    jac = np.empty((n, 2, 3))
+    for axis, step in enumerate((0.5 / m_lon, 0.5 / m_lat, np.full(n, 0.5))):
+        d = [np.zeros(n), np.zeros(n), np.zeros(n)]
+        d[axis] = step
+        rp, cp = rpc.projection(noisy.lon + d[0], noisy.lat + d[1], noisy.h + d[2])
+        rm, cm = rpc.projection(noisy.lon - d[0], noisy.lat - d[1], noisy.h - d[2])
+        jac[:, 0, axis], jac[:, 1, axis] = (rp - rm) / 1.0, (cp - cm) / 1.0
+    cov = sigma**2 * np.eye(2) + sigma_g**2 * jac @ jac.transpose(0, 2, 1)
+    w = np.linalg.inv(cov)
+    d = np.stack([noisy.row - r0, noisy.col - c0], axis=1)
+    normal = w.sum(axis=0)
+    shift = np.linalg.solve(normal, np.einsum("nij,nj->i", w, d))
+    np.testing.assert_allclose(ref.parameters, shift, atol=1e-4)
+    e = d - shift
+    sigma0 = np.sqrt(np.einsum("ni,nij,nj->", e, w, e) / (2 * n - 2))
+    assert ref.result.sigma0 == pytest.approx(sigma0, rel=1e-3)
+    np.testing.assert_allclose(ref.result.parameter_covariance, sigma0**2 * np.linalg.inv(normal), rtol=1e-3)
