@@ -230,8 +230,14 @@ class Views:
         pos = F.decimation_index(len(idx_all), self.max_cloud_points)
         idx, res = idx_all[pos], res_all[pos]
         colors = diverging_rgb(res, limit) if ev is not None else np.full((len(idx), 3), 200, np.uint8)
-        self._put("/points/scps", B.add_points(self.server.scene, "/points/scps", self.frame, scps.ground[idx],
-                                               colors, size_km=B.point_size_km(self.frame, len(idx))))
+        node = self.nodes.get("/points/scps")
+        pos_key = (self._frame_key(s), id(scps), idx.tobytes())
+        if node is not None and getattr(self, "_cloud_pos_key", None) == pos_key:
+            node.colors = colors  # the same points: send their new colours only (not 50,000 positions again)
+        else:
+            self._put("/points/scps", B.add_points(self.server.scene, "/points/scps", self.frame, scps.ground[idx],
+                                                   colors, size_km=B.point_size_km(self.frame, len(idx))))
+            self._cloud_pos_key = pos_key
         self.cloud_index, self.cloud_residual = idx, res
         if ev is not None:
             what = f"coloured by **{cm}** row residual (+-{limit:.3g} px, magenta: no valid row)"
