@@ -243,7 +243,7 @@ def loads_json(text: str, source: str, what: str = "JSON file", parse_constant: 
         Passed to :func:`json.loads` for ``NaN`` / ``Infinity`` (default: Python floats).
     """
     if _json_depth_exceeds(text, MAX_JSON_DEPTH):
-        raise SceneFileError(f"{source}: JSON nested deeper than {MAX_JSON_DEPTH} levels: not a {what}")
+        raise SceneFileError(f"{source}: JSON nested deeper than {MAX_JSON_DEPTH} levels (refused as {what})")
     kwargs: dict[str, Any] = {"parse_int": _parse_int, "parse_float": _parse_float}
     if parse_constant is not None:
         kwargs["parse_constant"] = parse_constant
@@ -251,8 +251,8 @@ def loads_json(text: str, source: str, what: str = "JSON file", parse_constant: 
         return json.loads(text, **kwargs)
     except _LongNumber as exc:
         literal = str(exc)
-        raise SceneFileError(f"{source}: a number literal of {len(literal)} characters ({literal[:12]}...): "
-                             f"not a {what}") from None
+        raise SceneFileError(f"{source}: a number literal of {len(literal)} characters ({literal[:12]}...) "
+                             f"(refused as {what})") from None
     except json.JSONDecodeError as exc:
         raise SceneFileError(f"{source}: not valid JSON ({exc})") from None
     except (RecursionError, ValueError) as exc:
