@@ -202,3 +202,31 @@ def test_encodings_of_a_valid_csv_are_read(tmp_path, capsys):
         assert main(["rpc", "project", str(IKONOS), "--points", str(path)]) == 0
         outputs.append(capsys.readouterr().out)
     assert all(o == outputs[0] for o in outputs) and outputs[0].count("True") == 2
+
+
+def test_rigorous_scene_with_a_reflection_or_late_tables_is_refused(tmp_path, capsys):
+    """A rigorous line-scan scene (the Pleiades DIMAP's) reads; with its sensor-to-body matrix turned into a
+    reflection, or its ephemeris cut to start after the image, it is refused by name."""
+    from explorer.real.dimap import rigorous_scene_from_dimap
+
+    model, _ = rigorous_scene_from_dimap(RPC_DIR / "PHRDIMAP_P1BP--2017030824934340CP.XML")
+    good = tmp_path / "rigorous.json"
+    model.save(good)
+    assert main(["simulate", "--scene", str(good), "--n", "16"]) == 0
+    d = json.loads(good.read_text())
+    m = d["exterior"]["sensor_to_body"]
+    reflected = json.loads(json.dumps(d))
+    reflected["exterior"]["sensor_to_body"] = [[-v for v in m[0]], m[1], m[2]]
+    late = json.loads(json.dumps(d))
+    eph = late["exterior"]["ephemeris"]
+    n = len(eph["time_s"])
+    for key, value in eph.items():
+        if isinstance(value, list) and len(value) == n:
+            eph[key] = value[n // 2 + 1:]
+    capsys.readouterr()
+    for name, doc, words in (("reflected", reflected, ["reflection"]), ("late", late, ["ephemeris", "extrapolated"])):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(doc))
+        assert main(["simulate", "--scene", str(path), "--n", "16"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and path.name in err[0] and all(w in err[0] for w in words), err
