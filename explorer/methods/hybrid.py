@@ -223,6 +223,11 @@ class HybridObjectSpace(BestScanlineMethod):
         rr, cc = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
         ground = np.vstack([sc.image_to_ground(rr, cc, height=h) for h in self.heights])
         target = np.concatenate([rr] * len(self.heights))
+        hit = np.isfinite(ground[:, 0])  # lines a sensor flags (e.g. past a CSM camera's tables) are left out
+        if hit.sum() < 2 * ground.shape[1] + 1:
+            raise ValueError(f"{sc.name}: only {int(hit.sum())} of {hit.size} approximation grid points reach the "
+                             "ground")
+        ground, target = ground[hit], target[hit]
         self.setup_ce = int(ground.shape[0])
         self._centre = ground.mean(axis=0)
         scale = np.abs(ground - self._centre).max(axis=0)

@@ -89,7 +89,8 @@ def image_space_grid(
     Returns
     -------
     row, col : ndarray, shape (M,)
-        Exact image coordinates of the nodes (0-based, pixel centre), ``M = n_row n_col n_layers``.
+        Exact image coordinates of the nodes (0-based, pixel centre), ``M = n_row n_col n_layers`` less the
+        nodes whose line of sight the sensor flags (no ground point).
     ground : ndarray, shape (M, 3)
         Local ENU metres (exact: intersection of the line of sight with the plane).
     """
@@ -109,7 +110,9 @@ def image_space_grid(
     cc = np.tile(cols, nr)
     origin, direction = scene.rays(rr, cc)
     parts = [origin + ((h - origin[:, 2]) / direction[:, 2])[:, None] * direction for h in heights]
-    return np.tile(rr, nz), np.tile(cc, nz), np.concatenate(parts)
+    ground = np.concatenate(parts)
+    hit = np.isfinite(ground[:, 0])  # image points a sensor flags (e.g. past a CSM camera's tables): left out
+    return np.tile(rr, nz)[hit], np.tile(cc, nz)[hit], ground[hit]
 
 
 def rigorous_ground_to_image(
