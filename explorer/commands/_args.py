@@ -24,6 +24,7 @@ __all__ = [
     "int_in_range",
     "latitude",
     "method_list",
+    "name_text",
     "longitude",
     "non_negative_float",
     "non_negative_int",
@@ -162,6 +163,13 @@ def int_in_range(low: int, high: int, what: str = "value"):
 
     parse.__name__ = f"int_in_range_{low}_{high}"
     return parse
+
+
+def name_text(text: str) -> str:
+    """A name (a preset id, a list of them): not empty or blank (an empty value is a mistake, not the default)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a name (or leave the option out for the default)")
+    return text.strip()
 
 
 def method_list(text: str) -> str:

@@ -25,6 +25,7 @@ from explorer.commands._args import (
     existing_file,
     float_in_range,
     method_list,
+    name_text,
     non_negative_int,
     output_file,
     positive_float,
@@ -155,7 +156,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="benchmark best-scanline methods on presets (the papers' protocol)")
-    p.add_argument("--preset", default=None, help="preset ids, comma-separated, or 'all' / 'paper' (default WSU)")
+    p.add_argument("--preset", default=None, type=name_text,
+                   help="preset ids, comma-separated, or 'all' / 'paper' (default WSU)")
     p.add_argument("--methods", default="all", type=method_list,
                    help="method names, comma-separated, or 'all' (default all)")
     p.add_argument("--scops", default=",".join(map(str, DEFAULT_SCOPS)),

@@ -12,6 +12,7 @@ import argparse
 
 from explorer.commands._args import (
     method_list,
+    name_text,
     port_number,
     positive_float,
     positive_int,
@@ -51,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Serve the explorer on one source (default: the default preset), or export "
                                    "the panels' numbers with --export DIR.")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--preset", default=None, help="a synthetic preset (default: the presets file's default, WSU)")
+    src.add_argument("--preset", default=None, type=name_text,
+                     help="a synthetic preset (default: the presets file's default, WSU)")
     src.add_argument("--scene", default=None, metavar="FILE", help="a scene JSON written by the `scene` commands")
     src.add_argument("--rpc", default=None, metavar="FILE", help="an RPC file: MPC scene by space resection")
     src.add_argument("--dimap", default=None, metavar="FILE", help="a Pleiades DIMAP v1.4 PHRDIMAP_*.XML")

@@ -13,6 +13,7 @@ from explorer.commands._args import (
     MAX_RELIEF_M,
     existing_file,
     float_in_range,
+    name_text,
     output_file,
     positive_int,
     random_seed,
@@ -37,7 +38,8 @@ def add_file_sources(p: argparse.ArgumentParser) -> None:
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     """The options every command that builds a scene accepts."""
-    p.add_argument("--preset", default=None, help="preset id (default: the presets file's default, WSU)")
+    p.add_argument("--preset", default=None, type=name_text,
+                   help="preset id (default: the presets file's default, WSU)")
     p.add_argument("--scene", default=None, type=existing_file, help="scene JSON file (instead of --preset)")
     p.add_argument("--relief", type=float_in_range(0.0, MAX_RELIEF_M, "--relief", "m"), default=0.0,
                    help="synthetic relief amplitude, metres")
