@@ -598,12 +598,14 @@ def fit_network(
     max_fail: int = 6,
     device: str | torch.device = "cpu",
     min_inputs: int | None = None,
+    goal_rmse: float = 0.0,
 ) -> tuple[TrainedNetwork, dict]:
     """Train a sigmoid MLP on normalised inputs ``x`` (N, D) for targets ``y`` (N,).
 
     The targets are scaled to [-1, 1] (min/max); the points are split 70/30 (seeded)
     into training and validation sets; the initial weights come from a torch generator
-    seeded with ``seed``; training is :func:`levenberg_marquardt` in float64.
+    seeded with ``seed``; training is :func:`levenberg_marquardt` in float64, stopping when the
+    training RMSE reaches ``goal_rmse`` (target units; 0: no goal, MATLAB's default).
 
     Returns
     -------
@@ -635,7 +637,7 @@ def fit_network(
     theta0 = net.init_params(gen)
     res = levenberg_marquardt(
         net, theta0.to(dev), x[tr], yn[tr], x[va], yn[va], max_epochs=max_epochs,
-        max_fail=max_fail, device=dev,
+        max_fail=max_fail, device=dev, goal=(float(goal_rmse) / scale) ** 2,
     )
     info = {
         "hidden": list(net.hidden),

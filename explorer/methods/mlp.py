@@ -98,6 +98,11 @@ class MLPMethod(BestScanlineMethod):
     detrend : bool
         Learn the row minus its least-squares affine function of the inputs (default True; False:
         the paper's raw scaled row).
+    goal_px : float
+        Stop training once the training RMSE is at most this (default 0.01 px, 1 % of the paper's
+        sub-pixel criterion; MATLAB's ``trainlm`` goal).  On the DIMAP scene at 100 SCOPs it ends
+        training after 122 instead of 1,000 epochs (0.3 s instead of 5 s here) for an SCP RMSE of
+        0.019 px instead of 0.005 px; 0 trains until the validation, gradient or epoch limit.
     domain_margin, height_tolerance_m : float
         Training-domain check as in :class:`explorer.methods.regression.LinearRegressionMethod`
         (0.05, 1.0 m): points outside are not located (``converged``/``inside`` False).
@@ -116,7 +121,7 @@ class MLPMethod(BestScanlineMethod):
     DEFAULTS = {
         "hidden_layers": 1, "neurons": 10, "seed": 0, "max_epochs": 1000, "max_fail": 6,
         "train_fraction": 0.7, "use_height": None, "device": "cpu", "max_val_rmse_px": 1.0,
-        "domain_margin": 0.05, "height_tolerance_m": 1.0, "detrend": True,
+        "domain_margin": 0.05, "height_tolerance_m": 1.0, "detrend": True, "goal_px": 0.01,
     }
 
     def __init__(self, scene: Scene, **params) -> None:
@@ -145,7 +150,7 @@ class MLPMethod(BestScanlineMethod):
         self.network, info = fit_network(
             x, target, self.hidden, name=self.name, seed=p["seed"],
             train_fraction=p["train_fraction"], max_epochs=p["max_epochs"], max_fail=p["max_fail"],
-            device=p["device"],
+            device=p["device"], goal_rmse=float(p["goal_px"]),
         )
         info["train_rmse_px"] = info.pop("train_rmse")
         info["val_rmse_px"] = info.pop("val_rmse")
