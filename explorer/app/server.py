@@ -331,9 +331,11 @@ def _refine_folder(args: Any, source: Any) -> Callable[[Any], None]:
     """``--gcps``: read the points and the sensor now (errors before serving); the *Refinement* folder
     (:mod:`explorer.app.refine_view`) is added once the app is up."""
     from explorer.app.refine_view import RefineView, refine_sensor_of
+    from explorer.refine.images import image_adapter
     from explorer.refine.points_io import read_points_csv
 
     sensor = refine_sensor_of(source)
+    image_adapter(sensor)  # a scene file holding a rigorous model: refused here, before serving
     control = read_points_csv(args.gcps)
     check = read_points_csv(args.check) if getattr(args, "check", None) else None
     return lambda app: setattr(app, "refine_view", RefineView(app.server.gui, sensor, control, check,
