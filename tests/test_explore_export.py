@@ -171,3 +171,24 @@ def test_isd_export_is_measured_against_the_camera_itself(tmp_path, capsys, isd)
             assert np.max(np.abs(line + dr - truth.line)) < 1e-6
             assert np.max(np.abs(sample + dc - truth.sample)) < 1e-6
 
+
+
+@pytest.mark.slow
+def test_2018_dimap_with_its_partial_dem_exports_against_the_rigorous_model(tmp_path, capsys):
+    """Issue 23: the public 2018 Pleiades DIMAP with its own DEM (which misses a few image corners) exports; the
+    truth is the rigorous model, the DEM's coverage is stated, and the vendor RPC's map against it is present."""
+    dimap = RPC_DIR / "PHRDIMAP_P1BP--2018122638935449CP.XML"
+    dem = DEM_DIR / "MNT_P1BP--2018122638935449CP.tif"
+    out = tmp_path / "phr2018"
+    assert main(["explore", "--dimap", str(dimap), "--dem", str(dem), "--methods", "exact,lrm", "--scops", "50",
+                 "--scps", "2000", "--export", str(out)]) == 0
+    capsys.readouterr()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["truth"]["model"].startswith("rigorous")
+    assert 0.5 <= summary["source"]["dem_coverage"]["fraction"] < 1.0
+    assert summary["stand_in"]["model"] == "vendor RPC of the same image"
+    assert summary["stand_in"]["n_valid"] == summary["settings"]["scps_used"] > 0
+    assert summary["methods"]["exact"]["max_row_px"] < 1e-6
+    rows = list(csv.DictReader((out / "residuals.csv").read_text().splitlines()))
+    assert {r["method"] for r in rows} == {"exact", "lrm", "stand-in"}
+    assert "DEM covers" in (out / "panels.html").read_text()
