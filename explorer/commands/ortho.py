@@ -21,7 +21,7 @@ from explorer.commands._args import (
     raster_file,
 )
 from explorer.commands._progress import with_compile_progress
-from explorer.commands.simulate import add_scene_arguments, scene_from_args
+from explorer.commands.simulate import FILE_SOURCES, add_file_sources, add_scene_arguments, scene_from_args
 
 if TYPE_CHECKING:
     import numpy as np
@@ -109,6 +109,10 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         from explorer.rpc import read_rpc
         from explorer.rpc.sensor import RPCSensor
 
+        others = [f"--{k}" for k in (*FILE_SOURCES, "preset") if getattr(args, k, None) is not None]
+        if others:
+            raise InputError(f"give one source: --rpc and {' and '.join(others)} were given")
+
         if args.method is not None:
             raise InputError(f"--method {args.method}: an RPC has no scanlines to search; ortho projects with the "
                              "RPC itself (leave out --method, or give a scene)")
@@ -138,6 +142,10 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         from explorer.methods.adapter import MethodSensor
 
         scene = scene_from_args(args)
+        body = scene.frame.body
+        if not body.is_wgs84:  # the output grid is a UTM zone of WGS84: Earth longitudes and latitudes only
+            given = next((f"--{k} {getattr(args, k)}" for k in FILE_SOURCES if getattr(args, k, None)), "the scene")
+            raise InputError(f"{given}: the image is on {body.name}; ortho writes WGS84 UTM grids (the Earth) only")
         if dem is not None:
             scene = scene.with_terrain(_dem_as_terrain(scene, dem, str(args.dem)))
         shape = scene.shape
@@ -329,6 +337,7 @@ def cmd_ortho(args: argparse.Namespace) -> int:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ortho", help="orthorectify an image (or a synthetic one) to a UTM GeoTIFF on dask")
     add_scene_arguments(p)
+    add_file_sources(p)  # --isd, --dimap, --dg: the sensor itself (explorer.sources.load_source)
     p.add_argument("--rpc", default=None, type=existing_file, help="RPC file (any supported format) instead of a scene")
     p.add_argument("--rpc-shape", default=None, type=image_shape, help="source size ROWSxCOLS for --rpc --synthetic")
     p.add_argument("--dem", default=None, type=raster_file,

@@ -131,3 +131,35 @@ def test_ortho_and_rpc_localize_read_an_srtm_tile_with_one_height_convention(tmp
     geometry = build_ortho_job(args, tmp_path)[0]
     ortho_h = geometry.surface.heights(geometry.sensor, np.array([lon]), np.array([lat]))[0]
     assert ortho_h == pytest.approx(h, abs=1e-3)
+
+
+def test_ortho_of_a_rigorous_dimap_model_projects_with_the_model_itself(tmp_path, capsys):
+    """``--dimap``: the sensor comes through the one file loader; the output pixels' image positions are the
+    rigorous model's own ground to image (its bracketing solver, independent of the methods)."""
+    from explorer.commands.ortho import build_ortho_job
+
+    img = tmp_path / "img.npy"
+    np.lib.format.open_memmap(img, mode="w+", dtype=np.uint8, shape=(38248, 40000)).flush()  # sparse file
+    out = tmp_path / "o.tif"
+    argv = ["ortho", "--dimap", str(PHR), "--image", str(img), "--gsd", "400", "--out", str(out)]
+    geometry = build_ortho_job(build_parser().parse_args(argv), tmp_path)[0]
+    scene = geometry.sensor.scene
+    assert type(scene).__name__ == "RigorousLineScanScene"
+    rng = np.random.default_rng(2)
+    lon0, lat0 = scene.frame.lon0_deg, scene.frame.lat0_deg
+    lon, lat = lon0 + rng.uniform(-0.05, 0.05, 40), lat0 + rng.uniform(-0.05, 0.05, 40)
+    row, col, valid = geometry.locate(lon, lat)
+    assert valid.all()
+    r_ref, c_ref = scene.ground_to_image(geometry.surface.ground(geometry.sensor, lon, lat))
+    assert np.max(np.hypot(row - r_ref, col - c_ref)) < 1e-6
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert _report(capsys.readouterr().out)["valid_pixels"] > 1000
+
+
+def test_an_image_of_another_body_is_refused_naming_it(tmp_path, capsys):
+    isd = ROOT / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
+    out = tmp_path / "o.tif"
+    assert main(["ortho", "--isd", str(isd), "--synthetic", "--gsd", "100", "--out", str(out)]) == 2
+    _one_line_error(capsys, "--isd", "Mars")
+    assert not out.exists()
