@@ -707,3 +707,28 @@ def test_a_file_source_shows_its_truth_and_the_stand_in_map(server):
     titles = " ".join(a.get("text", "") for a in fig["layout"].get("annotations", []))
     assert "stand-in" in titles, titles
     assert "Truth: USGS CSM" in app.handles["maps_note"].content and "stand-in" in app.handles["maps_note"].content
+
+
+def test_log_lines_of_background_work_name_it(caplog, monkeypatch):
+    """Issue 24: a fit's log line says which work it comes from (the sweep, or the maps)."""
+    import logging
+
+    from explorer import _log
+    from explorer.app.model import SWEEP_PURPOSE
+
+    class ToyLogs(ToyPoly):
+        name = "toy_logs"
+
+        def _fit(self, control: PointSet) -> None:
+            super()._fit(control)
+            _log.warn("toy_logs: training did not reach its accuracy goal")
+
+    monkeypatch.setitem(methods_base._REGISTRY, ToyLogs.name, ToyLogs)
+    model = ExplorerModel()
+    s = Settings(preset="WSU", scop_density=30, scp_count=1000, methods=("toy_logs",))
+    with caplog.at_level(logging.WARNING, logger="explorer"):
+        model.fit("toy_logs", s, 30, purpose=SWEEP_PURPOSE)
+        model.fit("toy_logs", s, 50)
+    msgs = [r.getMessage() for r in caplog.records if r.name == "explorer"]
+    assert msgs == ["[accuracy-vs-SCOPs sweep, 30 SCOPs] toy_logs: training did not reach its accuracy goal",
+                    "[maps, 50 SCOPs] toy_logs: training did not reach its accuracy goal"]

@@ -24,6 +24,7 @@ from explorer.app.controls import Controls
 from explorer.app.jobs import FitPool
 from explorer.app.model import (
     DEFAULT_METHODS,
+    SWEEP_PURPOSE,
     Evaluation,
     ExplorerModel,
     FitRecord,
@@ -447,7 +448,9 @@ class ExplorerApp(Views):
             if out[(name, d)] is None:
                 key = m.fit_key(name, s, d)
                 cost = m.fit_seconds.get(name, 1.0) * (d or s.scop_density) / 100.0
-                fits.submit(key, lambda n=name, dd=d: m.fit(n, s, dd), priority, cost)  # type: ignore[misc]
+                purpose = SWEEP_PURPOSE if priority > 0 else None  # its log lines name the sweep
+                fits.submit(key, lambda n=name, dd=d, why=purpose: m.fit(n, s, dd, purpose=why),  # type: ignore[misc]
+                            priority, cost)
                 missing.append((name, d, key))
         if missing and wait_s > 0 and fits is not None:
             keys = [k for _, _, k in missing]
