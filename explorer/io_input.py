@@ -33,6 +33,7 @@ from typing import Any
 
 from explorer.errors import SceneFileError
 from explorer.io_atomic import note_input
+from explorer.memory import check_allocation
 
 __all__ = [
     "COLUMN_RANGES",
@@ -259,9 +260,16 @@ def loads_json(text: str, source: str, what: str = "JSON file", parse_constant: 
         raise SceneFileError(f"{source}: not valid JSON ({type(exc).__name__})") from None
 
 
+#: Peak memory per byte of text while parsing it (Python objects of JSON values, lists of CSV fields).
+PARSE_BYTES_PER_CHAR = 16
+
+
 def load_json_file(path: str | os.PathLike[str], what: str = "JSON file", parse_constant: Any = None) -> Any:
     """Read and parse a JSON input file under every rule of this module (see :func:`loads_json`)."""
-    return loads_json(read_input_text(path, what), str(path), what, parse_constant)
+    text = read_input_text(path, what)
+    check_allocation(len(text) * PARSE_BYTES_PER_CHAR, f"{what} {path} ({len(text) / 1024**2:.0f} MiB of text)",
+                     "use a smaller file")
+    return loads_json(text, str(path), what, parse_constant)
 
 
 #: Physical range of the point columns a CSV may hold (inclusive), with the unit for the messages.
@@ -305,6 +313,8 @@ def read_points_csv(path: str | os.PathLike[str], columns: tuple[str, ...] | lis
     from explorer.errors import InputError
 
     text = read_input_text(path, what)
+    check_allocation(len(text) * PARSE_BYTES_PER_CHAR, f"{what} {path} ({len(text) / 1024**2:.0f} MiB of text)",
+                     "split it into smaller files")
     try:
         reader = csv.reader(io.StringIO(text, newline=""))
         table = [row for row in reader if any(cell.strip() for cell in row)]
