@@ -26,6 +26,7 @@ import pyproj
 
 from explorer.errors import InputError
 from explorer.geometry.dem_intersection import heights_at
+from explorer.sensor import GeodeticSensor, has_geodetic_projection
 from explorer.terrain_io import height_grid_of
 
 if TYPE_CHECKING:
@@ -100,13 +101,6 @@ def grid_covering(lon: np.ndarray, lat: np.ndarray, gsd: float, epsg: int) -> Or
 # ground of a sensor on it (to render a synthetic source the way the sensor saw it).
 
 
-def projects_geodetic(sensor: object) -> bool:
-    """True where ``sensor`` declares ``has_geodetic_projection`` (``geodetic_to_image(lon, lat, h)`` and
-    ``geodetic_localization(row, col, h)`` on longitude, latitude and ellipsoidal height, as an RPC is
-    defined): ortho then skips the round trip through the local frame."""
-    return bool(getattr(type(sensor), "has_geodetic_projection", False))
-
-
 #: Fixed-point steps of :meth:`EllipsoidHeight.image_to_lonlat` at most, and the height change that stops them.
 PLANE_ITERATIONS = 10
 PLANE_TOL_M = 1e-7
@@ -128,8 +122,8 @@ class EllipsoidHeight:
 
     def image_to_lonlat(self, sensor: Sensor, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Image points -> (lon, lat) degrees on this height (NaN where the line of sight does not reach it)."""
-        if projects_geodetic(sensor):
-            lon, lat, _ = sensor.geodetic_localization(row, col, np.full(np.shape(row), float(self.height_m)))  # type: ignore[attr-defined]
+        if isinstance(sensor, GeodeticSensor) and has_geodetic_projection(sensor):
+            lon, lat, _ = sensor.geodetic_localization(row, col, np.full(np.shape(row), float(self.height_m)))
             return lon, lat
         # local planes Z = z with z moved until the ellipsoidal height is the one asked (dZ/dh ~ 1)
         frame = sensor.frame
@@ -168,10 +162,10 @@ class DEMHeights:
 
     def image_to_lonlat(self, sensor: Sensor, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First hit of the lines of sight on the DEM (a sensor in geodetic coordinates: an RPC)."""
-        if not projects_geodetic(sensor):
+        if not (isinstance(sensor, GeodeticSensor) and has_geodetic_projection(sensor)):
             raise InputError("a lon/lat DEM is intersected here only by a sensor in geodetic coordinates (an RPC); "
                              "give a scene its DEM as its own terrain (SensorTerrain)")
-        lon, lat, _, _ = sensor.geodetic_localization_on_dem(row, col, self.dem)  # type: ignore[attr-defined]
+        lon, lat, _, _ = sensor.geodetic_localization_on_dem(row, col, self.dem)
         return lon, lat
 
     def height_range(self) -> tuple[float, float]:
@@ -222,7 +216,7 @@ Surface = EllipsoidHeight | DEMHeights | SensorTerrain
 class OrthoGeometry:
     """Ground (lon, lat) on a surface -> image (row, col) of any :class:`~explorer.sensor.Sensor`.
 
-    A sensor declaring ``has_geodetic_projection`` (an RPC, :func:`projects_geodetic`) is asked in
+    A sensor declaring ``has_geodetic_projection`` (:class:`~explorer.sensor.GeodeticSensor`, the RPC) is asked in
     longitude, latitude and ellipsoidal height (valid: on the image); any other through local ENU ground points of
     its frame (:meth:`~explorer.sensor.Sensor.project`: valid as the sensor says).  A
     best-scanline method is a sensor too (:class:`explorer.methods.adapter.MethodSensor`).
@@ -242,11 +236,12 @@ class OrthoGeometry:
         """Image (row, col) (N,) of the ground at (lon, lat) (N,) degrees, and True where it is on the image."""
         row = np.full(lon.shape, np.nan)
         col = np.full(lon.shape, np.nan)
-        if projects_geodetic(self.sensor):
-            h = self.surface.heights(self.sensor, lon, lat)
+        sensor = self.sensor
+        if isinstance(sensor, GeodeticSensor) and has_geodetic_projection(sensor):
+            h = self.surface.heights(sensor, lon, lat)
             ok = np.isfinite(h)
             if ok.any():
-                row[ok], col[ok] = self.sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])  # type: ignore[attr-defined]
+                row[ok], col[ok] = sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])
             nr, nc = self.image_shape
             return row, col, (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)  # NaN: False
         ground = self.surface.ground(self.sensor, lon, lat)

@@ -34,7 +34,9 @@ Optional capabilities are declared explicitly as class attributes, never discove
   Declared by the scenes (MPC, rigorous DIMAP / DG, CSM); an RPC has no lines (False);
 * :class:`PolynomialExteriorSensor` (``has_polynomial_exterior = True``): the exterior orientation is
   MPC polynomials of time, which the compiled collinearity kernels (:mod:`explorer.geometry.kernels`)
-  pack.
+  pack;
+* :class:`GeodeticSensor` (``has_geodetic_projection = True``): the model is defined on longitude, latitude
+  and ellipsoidal height (an RPC), so orthorectification asks it without the local-frame round trip.
 
 Code that only needs to project, localise or outline an image (building an MPC scene from any model
 by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in the explorer) takes a
@@ -44,7 +46,7 @@ by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -229,6 +231,39 @@ class StandIn:
         return self.sensor.ground_to_image(ground)
 
 
+@runtime_checkable
+class GeodeticSensor(Sensor, Protocol):
+    """Capability: the model is defined on longitude, latitude (degrees) and ellipsoidal height (metres), as an
+    RPC is, so a caller with geodetic ground points (orthorectification) asks it directly instead of through
+    the local frame (60 times the RPC's own projection for the round trip).
+
+    Declared by the class attribute ``has_geodetic_projection = True`` (:class:`explorer.rpc.sensor.RPCSensor`).
+    """
+
+    has_geodetic_projection: ClassVar[bool]
+
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lon, lat, h) (N,) -> (row, col) (N,), fractional pixels."""
+        ...
+
+    def geodetic_localization(
+        self, row: np.ndarray, col: np.ndarray, h: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Image points (N,) at ellipsoidal heights (N,) -> (lon, lat, converged)."""
+        ...
+
+    def geodetic_localization_on_dem(
+        self, row: np.ndarray, col: np.ndarray, dem: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Image points (N,) -> (lon, lat, h, found): first hit on a lon/lat DEM of ellipsoidal heights."""
+        ...
+
+
+def has_geodetic_projection(sensor: object) -> bool:
+    """True where ``sensor`` declares the :class:`GeodeticSensor` capability."""
+    return bool(getattr(type(sensor), "has_geodetic_projection", False))
+
+
 def has_polynomial_exterior(sensor: object) -> bool:
     """True where ``sensor`` declares the :class:`PolynomialExteriorSensor` capability."""
     return bool(getattr(type(sensor), "has_polynomial_exterior", False))
@@ -245,12 +280,14 @@ __all__ = [
     "FLAG_NO_HIT",
     "FLAG_OK",
     "FLAG_OUTSIDE_DEM",
+    "GeodeticSensor",
     "LineGeometrySensor",
     "Localization",
     "PolynomialExteriorSensor",
     "Projection",
     "Sensor",
     "StandIn",
+    "has_geodetic_projection",
     "has_line_geometry",
     "has_polynomial_exterior",
     "inside_image",

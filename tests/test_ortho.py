@@ -190,6 +190,10 @@ def test_ortho_geometry_takes_any_sensor_rpc_in_geodetic_or_local_coordinates():
 
     rpc = read_rpc(DATA / "PHRDIMAP_P1BP--2018122638935449CP.XML")
     sensor = RPCSensor(rpc)
+    from explorer.sensor import GeodeticSensor, has_geodetic_projection
+
+    assert isinstance(sensor, GeodeticSensor) and has_geodetic_projection(sensor)
+    assert not has_geodetic_projection(_LocalFrameOnly(sensor))
     rng = np.random.default_rng(4)
     lon = rpc.lon_offset + rng.uniform(-0.8, 0.8, 500) * rpc.lon_scale
     lat = rpc.lat_offset + rng.uniform(-0.8, 0.8, 500) * rpc.lat_scale
