@@ -14,6 +14,7 @@ and column.
 from __future__ import annotations
 
 import csv
+import io
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from explorer.errors import InputError
+from explorer.io_input import read_input_text
 
 __all__ = ["PointTable", "read_points_csv"]
 
@@ -69,15 +71,12 @@ def read_points_csv(path: str | os.PathLike[str], columns: Sequence[str] = CONTR
         beyond 90 degrees, an id repeated within one image.
     """
     name = os.fspath(path)
+    # regular file only, any text encoding (a UTF-8 BOM, UTF-16, Latin-1), binary refused: explorer.io_input
+    text = read_input_text(name, "CSV of points")
     try:
-        with open(name, newline="", encoding="utf-8") as handle:
-            records = list(csv.DictReader(handle))
-    except FileNotFoundError:
-        raise InputError(f"{name}: no such file") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
+        records = list(csv.DictReader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
         raise InputError(f"{name}: not a readable CSV text file ({exc})") from None
-    except OSError as exc:
-        raise InputError(f"{name}: cannot be read ({exc.strerror})") from None
     if not records:
         raise InputError(f"{name}: no data rows (expected columns {','.join(columns)})")
     header = [k.strip() for k in records[0] if k is not None]

@@ -205,3 +205,16 @@ def test_special_files_are_refused_without_blocking(reader, special_files):
     for path in special_files:
         with _no_blocking(), pytest.raises(ExplorerError):
             READERS[reader](path)
+
+
+@FEW
+@given(st.sampled_from(["utf-8", *ENCODINGS]))
+def test_refine_control_points_csv_in_any_text_encoding_gives_the_same_table(encoding):
+    from explorer.refine.points_io import read_points_csv as read_control_points
+
+    text = "id,lon,lat,h,row,col\nA1,-56.17,-34.90,28,5237.5,6704.25\nA2,7.25,43.70,150.5,10,20\n"
+    path = TMP / "gcps.csv"
+    path.write_bytes(text.encode(encoding))
+    table = read_control_points(path)
+    assert list(table.ids) == ["A1", "A2"]
+    assert np.array_equal(table.row, [5237.5, 10.0]) and np.array_equal(table.col, [6704.25, 20.0])
