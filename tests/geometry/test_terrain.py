@@ -76,3 +76,67 @@ def test_dem_intersection_flags_rays_leaving_the_dem():
 
 def test_flat_terrain_height():
     assert FlatTerrain(12.5).height(np.zeros(3), np.zeros(3)).tolist() == [12.5] * 3
+
+
+class TiltedPlane:
+    """A terrain the package does not know: ``Z = z0 + gx X + gy Y``, implementing the Terrain protocol with
+    its own closed-form first hit (a ray meets a plane once)."""
+
+    def __init__(self, z0: float, gx: float, gy: float) -> None:
+        self.z0, self.gx, self.gy = z0, gx, gy
+        self.min_height, self.max_height, self.mean_height = z0 - 500.0, z0 + 500.0, z0
+
+    def height(self, x, y):
+        return self.z0 + self.gx * np.asarray(x) + self.gy * np.asarray(y)
+
+    def intersect(self, origin, direction):
+        # (o + t d).z = z0 + gx (o + t d).x + gy (o + t d).y  ->  t
+        num = self.z0 + self.gx * origin[:, 0] + self.gy * origin[:, 1] - origin[:, 2]
+        den = direction[:, 2] - self.gx * direction[:, 0] - self.gy * direction[:, 1]
+        t = num / den
+        points = origin + t[:, None] * direction
+        ok = t > 0
+        return np.where(ok[:, None], points, np.nan), np.where(ok, 0, 3).astype(np.int8)
+
+    def to_dict(self):
+        return {"kind": "tilted", "z0": self.z0, "gx": self.gx, "gy": self.gy}
+
+
+def test_flat_and_grid_terrains_implement_the_terrain_interface():
+    from explorer.geometry.terrain import Terrain
+
+    assert isinstance(FlatTerrain(3.0), Terrain)
+    assert isinstance(synthetic_relief((0, 100, 0, 100), 10.0, seed=1), Terrain)
+    assert isinstance(TiltedPlane(0.0, 0.01, 0.0), Terrain)
+    origin = np.array([[0.0, 0.0, 1000.0], [5.0, 5.0, 1000.0]])
+    direction = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]])  # the second points up: no hit
+    points, flags = FlatTerrain(200.0).intersect(origin, direction)
+    np.testing.assert_allclose(points[0], [0.0, 0.0, 200.0])
+    assert flags.tolist() == [0, 3] and np.isnan(points[1]).all()
+
+
+@pytest.mark.parametrize("kind", ["scene", "rigorous"])
+def test_a_new_terrain_needs_no_change_in_the_sensors(kind):
+    """Scenes and rigorous models intersect any Terrain through its ``intersect``: image to ground on a tilted
+    plane lands on the plane (its closed form) and ground to image (bracketing) returns the pixel."""
+    from explorer.presets import build_scene
+
+    if kind == "scene":
+        scene = build_scene("SCB")
+    else:
+        from explorer.real.worldview import rigorous_scene_from_dg
+        from tests.real.conftest import WV1
+
+        scene = rigorous_scene_from_dg(WV1)
+    plane = TiltedPlane(scene.terrain.mean_height, 0.02, -0.01)
+    tilted = scene.with_terrain(plane)
+    rng = np.random.default_rng(3)
+    row = rng.uniform(0, scene.n_rows - 1, 50)
+    col = rng.uniform(0, scene.n_columns - 1, 50)
+    ground, flags = tilted.image_to_ground(row, col, return_flags=True)
+    assert (flags == 0).all()
+    np.testing.assert_allclose(ground[:, 2], plane.height(ground[:, 0], ground[:, 1]), atol=1e-6)
+    r, c = tilted.ground_to_image(ground)
+    assert np.max(np.hypot(r - row, c - col)) < 1e-5
+    flat = scene.image_to_ground(row, col)  # the slope moved the points: the plane was really used
+    assert np.max(np.abs(ground[:, 2] - flat[:, 2])) > 10.0
