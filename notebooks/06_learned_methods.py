@@ -177,4 +177,5 @@ panel.scene_view("lrm")
 # 2. Increase `attitude_rate_scale` from 0 to 5 on WSU and plot the LRM's RMSE against it. Which
 #    term of the derivation above does the attitude rate break?
 # 3. The MLP paper trains on 70 % of the SCOPs and validates on 30 %. What happens with 10 SCOPs
-#    (9 grid points, so 6 for training)? Compare with the number of weights of the network.
+#    (7 for training)? Compare with the number of weights of the network, and train it with a few
+#    different seeds (`create("mlp", scene, seed=...)`).

@@ -68,17 +68,25 @@ assert rmse[5.0] > rmse[1.0]
 
 # %% [markdown]
 # ## Exercise 3: an MLP on 10 SCOPs
-# 10 SCOPs are a 3 x 3 grid: 9 points, 6 for training after the 70/30 split. One hidden layer of
-# 10 neurons on 2 inputs already has $(2 + 1) \cdot 10 + (10 + 1) = 41$ weights: far more unknowns
-# than observations. The method detects that the training did not converge and flags its points.
+# Of 10 SCOPs, 7 train the network after the 70/30 split. One hidden layer of 10 neurons on 2 inputs
+# already has $(2 + 1) \cdot 10 + (10 + 1) = 41$ weights: far more unknowns than observations, so the
+# data do not determine the network; its random start does. Train it with ten seeds: on WSU, whose
+# row map is nearly affine, the trainings pass the sub-pixel criterion, but their RMSE spreads by more
+# than a factor of 2 from seed to seed, and the 3-parameter regression (`lrm`, on the same SCOPs) lies
+# inside that spread: better than the worst starts, worse than the best (all asserted). A network does
+# not "always beat" a regression; on 7 points it is a lottery around it.
 
 # %%
 wsu = build_scene("WSU")
 scops10 = simulate_points(wsu, 10, kind="scop")
+scps_w = simulate_points(wsu, N_SCPS, kind="scp")
 n_weights = (2 + 1) * 10 + (10 + 1)
-print(len(scops10), "SCOPs,", round(0.7 * len(scops10)), "for training,", n_weights, "weights")
-assert round(0.7 * len(scops10)) < n_weights
-m = create("mlp", wsu)
-ev10 = evaluate_method(m, simulate_points(wsu, N_SCPS, kind="scp"), scops10)
-print(f"mlp on 10 SCOPs: converged fraction {ev10.converged_frac:.2f}, RMSE {ev10.rmse_px} px")
-assert ev10.converged_frac < 1.0 or ev10.rmse_px > 1.0
+n_train = round(0.7 * len(scops10))
+print(len(scops10), "SCOPs,", n_train, "for training,", n_weights, "weights")
+assert n_train < n_weights
+lrm10 = evaluate_method(create("lrm", wsu), scps_w, scops10)
+runs = [evaluate_method(create("mlp", wsu, seed=seed), scps_w, scops10) for seed in range(10)]
+rmse = np.array([ev.rmse_px if ev.converged_frac == 1.0 else np.inf for ev in runs])
+print("mlp RMSE per seed (px):", np.array2string(rmse, precision=4))
+print(f"lrm on the same SCOPs: RMSE {lrm10.rmse_px:.4f} px; mlp spread max/min {rmse.max() / rmse.min():.1f}")
+assert rmse.max() > 2 * rmse.min() and rmse.min() < lrm10.rmse_px < rmse.max()
