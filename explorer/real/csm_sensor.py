@@ -232,6 +232,13 @@ class CsmScene(Scene):
         """The camera's time (N,) of rows (N,), seconds from the ISD's ``center_ephemeris_time``."""
         return self.camera.line_time(np.atleast_1d(np.asarray(row, dtype=np.float64)) + 0.5)
 
+    def time_range(self) -> tuple[float, float]:
+        """(earliest, latest) exposure time of the image on the camera's clock (seconds from the ISD's
+        ``center_ephemeris_time``): the first and last lines' outer edges, every line-rate segment included."""
+        rows = np.concatenate([[-0.5, self.n_rows - 0.5], self.camera.rate_lines - 1.0])
+        t = self.line_time(rows[(rows >= -0.5) & (rows <= self.n_rows - 0.5)])
+        return float(np.min(t)), float(np.max(t))
+
     def perspective_centre(self, t: np.ndarray) -> np.ndarray:
         """Perspective centres (N, 3), local ENU metres, at camera times (N,)."""
         centre, _ = self.camera.exterior(np.atleast_1d(np.asarray(t, dtype=np.float64)))

@@ -105,6 +105,7 @@ def test_closed_form_line_geometry(closed):
     rows = np.array([0.0, 1234.5, N_L - 1.0])
     t = scene.line_time(rows)
     np.testing.assert_allclose(t, (rows + 0.5) * DT - 0.5 * N_L * DT, atol=1e-12)
+    np.testing.assert_allclose(scene.time_range(), (-0.5 * N_L * DT, 0.5 * N_L * DT), atol=1e-12)
     centre_bf = scene.to_body_fixed(scene.perspective_centre(t))
     np.testing.assert_allclose(centre_bf, np.column_stack([np.full(3, R + H), V * t, np.zeros(3)]), atol=1e-6)
     # the look direction of the detector centre (sample N_S / 2 -> col N_S / 2 - 0.5 for theta = 0): nadir
