@@ -181,16 +181,36 @@ class RationalFunctionModel:
                                  f"large (normalised RPC coefficients are O(1); limit {MAX_COEFFICIENT:g})")
         if self.geodetic:
             self._check_ranges()
+        nodes = self._validity_nodes()
         for name in ("row_den", "col_den"):
-            den = evaluate_rpc00b_polynomial(getattr(self, name), *_CUBE)
+            den = evaluate_rpc00b_polynomial(getattr(self, name), *nodes)
             if not np.all(np.isfinite(den)) or np.any(den == 0.0) or np.any(np.sign(den) != np.sign(den[0])):
                 k = int(np.argmin(np.abs(den)))
-                where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", _CUBE[:, k], strict=True))
-                raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the normalised domain (near {where}): "
+                where = ", ".join(f"{a}={v:+.2f}" for a, v in zip("LPH", nodes[:, k], strict=True))
+                raise InputError(f"{_FILE_KEYS[name]} ({name}) vanishes inside the validity domain (near {where}): "
                                  "the projection is singular there")
         self._check_scales()
         self._check_ground_to_image_invertible()
         return self
+
+    def _validity_nodes(self) -> np.ndarray:
+        """Nodes (3, 343) in normalised (L, P, H) covering the cube [-1, 1]^3 and the declared validity box
+        where it reaches past the cube (a box beyond +-2 in normalised units is not a validity domain of these
+        polynomials and is not used)."""
+        declared = self.validity
+        axes = []
+        for name, low_key, high_key in (("lon", "lon_min", "lon_max"), ("lat", "lat_min", "lat_max"),
+                                        ("height", "h_min", "h_max")):
+            low, high = -1.0, 1.0
+            if declared is not None:
+                offset, scale = getattr(self, f"{name}_offset"), getattr(self, f"{name}_scale")
+                bounds = [getattr(declared, k) for k in (low_key, high_key)]
+                if all(b is not None for b in bounds):
+                    a, b = sorted((float(v) - offset) / scale for v in bounds)
+                    if -2.0 <= a and b <= 2.0:
+                        low, high = min(low, a), max(high, b)
+            axes.append(np.linspace(low, high, 7))
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=0).reshape(3, -1)
 
     def _check_scales(self) -> None:
         """Scales of a physical image: the pixel and height scales positive (half the image size, half the height

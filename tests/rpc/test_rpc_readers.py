@@ -266,7 +266,7 @@ def _replace_line(name, key, value, tmp_path, out="bad_RPC.TXT"):
         ("HEIGHT_SCALE", "1e9", "HEIGHT_OFF / HEIGHT_SCALE .* not a ground RPC"),
         ("LINE_NUM_COEFF_7", "1e308", "LINE_NUM_COEFF_7 .* implausibly large"),
         ("SAMP_DEN_COEFF_3", "nan", "SAMP_DEN_COEFF_3 .* not finite"),
-        ("LINE_DEN_COEFF_1", "0", "LINE_DEN_COEFF .* vanishes inside the normalised domain"),
+        ("LINE_DEN_COEFF_1", "0", "LINE_DEN_COEFF .* vanishes inside the validity domain"),
     ],
 )
 def test_corrupt_values_are_refused_naming_file_and_field(key, value, message, tmp_path):
