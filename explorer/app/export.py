@@ -4,13 +4,18 @@
 every chosen method on the SCOPs and evaluates it on **every** SCP -- never a subsample --
 then writes
 
-* ``summary.json`` -- ``{"source": {...}, "settings": {...}, "methods": {name: {"rmse_row_px",
-  "rmse_col_px", "max_row_px", "max_col_px", "n_valid", "n_invalid", "n_refused",
-  "n_not_converged", "n_outside_image", "ce_per_point", "fit_s", "eval_s", "error"}}}``;
-* ``residuals.csv`` -- one row per check point per method: ``method, scp_index, row_px,
-  col_px, row_residual_px, col_residual_px, status`` (exact image position of the SCP,
-  estimated minus exact, empty where the method gave no answer; status as in
-  :data:`explorer.app.model.STATUS_NAMES`);
+* ``summary.json`` -- ``{"source": {...}, "settings": {...}, "truth": {"model", "body", ...},
+  "methods": {name: {"rmse_row_px", "rmse_col_px", "max_row_px", "max_col_px", "n_valid", "n_invalid",
+  "n_refused", "n_not_converged", "n_outside_image", "ce_per_point", "fit_s", "eval_s", "error"}},
+  "stand_in": {"model", "against", "rmse_row_px", ...} or null}``: ``truth`` names the sensor every residual is
+  measured against (its own ground to image), ``stand_in`` the model-vs-model map of a file source (the MPC
+  fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG model) against it;
+* ``residuals.csv`` -- one row per check point per method (and per stand-in, method ``stand-in``):
+  ``method, scp_index, row_px, col_px, row_residual_px, col_residual_px, status, x_m, y_m, z_m`` (the
+  sensor's own image position of the SCP, estimated minus exact, empty where the method gave no answer;
+  status as in :data:`explorer.app.model.STATUS_NAMES`; the SCP's body-fixed coordinates, ECEF on the Earth),
+  plus ``line, sample`` for an ISD source (the camera's own image position, usgscsm's convention:
+  ``row + 0.5, col + 0.5``);
 * ``panels.html`` -- the residual maps (row and column, every point drawn) and the timing
   bars in one page that opens offline (plotly.js inlined, nothing loaded from the network).
 
