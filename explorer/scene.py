@@ -10,12 +10,12 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import ClassVar, Literal, overload
+from typing import Any, ClassVar, Literal, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from explorer.errors import SceneFileError, as_points, check_finite
+from explorer.errors import ExplorerError, SceneFileError, as_points, check_finite
 from explorer.geometry.bracket import bracket_best_scanline
 from explorer.geometry.collinearity import ideal_focal_plane
 from explorer.geometry.exterior import ExteriorOrientation, LineTiming
@@ -360,22 +360,32 @@ class Scene:
             raise SceneFileError(f"{source}: unsupported scene version {d.get('version')!r}")
         if (where := _non_finite_field({k: v for k, v in d.items() if k != "metadata"})) is not None:
             raise SceneFileError(f"{source}: {where} is not finite; a scene file holds finite numbers only")
-        try:
-            scene = cls(
-                name=str(d["name"]),
-                interior=InteriorOrientation.from_dict(d["interior"]),
-                exterior=ExteriorOrientation.from_dict(d["exterior"]),
-                timing=LineTiming(float(d["timing"]["line_period_s"]), float(d["timing"]["reference_row"])),
-                n_rows=int(d["n_rows"]),
-                terrain=terrain_from_dict(d["terrain"]),
-                frame=LocalFrame.from_dict(d["frame"]),
-                metadata=dict(d.get("metadata", {})),
-            )
-        except KeyError as exc:
-            raise SceneFileError(f"{source}: missing field {exc.args[0]!r}") from exc
-        except (TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
-            # a field of the wrong type or shape (an object where a number belongs, a short array...)
-            raise SceneFileError(f"{source}: malformed scene ({type(exc).__name__}: {exc})") from exc
+        def part(key: str, build: Callable[[], object]) -> Any:
+            """``build()``, its errors naming ``source`` and the field ``key`` (and the missing sub-key)."""
+            try:
+                return build()
+            except SceneFileError:
+                raise
+            except KeyError as exc:
+                if isinstance(exc, ExplorerError):  # an unknown name (terrain kind...): its own message
+                    raise SceneFileError(f"{source}: field {key!r}: {exc}") from exc
+                where = key if exc.args[0] == key.split(".")[0] else f"{key}.{exc.args[0]}"
+                raise SceneFileError(f"{source}: missing field {where!r}") from exc
+            except (TypeError, ValueError, AttributeError, IndexError, OverflowError) as exc:
+                # a field of the wrong type or shape (an object where a number belongs, a short array...)
+                raise SceneFileError(f"{source}: field {key!r} is malformed ({type(exc).__name__}: {exc})") from exc
+
+        scene = part("scene", lambda: cls(
+            name=part("name", lambda: str(d["name"])),
+            interior=part("interior", lambda: InteriorOrientation.from_dict(d["interior"])),
+            exterior=part("exterior", lambda: ExteriorOrientation.from_dict(d["exterior"])),
+            timing=part("timing", lambda: LineTiming(float(d["timing"]["line_period_s"]),
+                                                     float(d["timing"]["reference_row"]))),
+            n_rows=part("n_rows", lambda: int(d["n_rows"])),
+            terrain=part("terrain", lambda: terrain_from_dict(d["terrain"])),
+            frame=part("frame", lambda: LocalFrame.from_dict(d["frame"])),
+            metadata=part("metadata", lambda: dict(d.get("metadata", {}))),
+        ))
         for what, n in (("n_rows", scene.n_rows), ("interior.n_columns", scene.interior.n_columns)):
             if not 1 <= n <= 10**9:
                 raise SceneFileError(f"{source}: {what} = {n} is not an image size (1 .. 1e9)")
