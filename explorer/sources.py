@@ -246,12 +246,18 @@ def load_source(
         try:
             scene, report = scene_from_rpc(path, dem=dem, degree=degree, n_gcps=n_gcps, n_check=400, seed=0)
         except ValueError as exc:
-            if dem is None or isinstance(exc, (InputError, SceneFileError)) or type(exc).__name__ == "RPCFormatError":
+            if dem is None or isinstance(exc, (InputError, SceneFileError)):  # (RPCFormatError is a SceneFileError)
                 raise
             raise InputError(f"--rpc {str(path)!r} with DEM {dem!r}: {exc}") from exc
         sensor = f"RPC {report.info.get('rpc_format', '')}".strip()
         info.update(sensor=sensor, model="MPC by space resection of the RPC (a stand-in: an RPC has no scanlines)",
                     stand_in_model=True, resection=report.to_dict())
+        from explorer.rpc import read_rpc
+        from explorer.rpc.sensor import RPCSensor
+
+        # what the stand-in costs, as a map: the RPC itself against the MPC the methods run on
+        stand_in = StandIn("the RPC itself, against the MPC resected from it (on which the methods run)",
+                           RPCSensor(read_rpc(path), frame=scene.frame, name="RPC"), scene.frame)
     elif kind in ("dimap", "dg"):
         if kind == "dimap":
             from explorer.real.dimap import rigorous_scene_from_dimap
