@@ -205,12 +205,15 @@ def _map_colours(page, region) -> int:
 def test_real_scene_maps_have_structure_and_a_click_selects_in_3d(real_explorer, browser, tmp_path):
     app = real_explorer
     assert app.scene.n_rows == 49826 and "Pleiades" in app.handles["preset"].value
+    # the DEM's relief (~90 m over a ~30 km footprint) is exaggerated automatically, and the factor stated
+    assert "heights exaggerated x10 (automatic" in app.handles["cloud_text"].content
     page = _open(browser, app.url)
     page.wait_for_function("() => document.body.innerText.includes('nr row: RMSE')")
     page.wait_for_timeout(1500)  # the rasters draw after the layout
     page.screenshot(path=str(tmp_path / "real.png"))
     regions = page.evaluate(MAP_REGIONS)
-    assert len(regions) == 3  # lrm, prm, nr (row residual)
+    maps = [t.name for t in app.handles["maps"].figure.data if t.type == "heatmap" and t.coloraxis]
+    assert len(regions) == len(maps) and {"lrm row", "prm row", "nr row"} <= set(maps)  # (and the stand-in's)
     for region in regions:  # every map shows structure under the default (automatic) scale
         assert _map_colours(page, region) > 10
     text = page.locator(".js-plotly-plot").first.inner_text()

@@ -166,7 +166,11 @@ class Controls:
                                               "residuals.csv and panels.html (as `pushbroom explore --export`)")
         with gui.add_folder("View"):
             h["distance"] = gui.add_dropdown("Sensor distance", ("compressed", "true"))
-            h["exaggeration"] = gui.add_slider("Height exaggeration", 1.0, 10.0, 0.5, 1.0)
+            h["auto_exaggeration"] = gui.add_checkbox(
+                "Automatic height exaggeration", True,
+                hint="exaggerate heights so the terrain's relief shows (the factor is stated under the maps' 3D "
+                     "text); moving the slider sets it by hand")
+            h["exaggeration"] = gui.add_slider("Height exaggeration", 1.0, 50.0, 0.5, 1.0)
             h["reset_view"] = gui.add_button("Reset view", hint="frame the footprint and the track again")
         with gui.add_folder("Selected point"):
             h["sel_mode"] = gui.add_dropdown("Select", ("worst SCP", "image point", "picked SCP"))
@@ -192,10 +196,10 @@ class Controls:
             self.panel.set_width(560)
 
         for key in ("preset", "density", "scps", "color_method", "limit", "colour_mode", "component", "aggregate",
-                    "diff_a", "diff_b", "show_scops", "distance", "sweep", "sel_mode"):
+                    "diff_a", "diff_b", "show_scops", "distance", "sweep", "sel_mode", "auto_exaggeration"):
             h[key].on_update(self.changed)  # one value per change: computed at once
         for key in SLIDERS:
-            h[key].on_update(self.slid)  # a value per frame while dragged: debounced
+            h[key].on_update(self._exaggeration_slid if key == "exaggeration" else self.slid)  # debounced
         h["sel_row"].on_update(self._selection_changed)
         h["sel_col"].on_update(self._selection_changed)
         h["pick"].on_update(self._picked)
@@ -214,6 +218,13 @@ class Controls:
     def slid(self, _event: Any = None) -> None:
         """A slider moved: request a debounced update."""
         self.changed(debounce=True)
+
+    def _exaggeration_slid(self, _event: Any = None) -> None:
+        """The height exaggeration set by hand: the automatic one is off."""
+        if not self.host.is_quiet():
+            with self.host.quiet():
+                self.handles["auto_exaggeration"].value = False
+        self.slid()
 
     def _selection_changed(self, _event: Any = None) -> None:
         if self.host.is_quiet():

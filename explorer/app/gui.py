@@ -265,7 +265,8 @@ class ExplorerApp(Views):
             component=h["component"].value, aggregate=h["aggregate"].value, diff=diff,
             show_scops=bool(h["show_scops"].value),
             sensor_distance=h["distance"].value,
-            height_exaggeration=float(h["exaggeration"].value), selection=sel,
+            height_exaggeration=float(h["exaggeration"].value), auto_exaggeration=bool(h["auto_exaggeration"].value),
+            selection=sel,
             sweep=bool(h["sweep"].value),
         )
 

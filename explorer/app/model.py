@@ -96,6 +96,9 @@ class Settings:
     show_scops: bool = True
     sensor_distance: str = "compressed"
     height_exaggeration: float = 1.0
+    auto_exaggeration: bool = True
+    """Exaggerate heights automatically so a real DEM's relief shows (the factor is stated; the slider
+    overrides it)."""
     selection: tuple = ("worst",)
     """("worst",): the SCP with the largest |residual| of ``color_method``;
     ("image", row, col): the ground point of that image point on the terrain;

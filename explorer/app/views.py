@@ -102,7 +102,7 @@ class Views:
         return True
 
     def _frame_key(self, s: Settings) -> tuple:
-        return (s.scene_key, s.sensor_distance, s.height_exaggeration)
+        return (s.scene_key, s.sensor_distance, "auto" if s.auto_exaggeration else s.height_exaggeration)
 
     # ----------------------------------------------------------------- update
     def update(self, s: Settings, gen: int | None = None) -> dict[str, float]:
@@ -158,12 +158,21 @@ class Views:
         self.scene = scene
         frame_key = self._frame_key(s)
         if self._changed("frame", frame_key):
+            auto, relief = B.auto_height_exaggeration(scene)
+            factor = auto if s.auto_exaggeration else s.height_exaggeration
             self.frame = B.DisplayFrame.for_scene(scene, sensor_distance=s.sensor_distance,
-                                                  height_exaggeration=s.height_exaggeration)
+                                                  height_exaggeration=factor)
             n, dem_cells = B.ground_mesh_nodes(scene)
             self.ground_text = (f"Ground: the DEM sampled on a {n} x {n} image grid"
                                 + (f" (decimated from ~{dem_cells} DEM cells across)" if dem_cells and dem_cells > n - 1
                                    else "") if dem_cells is not None else f"Ground: {n} x {n} image grid")
+            if relief > 1.0 or factor != 1.0:
+                how = (f"automatic: the terrain's {relief:.0f} m relief drawn at about "
+                       f"{100 * B.RELIEF_SHARE:g} % of the footprint" if s.auto_exaggeration else "set by hand")
+                self.ground_text += f"; heights exaggerated x{factor:g} ({how})"
+            if s.auto_exaggeration:
+                with self.quiet():
+                    self.handles["exaggeration"].value = factor
             with self.server.atomic():
                 self._put("/ground", B.add_ground(self.server.scene, scene, self.frame, n=n))
                 self._put("/orbit", B.add_orbit(self.server.scene, scene, self.frame))

@@ -212,6 +212,23 @@ def footprint_outline(scene: Scene, per_edge: int = 64) -> np.ndarray:
     return np.concatenate(segs)
 
 
+RELIEF_SHARE = 0.05
+"""Automatic height exaggeration: the terrain's relief is drawn as about this share of the footprint diagonal."""
+NICE_FACTORS = (1.0, 2.0, 3.0, 5.0, 10.0, 20.0, 30.0, 50.0)
+"""Automatic height exaggerations offered (the largest not above the computed one)."""
+def auto_height_exaggeration(scene: Scene) -> tuple[float, float]:
+    """(factor, relief_m): a height exaggeration that makes the terrain's relief visible -- about
+    :data:`RELIEF_SHARE` of the footprint diagonal, rounded down to one of :data:`NICE_FACTORS` -- and the
+    relief it is for.  1 on flat terrain or when the relief is already visible."""
+    relief = float(scene.terrain.max_height - scene.terrain.min_height)
+    fp = np.asarray(scene.footprint(), dtype=np.float64)
+    diag = float(max(np.linalg.norm(fp[2] - fp[0]), np.linalg.norm(fp[3] - fp[1])))
+    if not relief > 1.0 or not diag > 0:
+        return 1.0, max(relief, 0.0)
+    want = RELIEF_SHARE * diag / relief
+    return float(max([f for f in NICE_FACTORS if f <= want], default=1.0)), relief
+
+
 def track_positions(scene: Scene, n: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Perspective centres over the imaging time.
 
@@ -570,5 +587,5 @@ __all__ = [
     "ground_mesh_nodes",
     "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
     "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
-    "scanline_planes", "scene_centre", "track_positions", "vertex_normals",
+    "scanline_planes", "scene_centre", "track_positions", "vertex_normals", "auto_height_exaggeration",
 ]

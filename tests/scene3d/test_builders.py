@@ -202,3 +202,20 @@ def test_real_dem_ground_mesh_follows_the_dem_and_is_decimated_for_the_browser()
     assert np.ptp(verts[:, 2]) > 30.0  # the coastal relief is there
     flat = build_scene("WSU")
     assert B.ground_mesh_nodes(flat) == (41, None)
+
+
+def test_automatic_height_exaggeration_makes_the_relief_visible():
+    """Issue 24: a real DEM's relief (tens of metres under a footprint of tens of km) is exaggerated to about
+    5 % of the footprint diagonal, rounded down to a nice factor; flat terrain stays at 1."""
+    from explorer.presets import build_scene
+    from explorer.scene3d.builders import NICE_FACTORS, RELIEF_SHARE, auto_height_exaggeration
+
+    assert auto_height_exaggeration(build_scene("WSU")) == (1.0, 0.0)
+    scene = build_scene("ISB", relief_m=50.0)
+    factor, relief = auto_height_exaggeration(scene)
+    fp = scene.footprint()
+    diag = max(np.linalg.norm(fp[2] - fp[0]), np.linalg.norm(fp[3] - fp[1]))
+    assert relief == scene.terrain.max_height - scene.terrain.min_height
+    want = RELIEF_SHARE * diag / relief
+    assert factor in NICE_FACTORS and factor <= want and (factor == NICE_FACTORS[-1] or
+                                                           NICE_FACTORS[NICE_FACTORS.index(factor) + 1] > want)
