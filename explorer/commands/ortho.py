@@ -210,7 +210,7 @@ def _dem_as_terrain(scene, dem, label: str):
 
     from explorer.errors import InputError
     from explorer.real.from_rpc import terrain_from_dem
-    from explorer.terrain_io import height_grid_of
+    from explorer.terrain_io import height_grid_of, require_coverage
 
     lo_h, hi_h = float(dem.min), float(dem.max)
     corners = np.vstack([scene.footprint(lo_h - scene.frame.h0_m), scene.footprint(hi_h - scene.frame.h0_m)])
@@ -221,12 +221,15 @@ def _dem_as_terrain(scene, dem, label: str):
     pad = 0.05 * (hi - lo)
     extent = (lo[0] - pad[0], hi[0] + pad[0], lo[1] - pad[1], hi[1] + pad[1])
     grid = height_grid_of(dem)
+    if grid is not None:  # a DEM that misses the whole footprint is the wrong DEM (one line naming both extents)
+        lon, lat, _ = scene.frame.enu_to_geodetic(corners)
+        require_coverage(grid, lon, lat, "the image footprint", f"--dem {label}", partial=True)
     spacing_m = 30.0 if grid is None else abs(grid.dy) * 110_574.0
     cell = max(spacing_m, max(extent[1] - extent[0], extent[3] - extent[2]) / (MAX_TERRAIN_NODES - 1))
-    terrain = terrain_from_dem(dem, scene.frame, extent, cell_m=cell)
-    if not np.isfinite(terrain.heights).any():
-        raise InputError(f"--dem {label} does not cover the image footprint at all")
-    return terrain
+    try:
+        return terrain_from_dem(dem, scene.frame, extent, cell_m=cell)
+    except ValueError as exc:  # no height at any node (GridDEM refuses an empty grid)
+        raise InputError(f"--dem {label} has no height over the image footprint ({exc})") from None
 
 
 WORK_PREFIX = "pushbroom-ortho-"

@@ -163,3 +163,30 @@ def test_an_image_of_another_body_is_refused_naming_it(tmp_path, capsys):
     assert main(["ortho", "--isd", str(isd), "--synthetic", "--gsd", "100", "--out", str(out)]) == 2
     _one_line_error(capsys, "--isd", "Mars")
     assert not out.exists()
+
+
+def test_a_scenes_dem_becomes_its_terrain_and_one_missing_the_footprint_is_refused(tmp_path, capsys):
+    """WSU (San Diego) on an SRTM tile of one height: the synthetic source and the orthoimage see the same ground
+    (geolocation against the known pattern), the tile's heights above EGM96 (the undulation is about -35 m
+    there); the Pleiades tile (Algeria) misses the footprint: one line naming --dem."""
+    from explorer.commands.ortho import build_ortho_job
+    from explorer.terrain_io import Geoid
+
+    here = tmp_path / "N32W118.hgt"
+    np.full((1201, 1201), 200, dtype=">i2").tofile(here)
+    out = tmp_path / "o.tif"
+    argv = ["ortho", "--preset", "WSU", "--dem", str(here), "--synthetic", "--gsd", "50", "--out", str(out)]
+    geometry = build_ortho_job(build_parser().parse_args(argv), tmp_path)[0]
+    frame = geometry.sensor.frame
+    lon, lat = np.array([frame.lon0_deg]), np.array([frame.lat0_deg])
+    h = geometry.surface.heights(geometry.sensor, lon, lat)[0]
+    assert h == pytest.approx(200.0 + float(Geoid.egm96().geoid_height(lon, lat)[0]), abs=0.01)
+    assert main(argv) == 0
+    geo = _report(capsys.readouterr().out)["geolocation"]
+    assert geo["max_px"] < 0.01
+    elsewhere = _srtm_tile(tmp_path, 500)
+    out2 = tmp_path / "o2.tif"
+    assert main(["ortho", "--preset", "WSU", "--dem", str(elsewhere), "--synthetic", "--gsd", "50",
+                 "--out", str(out2)]) == 2
+    _one_line_error(capsys, "--dem", "does not cover")
+    assert not out2.exists()
