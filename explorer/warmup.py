@@ -146,6 +146,7 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
         if pid != paper:
             out.append((f"{pid}: compiled methods", partial(_warm_compiled_methods, pid)))
     out.append(("orthorectification block", _warm_ortho))
+    out.append(("stereo pair (triangulation, epipolar curve)", _warm_stereo))
     out.append(("every other kernel of the manifest (explorer.kernel_cache)", _warm_manifest))
     return out
 
@@ -158,6 +159,26 @@ def _warm_manifest() -> None:
     failures = compile_kernels(uncached(list(manifest())))
     if failures:
         raise RuntimeError("; ".join(failures))
+
+
+def _warm_stereo() -> None:
+    """Triangulate matches of the packaged Pleiades stereo pair (both loop sizes) and trace an epipolar curve:
+    the stereo kernels (``explorer.stereo``)."""
+    from explorer._resources import asset_path
+    from explorer.rpc import read_rpc
+    from explorer.stereo import epipolar_curve, triangulate
+
+    left = read_rpc(asset_path("rpc", "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"))
+    right = read_rpc(asset_path("rpc", "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML"))
+    for n in (16, 25_000):  # below and above the parallel thresholds
+        rng = np.random.default_rng(0)
+        lon = left.lon_offset + rng.uniform(-0.2, 0.2, n) * left.lon_scale
+        lat = left.lat_offset + rng.uniform(-0.2, 0.2, n) * left.lat_scale
+        h = left.height_offset + rng.uniform(-0.2, 0.2, n) * left.height_scale
+        lr, lc = left.projection(lon, lat, h)
+        rr, rc = right.projection(lon, lat, h)
+        triangulate(left, right, lr, lc, rr, rc)
+    epipolar_curve(left, right, float(lr[0]), float(lc[0]), np.linspace(0.0, 1000.0, 5))
 
 
 def _warm_scene(scene) -> None:
@@ -206,6 +227,7 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         "scene:relief": lambda: _warm_scene(relief()),
         "rpc": _warm_rpc,
         "ortho": _warm_ortho,
+        "stereo": _warm_stereo,
     }
     isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
     if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
