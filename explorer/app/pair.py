@@ -33,15 +33,20 @@ def _dem(path: str | None) -> Any:
     return EllipsoidalDEM(dem, Geoid.egm96()) if dem.vertical_reference == "egm96" else dem
 
 
-def load_pair(left_path: str, right_path: str, dem_path: str | None = None) -> Any:
-    """The :class:`~explorer.stereo.pairview.PairView` of two files (RPC, scene JSON, ISD by content)."""
+def load_pair(left_path: str, right_path: str, dem_path: str | None = None,
+              kinds: tuple[str, str] = ("auto", "auto")) -> Any:
+    """The :class:`~explorer.stereo.pairview.PairView` of two files.
+
+    ``kinds`` says what each file is (:data:`explorer.stereo.files.SENSOR_KINDS`); ``"auto"``: a scene JSON or
+    ISD by content, any other file an RPC -- so a DIMAP or DigitalGlobe file is its vendor RPC unless its kind
+    is ``"dimap"`` / ``"dg"``, which takes the rigorous line-scan model of the metadata."""
     from explorer.sources import load_source
     from explorer.stereo.files import json_kind, load_sensor
     from explorer.stereo.pairview import pair_view
 
     sensors, scenes = [], []
-    for path in (left_path, right_path):
-        kind = json_kind(path) if path.lower().endswith(".json") else "rpc"
+    for path, given in zip((left_path, right_path), kinds, strict=True):
+        kind = given if given != "auto" else (json_kind(path) if path.lower().endswith(".json") else "rpc")
         sensors.append(load_sensor(path, kind))
         scenes.append(load_source(kind, path).scene)
     return pair_view(sensors[0], sensors[1], left_scene=scenes[0], right_scene=scenes[1], dem=_dem(dem_path))
@@ -170,7 +175,8 @@ def run_pair(args: Any) -> int:
     export = getattr(args, "export", None)
     if export is None:
         check_listen_address(args.host, args.port)
-    view = load_pair(args.pair[0], args.pair[1], getattr(args, "dem", None))
+    view = load_pair(args.pair[0], args.pair[1], getattr(args, "dem", None),
+                     (getattr(args, "left_kind", "auto"), getattr(args, "right_kind", "auto")))
     if export is not None:
         export_pair(view, export, (view.left.n_rows - 1) / 2.0, (view.left.n_columns - 1) / 2.0)
         return 0

@@ -26,6 +26,11 @@ def cmd_explore(args: argparse.Namespace) -> int:
         from explorer.app.pair import run_pair
 
         return run_pair(args)
+    for side in ("left", "right"):
+        if getattr(args, f"{side}_kind", "auto") != "auto":
+            from explorer.errors import InputError
+
+            raise InputError(f"--{side}-kind goes with --pair LEFT RIGHT")
     from explorer.io_atomic import check_output_folder
     from explorer.memory import check_allocation
     from explorer.points import BYTES_PER_POINT
@@ -62,6 +67,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--pair", nargs=2, default=None, metavar=("LEFT", "RIGHT"),
                      help="a stereo pair (RPC files, scene JSONs or ISDs): both trajectories and footprints, a "
                           "pixel's lines of sight and epipolar curve, the approximation maps (docs/stereo.md)")
+    for side in ("left", "right"):
+        p.add_argument(f"--{side}-kind", choices=("auto", "rpc", "scene", "dimap", "dg", "isd"), default="auto",
+                       help=f"with --pair: what the {side} file is (default auto: scene/ISD JSON by content, else an "
+                            "RPC; dimap / dg: the rigorous model of the metadata rather than its vendor RPC)")
     p.add_argument("--dem", default=None, metavar="DEM",
                    help="DEM for --rpc / --dimap / --dg (GeoTIFF with EGM96 heights, or SRTM .hgt); must cover "
                         "the image footprint")
