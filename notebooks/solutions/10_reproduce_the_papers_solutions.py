@@ -44,8 +44,9 @@ assert ev_nr.ce_evals_max <= bss["nr"][2]  # the 2020 paper's NR needs at most 4
 # %% [markdown]
 # ## Exercise 2: which attitude rate makes the LRM exact on WSU?
 # None: even without attitude rates the orbit's curvature (and the Earth's rotation) keep $t(P)$
-# non-affine: about 5e-3 px (asserted between 1e-3 and 1e-2 px below). Only a straight orbit at constant attitude — the `linear` preset — gives
-# the paper's 1e-9 px: the papers' simulation must have used such a model.
+# non-affine: about 5e-3 px (asserted between 1e-3 and 1e-2 px below). Only a straight orbit at
+# constant attitude — the `linear` preset — gives the paper's 1e-9 px: the papers' simulation must
+# have used such a model.
 
 # %%
 lrm = {}
