@@ -23,6 +23,7 @@ from pathlib import Path
 from explorer.errors import OutputError
 
 __all__ = [
+    "file_kind",
     "atomic_folder", "atomic_path", "check_output_folder", "check_output_path", "note_input", "protect_inputs",
     "remove_stale_partials", "write_text_atomic",
 ]
@@ -57,7 +58,11 @@ def note_input(path: str | os.PathLike[str]) -> None:
     _INPUTS[(st.st_dev, st.st_ino)] = str(path)
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a non-regular file is, in words (``"a FIFO (named pipe)"``, ``"a character device"``...), from its
+    ``st_mode``: the one wording of every refusal of a special file (readers, writers, the CLI's path options)."""
+    if stat.S_ISDIR(mode):
+        return "a directory"
     if stat.S_ISFIFO(mode):
         return "a FIFO (named pipe)"
     if stat.S_ISCHR(mode):
@@ -78,7 +83,7 @@ def _check_existing_target(target: Path, path: str | os.PathLike[str]) -> None:
     if stat.S_ISDIR(st.st_mode):
         raise OutputError(f"output path {str(path)!r} is a directory; give a file name")
     if not stat.S_ISREG(st.st_mode):
-        raise OutputError(f"output path {str(path)!r} is {_kind(st.st_mode)}, not a regular file; "
+        raise OutputError(f"output path {str(path)!r} is {file_kind(st.st_mode)}, not a regular file; "
                           "refusing to replace it")
     if _INPUTS is not None and (st.st_dev, st.st_ino) in _INPUTS:
         raise OutputError(f"output path {str(path)!r} is an input of this command "

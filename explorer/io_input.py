@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from explorer.errors import SceneFileError
-from explorer.io_atomic import note_input
+from explorer.io_atomic import file_kind, note_input
 from explorer.memory import check_allocation
 
 __all__ = [
@@ -65,21 +65,6 @@ _BOMS = (
     (codecs.BOM_UTF16_LE, "utf-16-le"),
     (codecs.BOM_UTF16_BE, "utf-16-be"),
 )
-
-
-def file_kind(mode: int) -> str:
-    """What a non-regular file is, in words (``"a FIFO (named pipe)"``, ``"a character device"``...)."""
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISBLK(mode):
-        return "a block device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
 
 
 def check_input_file(path: str | os.PathLike[str], what: str = "input") -> Path:

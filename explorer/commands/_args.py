@@ -13,6 +13,7 @@ import stat
 from pathlib import Path
 
 from explorer.commands import parsed_paths
+from explorer.io_atomic import file_kind
 
 __all__ = [
     "existing_file",
@@ -198,18 +199,6 @@ def port_number(text: str) -> int:
 
 
 
-def _special_kind(mode: int) -> str:
-    if stat.S_ISFIFO(mode):
-        return "a FIFO (named pipe)"
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISBLK(mode):
-        return "a block device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
-
-
 def existing_file(text: str) -> str:
     """A path to a readable regular file (a FIFO, a device or a socket is refused without being opened)."""
     path = Path(text)
@@ -219,7 +208,7 @@ def existing_file(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{text!r} is a directory, not a file")
     mode = path.stat().st_mode
     if not stat.S_ISREG(mode):
-        raise argparse.ArgumentTypeError(f"{text!r} is {_special_kind(mode)}, not a regular file")
+        raise argparse.ArgumentTypeError(f"{text!r} is {file_kind(mode)}, not a regular file")
     if not os.access(path, os.R_OK):
         raise argparse.ArgumentTypeError(f"{text!r} is not readable")
     parsed_paths.INPUTS.append(text)
@@ -256,7 +245,7 @@ def output_file(text: str) -> str:
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a directory; give a file name")
     if path.exists() and not stat.S_ISREG(path.stat().st_mode):
-        raise argparse.ArgumentTypeError(f"{text!r} is {_special_kind(path.stat().st_mode)}, not a regular "
+        raise argparse.ArgumentTypeError(f"{text!r} is {file_kind(path.stat().st_mode)}, not a regular "
                                          "file; refusing to replace it")
     parent = path.parent
     if not parent.is_dir():
