@@ -158,6 +158,29 @@ def flyby_truth_time(line: np.ndarray, rates) -> np.ndarray:
     return rates[k, 1] + rates[k, 2] * (line - rates[k, 0] + 0.5)
 
 
+def assert_flyby_round_trip(cam, lines: np.ndarray, samples: np.ndarray, h: np.ndarray, xb: np.ndarray,
+                            yb: np.ndarray, focal_mm: float) -> None:
+    """The fly-by's closed form for a detector whose undistorted body-frame focal-plane position of each image
+    point is ``(xb, yb)`` mm: the line of sight ``(-xb, -yb, -f)`` from the centre at the line's time hits the
+    sphere ``R + h``; ``image_to_ground`` must give that point to 1e-6 m and ``ground_to_image`` the image point
+    back to 1e-7 px."""
+    n = len(lines)
+    d = np.stack([-xb, -yb, -np.full(n, focal_mm)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = flyby_truth_time(lines, None)
+    centre = np.stack([V_KM_S * t * 1000.0, np.zeros(n), np.full(n, (R_KM + H_KM) * 1000.0)], axis=1)
+    b = np.sum(centre * d, axis=1)
+    c = np.sum(centre * centre, axis=1) - (R_KM * 1000.0 + h) ** 2
+    truth = centre + (-b - np.sqrt(b * b - c))[:, None] * d
+    g = cam.image_to_ground(lines, samples, h)
+    assert g.hit.all()
+    np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
+    r = cam.ground_to_image(truth)
+    assert r.valid.all()
+    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
+
+
 def flyby_ground(line, sample, h_m, rates=None, sample_summing=1, start_sample=0.0, radial=None):
     """Closed form: time -> x; the detector direction (0, -y, -f) hits the sphere R + h (y undistorted by
     usgscsm's radial removal ``y (1 - k0 - k1 y^2 - k2 y^4)`` on the detector line x = 0)."""
@@ -235,20 +258,7 @@ def test_affine_focal2pixel_closed_form():
     rhs = np.stack([np.full(n, -fl[0]), samples - 100.0 - fs[0]])
     xc, yc = np.linalg.solve(m, rhs)
     xb, yb = -yc, xc  # camera -> body: R_z(90 deg)
-    d = np.stack([-xb, -yb, -np.full(n, F_MM)], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t = flyby_truth_time(lines, None)
-    centre = np.stack([V_KM_S * t * 1000.0, np.zeros(n), np.full(n, (R_KM + H_KM) * 1000.0)], axis=1)
-    b = np.sum(centre * d, axis=1)
-    c = np.sum(centre * centre, axis=1) - (R_KM * 1000.0 + h) ** 2
-    truth = centre + (-b - np.sqrt(b * b - c))[:, None] * d
-    g = cam.image_to_ground(lines, samples, h)
-    assert g.hit.all()
-    np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
-    r = cam.ground_to_image(truth)
-    assert r.valid.all()
-    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
-    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
+    assert_flyby_round_trip(cam, lines, samples, h, xb, yb, F_MM)
 
 
 def test_flyby_miss_and_behind_are_flagged():

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from explorer.real.csm import camera_from_isd, read_isd
-from tests.real.test_csm import F_MM, H_KM, R_KM, V_KM_S, flyby_isd, flyby_truth_time
+from tests.real.test_csm import F_MM, assert_flyby_round_trip, flyby_isd
 
 MVIC = Path(__file__).resolve().parents[1] / "data" / "ale" / "nhmvic_tdi_isd.json"
 ISIS_TERMS = [(0, 1), (1, 0), (0, 2), (1, 1), (2, 0), (0, 3), (1, 2), (2, 1), (3, 0), (0, 4), (1, 3), (2, 2), (3, 1),
@@ -99,17 +99,4 @@ def test_themis_ir_interior_closed_form():
     xu = xd / THEMIS_K
     yu = 2 * yd / (1 + THEMIS_A1 + np.sqrt((1 + THEMIS_A1) ** 2 + 4 * THEMIS_A2 * yd))
     xb, yb = -yu, xu  # camera -> body: R_z(90 deg)
-    d = np.stack([-xb, -yb, -np.full(n, THEMIS_F_MM)], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t = flyby_truth_time(lines, None)
-    centre = np.stack([V_KM_S * t * 1000.0, np.zeros(n), np.full(n, (R_KM + H_KM) * 1000.0)], axis=1)
-    b = np.sum(centre * d, axis=1)
-    c = np.sum(centre * centre, axis=1) - (R_KM * 1000.0 + h) ** 2
-    truth = centre + (-b - np.sqrt(b * b - c))[:, None] * d
-    g = cam.image_to_ground(lines, samples, h)
-    assert g.hit.all()
-    np.testing.assert_allclose(g.ground, truth, rtol=0, atol=1e-6)
-    r = cam.ground_to_image(truth)
-    assert r.valid.all()
-    np.testing.assert_allclose(r.line, lines, rtol=0, atol=1e-7)
-    np.testing.assert_allclose(r.sample, samples, rtol=0, atol=1e-7)
+    assert_flyby_round_trip(cam, lines, samples, h, xb, yb, THEMIS_F_MM)
