@@ -192,9 +192,22 @@ def _warm_scene(scene) -> None:
 
 
 def _isd_scene(path: Path) -> object:
+    """The sensor ``--isd`` gives: the CSM camera itself (as :func:`explorer.sources.load_source`)."""
+    from explorer.real.csm_camera import read_isd
+    from explorer.real.csm_sensor import csm_scene
+
+    return csm_scene(read_isd(path))
+
+
+def _warm_isd(path: Path) -> None:
+    """A CSM camera as ``explore --isd`` shows it: its check points, the search methods on its own line
+    geometry (the camera's residual kernels) and its MPC stand-in's check points."""
     from explorer.real.csm import scene_from_isd
 
-    return scene_from_isd(path)
+    scene = _isd_scene(path)
+    _warm_scene(scene)
+    _warm_scene(scene_from_isd(path))
+    _warm_methods(scene, ["exact", "csm-secant", "nr"], n_scops=30, n_scps=2000)
 
 
 def kernel_units() -> dict[str, Callable[[], None]]:
@@ -231,7 +244,7 @@ def kernel_units() -> dict[str, Callable[[], None]]:
     }
     isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
     if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
-        units["isd"] = lambda: _warm_scene(_isd_scene(isd))
+        units["isd"] = partial(_warm_isd, isd)
     for name in available():
         if name in COMPILED_SEARCH_METHODS:
             units[f"method:{name}"] = every_preset(partial(_warm_one_method, name))
