@@ -23,9 +23,8 @@ from pathlib import Path
 from explorer.errors import OutputError
 
 __all__ = [
-    "file_kind",
-    "atomic_folder", "atomic_path", "check_output_folder", "check_output_path", "note_input", "protect_inputs",
-    "remove_stale_partials", "write_text_atomic",
+    "atomic_folder", "atomic_path", "check_output_folder", "check_output_path", "file_kind", "note_input",
+    "protect_inputs", "remove_stale_partials", "write_folder_atomic", "write_text_atomic",
 ]
 
 #: (device, inode) of the files the running command reads, when :func:`protect_inputs` is on (else None).
@@ -332,3 +331,18 @@ def atomic_folder(path: str | os.PathLike[str], names: tuple[str, ...]) -> Itera
         raise
     finally:
         _unlock_folder(target, fd)
+
+
+def write_folder_atomic(path: str | os.PathLike[str], files: dict[str, bytes]) -> dict[str, Path]:
+    """Write ``{name: bytes}`` as the folder ``path``, as a whole (:func:`atomic_folder`).
+
+    Returns
+    -------
+    dict
+        Name -> final path of each file.
+    """
+    out = Path(path)
+    with atomic_folder(out, tuple(files)) as tmp:
+        for name, data in files.items():
+            (tmp / name).write_bytes(data)
+    return {name: out / name for name in files}

@@ -37,7 +37,7 @@ import numpy as np
 
 from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, sensor_truth
 from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
-from explorer.io_atomic import atomic_folder
+from explorer.io_atomic import write_folder_atomic
 from explorer.sensor import StandIn
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status",
@@ -249,13 +249,9 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,
                          native_pixels=source.kind == "isd")
     out = Path(out_dir)
-    written = {}
     # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a
     # failure, SIGTERM or a full disk the folder holds the previous complete export or nothing
-    with atomic_folder(out, tuple(files)) as tmp:
-        for name, data in files.items():
-            (tmp / name).write_bytes(data)
-            written[name] = out / name
+    written = write_folder_atomic(out, files)
     log(f"pushbroom explore: exported {', '.join(files)} to {out} ({time.perf_counter() - t0:.1f} s)")
     return written
 

@@ -90,7 +90,7 @@ def pair_summary(view: Any, selection: Any, maps: Any) -> dict:
 
 def export_pair(view: Any, out_dir: str | Path, row: float, col: float, log: Any = print) -> dict[str, Path]:
     """Write ``summary.json``, ``curve.csv`` and ``panels.html`` into ``out_dir`` (as a whole)."""
-    from explorer.io_atomic import atomic_folder
+    from explorer.io_atomic import write_folder_atomic
     from explorer.panels.figures import figures_html
     from explorer.stereo.pairview import select
 
@@ -110,11 +110,7 @@ def export_pair(view: Any, out_dir: str | Path, row: float, col: float, log: Any
             [f"left pixel {sel.left_pixel}, right pixel {sel.right_pixel}, height {sel.height:.2f} m"]).encode(),
     }
     out = Path(out_dir)
-    written = {}
-    with atomic_folder(out, tuple(files)) as tmp:
-        for name, data in files.items():
-            (tmp / name).write_bytes(data)
-            written[name] = out / name
+    written = write_folder_atomic(out, files)
     log(f"pushbroom explore --pair: exported {', '.join(files)} to {out} ({time.perf_counter() - t0:.1f} s)")
     return written
 
