@@ -42,11 +42,70 @@ def test_refine_folder_readjusts_live(server):
     assert view.refinement.model == "poly2"  # the last good adjustment (poly2 on 10 points) stays shown
 
 
-def test_explore_gcps_refuses_a_source_it_cannot_refine(tmp_path, capsys):
-    from explorer.cli import main
-    from tests.refine.cases import write_points_csv
+def _scene_control(scene, true, n=20, seed=5, noise_px=0.0):
+    import numpy as np
 
-    gcps = write_points_csv(tmp_path / "g.csv", simulate_points(pleiades(), 5, seed=1))
-    assert main(["explore", "--preset", "WSU", "--gcps", str(gcps), "--port", "8182"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].endswith("--gcps refines --rpc or --scene sources, not --preset")
+    from explorer.refine.points_io import PointTable
+    from explorer.refine.torch_scene import adjusted_scene
+
+    rng = np.random.default_rng(seed)
+    g = scene.image_to_ground(rng.uniform(0.05, 0.95, n) * scene.n_rows, rng.uniform(0.05, 0.95, n) * scene.n_columns,
+                              height=rng.uniform(-200, 200, n))
+    row, col = adjusted_scene(scene, "attitude", true).ground_to_image(g)
+    lon, lat, h = scene.frame.enu_to_geodetic(g)
+    return PointTable([f"g{i}" for i in range(n)], row + rng.normal(0, noise_px, n), col + rng.normal(0, noise_px, n),
+                      lon, lat, h)
+
+
+def test_scene_refinement_draws_both_trajectories_in_3d_and_redraws_them_live(server):
+    import numpy as np
+
+    from explorer.presets import build_scene
+    from explorer.refine.trajectory import refinement_trajectory
+    from explorer.scene3d.builders import DisplayFrame
+
+    scene = build_scene("WSU")
+    true = np.array([30.0, -20.0, 10.0, 2e-5, -1e-5, 1e-5])
+    frame = DisplayFrame.for_scene(scene)
+    view = RefineView(server.gui, scene, _scene_control(scene, true, noise_px=0.3), sigma_px=0.3,
+                      scene_api=server.scene, display_frame=lambda: frame)
+    assert view.error is None and view.models == ["attitude", "attitude-drift"]
+    assert set(view._nodes) >= {"/refine/original/track", "/refine/adjusted/track", "/refine/adjusted/attitude"}
+    params = {p["name"]: p["value"] for p in view.refinement.report()["parameters"]}
+    d = np.linalg.norm([params["position_e_m"], params["position_n_m"], params["position_u_m"]])
+    assert view.trajectory_3d["displacement_m"] == pytest.approx([d, d], rel=1e-9)  # the view's number = report's
+    kp = view.trajectory_3d["position_factor"]
+    assert f"drawn x{kp:g}" in view.trajectory_text.content
+    drawn = np.asarray(view._nodes["/refine/adjusted/track"].points)
+    comp = refinement_trajectory(view.refinement)
+    np.testing.assert_allclose(drawn[:, 0], frame.sensor(comp.original_centre_m + kp * comp.displacement_m)[:-1],
+                               atol=1e-5)  # (viser keeps float32)
+    before = view.refinement.parameters.copy()
+    view.drop.value = "g0, g3, g7"
+    view.update()
+    assert view.refinement.result.outlier.size == 17
+    assert np.abs(view.refinement.parameters - before).max() > 0  # dropping points re-adjusts
+    params2 = {p["name"]: p["value"] for p in view.refinement.report()["parameters"]}
+    d2 = np.linalg.norm([params2["position_e_m"], params2["position_n_m"], params2["position_u_m"]])
+    assert view.trajectory_3d["displacement_m"] == pytest.approx([d2, d2], rel=1e-9)  # and redraws the 3D
+    view.model.value = "attitude-drift"
+    view.update()
+    assert len(view.refinement.parameters) == 12 and "attitude-drift" in view.summary.content
+    view.draw_3d(visible=False)  # another scene shown: hidden
+    assert not any(h.visible for h in view._nodes.values())
+
+
+def test_every_source_kind_has_a_refinement_target():
+    from explorer.app.refine_view import refine_target_of
+    from explorer.sources import load_source
+    from tests.refine.cases import PLEIADES
+    from tests.refine.test_target import ORBITAL
+
+    preset = refine_target_of(load_source("preset", "WSU"))
+    assert not preset.is_stand_in and preset.label == "the Scene itself" and preset.model.n_rows > 0
+    rpc = refine_target_of(load_source("rpc", str(PLEIADES)))
+    assert not rpc.is_stand_in and "the RPC itself" in rpc.label
+    isd = load_source("isd", str(ORBITAL))
+    target = refine_target_of(isd)
+    assert target.is_stand_in and target.model is isd.stand_in.sensor and target.truth is isd.scene
+    assert target.label == "the MPC fitted to the CSM camera (a stand-in)"

@@ -1,34 +1,54 @@
-"""The explorer's *Refinement* folder (``pushbroom explore --rpc FILE --gcps gcps.csv``, ``docs/refine.md``).
+"""The explorer's *Refinement* folder (``pushbroom explore SOURCE --gcps gcps.csv``, ``docs/refine.md``).
 
 A correction model dropdown and a list of dropped point ids; every change re-adjusts the sensor to the
 control points (:func:`explorer.refine.adjust.refine_images`) and redraws the refinement panels
 (:mod:`explorer.panels.refine`): the residual vectors before and after, the field the adjustment removed,
-the parameter table with sigmas and, for an MPC scene, the original and adjusted trajectory in 3D.
+the parameter table with sigmas and, for a sensor with scanlines, the original and adjusted trajectory --
+as a panel and in the 3D scene (:mod:`explorer.scene3d.refine`, the displacement exaggerated with the factor
+stated).  What is adjusted is :func:`refine_target_of` the source: the RPC itself for ``--rpc``, the MPC scene
+of ``--scene`` / a preset, and for a sensor that is not refinable yet (rigorous DIMAP / DG, CSM camera) the MPC
+that stands in for it, labelled so with its distance from the sensor at the points.
 A bad configuration (too few points left, a degenerate one) shows its one-line message in the folder.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from explorer.errors import ExplorerError, InputError
 from explorer.refine.points_io import PointTable
+from explorer.refine.target import RefineTarget
 
-__all__ = ["RefineView", "refine_sensor_of"]
+__all__ = ["RefineView", "refine_target_of"]
 
 
-def refine_sensor_of(source: Any) -> Any:
-    """The model a source's refinement adjusts: the RPC file itself for ``--rpc``, the MPC scene for
-    ``--scene``/presets; InputError for the rigorous and CSM sources (not refined yet)."""
+def refine_target_of(source: Any) -> RefineTarget:
+    """The model a source's refinement adjusts (:func:`explorer.refine.target.refine_target`): the RPC file
+    itself for ``--rpc`` (not the MPC resected from it), the scene of ``--scene`` and of a preset (built with
+    the preset's defaults), and the sensor itself or its MPC stand-in for ``--dimap``, ``--dg`` and ``--isd``."""
+    from explorer.refine.target import refine_target
+
     if source.kind == "rpc":
         from explorer.rpc import read_rpc
 
-        return read_rpc(source.path)
-    if source.kind == "scene" and source.scene is not None:
-        return source.scene
-    raise InputError(f"--gcps refines --rpc or --scene sources, not --{source.kind}")
+        return RefineTarget(read_rpc(source.path), "the RPC itself (image-space correction)")
+    scene = source.scene
+    if scene is None and source.kind == "preset":
+        from explorer.presets import build_scene
+
+        scene = build_scene(source.label)
+    if scene is None:
+        raise InputError(f"--gcps: the --{source.kind} source has no sensor to refine")
+    stand_ins = [source.stand_in.sensor] if source.stand_in is not None else []
+    what = {"dimap": "the rigorous DIMAP model", "dg": "the rigorous DG model", "isd": "the CSM camera"}.get(
+        source.kind, f"the {type(scene).__name__}")
+    target = refine_target(scene, stand_ins=stand_ins, what=what)
+    if not target.is_stand_in:
+        target.label = f"{what} itself"
+    return target
 
 
 def _subset(table: PointTable, keep: np.ndarray) -> PointTable:
@@ -45,45 +65,68 @@ class RefineView:
     Parameters
     ----------
     gui : viser GUI API (``server.gui``)
-    sensor : RationalFunctionModel or Scene
+    sensor : RefineTarget, RationalFunctionModel or Scene
+        What is adjusted (a bare model is the sensor itself).
     control : PointTable
     check : PointTable, optional
     sigma_px : float
         Stated sigma of a measured coordinate, pixels.
+    scene_api : viser SceneApi, optional
+        Where the trajectories are drawn in 3D (``server.scene``); none: no 3D.
+    display_frame : callable, optional
+        Returns the 3D view's current :class:`~explorer.scene3d.builders.DisplayFrame` (None before the
+        first scene is drawn); the app calls :meth:`draw_3d` again when it changes.
     """
 
     def __init__(self, gui: Any, sensor: Any, control: PointTable, check: PointTable | None = None,
-                 sigma_px: float = 0.5) -> None:
+                 sigma_px: float = 0.5, *, scene_api: Any = None,
+                 display_frame: Callable[[], Any] | None = None) -> None:
         from explorer.refine.images import image_adapter
 
-        self.sensor, self.control, self.check, self.sigma_px = sensor, control, check, sigma_px
-        adapter = image_adapter(sensor)
+        self.target = sensor if isinstance(sensor, RefineTarget) else RefineTarget(sensor, "the sensor itself")
+        self.sensor, self.control, self.check, self.sigma_px = self.target.model, control, check, sigma_px
+        adapter = image_adapter(self.sensor)
         self.models = list(adapter.models)
+        self.has_trajectory = getattr(adapter, "adjusted_sensor", None) is not None
         self.is_scene = adapter.kind == "scene"
+        self.stand_in_px = self.target.stand_in_error_px(control, check)
+        self.scene_api, self.display_frame = scene_api, display_frame
         self.refinement: Any = None
+        self.trajectory_3d: dict[str, Any] | None = None
+        self._nodes: dict[str, Any] = {}
         self.error: str | None = None
         with gui.add_folder("Refinement"):
+            self.what = gui.add_markdown(self._what_text())
             self.model = gui.add_dropdown("Model", self.models,
                                           initial_value="affine" if "affine" in self.models else self.models[0])
             self.drop = gui.add_text("Drop point ids", initial_value="",
                                      hint="comma-separated control point ids left out of the adjustment")
             self.summary = gui.add_markdown("")
+            self.trajectory_text = gui.add_markdown("", visible=self.has_trajectory)
             import plotly.graph_objects as go
 
             empty = go.Figure()
             self.quiver = gui.add_plotly(empty, aspect=1.6)
             self.field = gui.add_plotly(empty, aspect=1.8)
             self.table = gui.add_plotly(empty, aspect=1.4)
-            self.trajectory = gui.add_plotly(empty, aspect=1.2, visible=self.is_scene)
+            self.trajectory = gui.add_plotly(empty, aspect=1.2, visible=self.has_trajectory)
         self.model.on_update(lambda _: self.update())
         self.drop.on_update(lambda _: self.update())
         self.update()
+
+    def _what_text(self) -> str:
+        text = f"Adjusting **{self.target.label}**."
+        if self.stand_in_px is not None:
+            text += (f" The stand-in is {self.stand_in_px:.3g} px (largest coordinate) from the sensor at the "
+                     "control and check points: residuals below that are out of its reach.")
+        return text
 
     def dropped(self) -> set[str]:
         return {t.strip() for t in str(self.drop.value).split(",") if t.strip()}
 
     def update(self) -> None:
-        """Re-adjust with the current model and points; redraw the panels (or show the error)."""
+        """Re-adjust with the current model and points; redraw the panels and the 3D trajectories (or show
+        the error)."""
         from explorer.panels.refine import (
             correction_field_figure,
             parameter_table_figure,
@@ -118,5 +161,26 @@ class RefineView:
         self.quiver.figure = residual_quiver_figure(ref, height=380)
         self.field.figure = correction_field_figure(ref, height=320)
         self.table.figure = parameter_table_figure(ref)
-        if self.is_scene:
+        if self.has_trajectory:
             self.trajectory.figure = trajectory_figure(ref, height=380)
+            self.draw_3d()
+
+    def draw_3d(self, visible: bool = True) -> None:
+        """Draw (or redraw) the original and adjusted trajectories of the last adjustment in the 3D scene, in
+        the app's current display frame; ``visible`` False hides them (another scene is shown)."""
+        if not self.has_trajectory or self.refinement is None or self.scene_api is None:
+            return
+        frame = self.display_frame() if self.display_frame is not None else None
+        if frame is None:
+            return
+        from explorer.refine.trajectory import refinement_trajectory
+        from explorer.scene3d.refine import add_refined_trajectories
+
+        comparison = refinement_trajectory(self.refinement)
+        for handle in self._nodes.values():
+            handle.remove()
+        self._nodes, info = add_refined_trajectories(self.scene_api, comparison, frame)
+        for handle in self._nodes.values():
+            handle.visible = visible
+        self.trajectory_3d = info
+        self.trajectory_text.content = f"3D: {info['text']}."

@@ -329,17 +329,20 @@ def run_explore(args: Any) -> int:
 
 def _refine_folder(args: Any, source: Any) -> Callable[[Any], None]:
     """``--gcps``: read the points and the sensor now (errors before serving); the *Refinement* folder
-    (:mod:`explorer.app.refine_view`) is added once the app is up."""
-    from explorer.app.refine_view import RefineView, refine_sensor_of
-    from explorer.refine.images import image_adapter
+    (:mod:`explorer.app.refine_view`) is added once the app is up, drawing the trajectories in its 3D scene."""
+    from explorer.app.refine_view import RefineView, refine_target_of
     from explorer.refine.points_io import read_points_csv
 
-    sensor = refine_sensor_of(source)
-    image_adapter(sensor)  # a scene file holding a rigorous model: refused here, before serving
     control = read_points_csv(args.gcps)
     check = read_points_csv(args.check) if getattr(args, "check", None) else None
-    return lambda app: setattr(app, "refine_view", RefineView(app.server.gui, sensor, control, check,
-                                                              sigma_px=getattr(args, "sigma_px", 0.5)))
+    target = refine_target_of(source)
+
+    def ready(app: Any) -> None:
+        app.refine_view = RefineView(app.server.gui, target, control, check, sigma_px=getattr(args, "sigma_px", 0.5),
+                                     scene_api=app.server.scene, display_frame=lambda: getattr(app, "frame", None))
+        app.refine_label = source.label
+
+    return ready
 
 
 __all__ = ["check_listen_address", "limit_malloc_arenas", "quiet_client_errors", "release_freed_memory", "run_explore",

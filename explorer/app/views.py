@@ -176,6 +176,9 @@ class Views:
             with self.server.atomic():
                 self._put("/ground", B.add_ground(self.server.scene, scene, self.frame, n=n))
                 self._put("/orbit", B.add_orbit(self.server.scene, scene, self.frame))
+            refine_view = getattr(self, "refine_view", None)  # explore --gcps: its trajectories, in the new frame
+            if refine_view is not None:
+                refine_view.draw_3d(visible=s.preset == getattr(self, "refine_label", None))
             self._frame_camera(scene, (s.preset, s.sensor_distance))
             fixed = s.preset in m.fixed_scenes
             with self.quiet():

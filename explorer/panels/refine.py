@@ -5,7 +5,7 @@
 - :func:`correction_field_figure` -- the field the adjustment removed: the change of the model's pixel
   (after - before) over a grid of the image, row and column components;
 - :func:`parameter_table_figure` -- the parameters with their a posteriori sigmas;
-- :func:`trajectory_figure` -- an MPC scene's original and adjusted perspective centres and boresights in 3D;
+- :func:`trajectory_figure` -- a line-scan sensor's original and adjusted perspective centres and boresights in 3D;
 - :func:`refinement_html` -- all of them in one offline HTML page (``pushbroom refine`` writes it).
 
 Pixels: ``docs/conventions.md`` (rows down, columns across); ``docs/refine.md`` for the adjustment.
@@ -143,35 +143,35 @@ def parameter_table_figure(ref: Refinement, *, height: int | None = None) -> go.
 
 def trajectory_figure(ref: Refinement, image: int = 0, *, n: int = 30, boresight_m: float | None = None,
                       height: int = 480) -> go.Figure:
-    """An MPC scene's perspective centres over the image's time (original and adjusted, local ENU km) with
-    the boresight (sensor -z axis) drawn ``boresight_m`` long at a few times; ValueError for an RPC (no orbit)."""
-    from explorer.refine.images import SceneImage
-    from explorer.refine.torch_scene import adjusted_scene
+    """A line-scan sensor's perspective centres over the image's time (original and adjusted, local ENU km,
+    :func:`explorer.refine.trajectory.refinement_trajectory`) with the boresight (camera -z axis) drawn
+    ``boresight_m`` long at a few times; ValueError for an RPC (no orbit)."""
+    from explorer.refine.trajectory import refinement_trajectory
 
-    adapter = ref.images[image]
-    if not isinstance(adapter, SceneImage):
-        raise ValueError("an RPC has no trajectory: the 3D panel needs an MPC scene")
-    scene = adapter.sensor
-    adjusted = adjusted_scene(scene, ref.model, ref.result.parameters[image])
-    t0, t1 = scene.time_range()
-    t = np.linspace(t0, t1, n)
+    try:
+        comparison = refinement_trajectory(ref, image, n)
+    except ValueError:
+        raise ValueError("an RPC has no trajectory: the 3D panel needs a sensor with scanlines") from None
     fig = go.Figure()
-    for label, s, colour in (("original", scene, "#7f7f7f"), ("adjusted", adjusted, "#d62728")):
-        pos = s.exterior.position(t) / 1e3
+    step = max(1, n // 5)
+    for label, centres, attitude, colour in (
+            ("original", comparison.original_centre_m, comparison.original_attitude, "#7f7f7f"),
+            ("adjusted", comparison.adjusted_centre_m, comparison.adjusted_attitude, "#d62728")):
+        pos = centres / 1e3
         fig.add_trace(go.Scatter3d(x=pos[:, 0], y=pos[:, 1], z=pos[:, 2], mode="lines", name=f"{label} orbit",
                                    line={"color": colour, "width": 5}))
-        axis = -s.exterior.rotation(t[:: max(1, n // 5)])[:, :, 2]  # the camera looks along -z
+        axis = -attitude[::step, :, 2]  # the camera looks along -z
         length = (boresight_m if boresight_m is not None else 0.15 * float(pos[0, 2]) * 1e3) / 1e3
-        xs, ys = _segments(pos[:: max(1, n // 5), 0], pos[:: max(1, n // 5), 1], length * axis[:, 0],
-                           length * axis[:, 1])
-        zs = _segments(pos[:: max(1, n // 5), 2], pos[:: max(1, n // 5), 2], length * axis[:, 2],
-                       length * axis[:, 2])[0]
+        xs, ys = _segments(pos[::step, 0], pos[::step, 1], length * axis[:, 0], length * axis[:, 1])
+        zs = _segments(pos[::step, 2], pos[::step, 2], length * axis[:, 2], length * axis[:, 2])[0]
         fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", name=f"{label} boresight",
                                    line={"color": colour, "width": 2, "dash": "dot"}))
-    moved = np.linalg.norm(adjusted.exterior.position(t) - scene.exterior.position(t), axis=1)
+    summary = comparison.summary()
+    d, a = summary["displacement_m"], summary["attitude_change_urad"]
     fig.update_layout(height=height, margin={"l": 0, "r": 0, "t": 50, "b": 0},
                       scene={"xaxis_title": "east (km)", "yaxis_title": "north (km)", "zaxis_title": "up (km)"},
-                      title=f"{ref.image_names[image]}: trajectory moved by {moved.min():.2f} .. {moved.max():.2f} m")
+                      title=f"{ref.image_names[image]}: trajectory moved by {d[0]:.2f} .. {d[1]:.2f} m, attitude "
+                            f"turned {a[0]:.2f} .. {a[1]:.2f} urad")
     return fig
 
 
@@ -180,7 +180,7 @@ def refinement_html(ref: Refinement) -> str:
     figures = [parameter_table_figure(ref)]
     for k in range(len(ref.images)):
         figures += [residual_quiver_figure(ref, k), correction_field_figure(ref, k)]
-        if ref.images[k].kind == "scene":
+        if getattr(ref.images[k], "adjusted_sensor", None) is not None:
             figures.append(trajectory_figure(ref, k))
     parts = [fig.to_html(full_html=False, include_plotlyjs=(k == 0)) for k, fig in enumerate(figures)]
     return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>refinement</title></head><body>"

@@ -138,10 +138,14 @@ class SceneImage:
         row, col = scene.ground_to_image(self.sensor.frame.geodetic_to_enu(lon, lat, h))
         return np.stack([row, col], axis=1)
 
-    def adjust(self, model: str, params: np.ndarray) -> dict[str, Any]:
+    def adjusted_sensor(self, model: str, params: np.ndarray) -> Scene:
+        """The scene with corrected coefficients (its trajectory: :mod:`explorer.refine.trajectory`)."""
         from explorer.refine.torch_scene import adjusted_scene
 
-        self.adjusted = adjusted_scene(self.sensor, model, params)
+        return adjusted_scene(self.sensor, model, params)
+
+    def adjust(self, model: str, params: np.ndarray) -> dict[str, Any]:
+        self.adjusted = self.adjusted_sensor(model, params)
         return {}
 
     def write(self, path: Path) -> Path:
