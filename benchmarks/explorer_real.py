@@ -47,7 +47,8 @@ def _proc_kib(pid: int, key: str) -> int:
 
 def startup(methods: str | None, timeout: float) -> dict:
     """Cold start of ``pushbroom explore --dimap ... --dem ...`` in a fresh process, seen from a browser."""
-    cmd = [sys.executable, "-m", "explorer", "explore", "--dimap", str(DIMAP), "--dem", str(DEM), "--port", "0"]
+    cmd = [sys.executable, "-m", "explorer", "explore", "--dimap", str(DIMAP), "--dem", str(DEM),
+           "--dem-datum", "egm96", "--port", "0"]
     if methods:
         cmd += ["--methods", methods]
     t0 = time.perf_counter()
@@ -104,7 +105,7 @@ def drag(source: str, key: str, values: list, debounce_s: float, methods: list[s
     if source == "dimap":
         from explorer.sources import load_source
 
-        sources = [load_source("dimap", str(DIMAP), dem=str(DEM))]
+        sources = [load_source("dimap", str(DIMAP), dem=str(DEM), dem_datum="egm96")]
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = ExplorerApp(server, preset=None if sources else source, methods=methods, sources=sources, scp_count=scps,
                       sweep=False, debounce_s=debounce_s)

@@ -143,7 +143,7 @@ def check_dem_covers(scene: Any, dem_path: str, n: int = COVERAGE_GRID) -> None:
             f"points (footprint lon {np.min(lon):.4f}..{np.max(lon):.4f}, lat {np.min(lat):.4f}..{np.max(lat):.4f})")
 
 
-def _dem_terrain(scene: Any, dem_path: str) -> tuple[Any, dict]:
+def _dem_terrain(scene: Any, dem_path: str, dem_datum: str | None = None) -> tuple[Any, dict]:
     """``scene`` with the DEM resampled onto its local frame over the footprint (+5 %), and the DEM's coverage.
 
     A DEM that covers at least :data:`MIN_DEM_COVERAGE` of the image is used: the SCOPs and SCPs are simulated
@@ -152,8 +152,9 @@ def _dem_terrain(scene: Any, dem_path: str) -> tuple[Any, dict]:
     pixel edges included).  Less is refused with the figure.
     """
     from explorer.real.from_rpc import load_dem, terrain_from_dem
+    from explorer.terrain_io import datum_statement
 
-    height_source = load_dem(dem_path)
+    height_source = load_dem(dem_path, dem_datum)
     lo_h, hi_h = float(height_source.min), float(height_source.max)
     n = COVERAGE_GRID
     rows = np.linspace(-0.5, scene.n_rows - 0.5, n)
@@ -175,6 +176,7 @@ def _dem_terrain(scene: Any, dem_path: str) -> tuple[Any, dict]:
     if not np.isfinite(terrain.heights).any():
         raise InputError(f"DEM {dem_path!r} does not cover the image footprint at all ({where})")
     coverage = {"fraction": fraction, "grid_points": n * n, "covered_points": int(covered.sum()),
+                "datum": datum_statement(height_source),
                 "note": "SCOPs and SCPs are simulated where the DEM has heights; lines of sight that miss it "
                         "are flagged and left out"}
     return scene.with_terrain(terrain), coverage
@@ -191,7 +193,8 @@ def _dimap_sensor(path: Path) -> str:
 
 # ---------------------------------------------------------------------- loading
 def load_source(
-    kind: str, value: str, *, dem: str | None = None, degree: int = MPC_DEGREE, n_gcps: int = 100
+    kind: str, value: str, *, dem: str | None = None, dem_datum: str | None = None, degree: int = MPC_DEGREE,
+    n_gcps: int = 100,
 ) -> Source:
     """Resolve and load one explorer source (see the module docstring).
 
@@ -202,7 +205,11 @@ def load_source(
     value : str
         The preset id or the file.
     dem : str, optional
-        DEM (GeoTIFF, EGM96 heights, or SRTM ``.hgt``) for ``rpc`` / ``dimap`` / ``dg``.
+        DEM (GeoTIFF or SRTM ``.hgt``) for ``rpc`` / ``dimap`` / ``dg``, read by
+        :func:`explorer.terrain_io.read_dem_above_ellipsoid` (the one DEM reader of every command).
+    dem_datum : {"ellipsoid", "egm96"} or None
+        The DEM's vertical datum when the file declares none (``--dem-datum``; None: the default of
+        ``docs/conventions.md#dem-heights``).
     degree : int
         Degree of the MPC polynomials fitted to an RPC or a rigorous model (default 3).
     n_gcps : int
@@ -244,7 +251,8 @@ def load_source(
         from explorer.real.from_rpc import scene_from_rpc
 
         try:
-            scene, report = scene_from_rpc(path, dem=dem, degree=degree, n_gcps=n_gcps, n_check=400, seed=0)
+            scene, report = scene_from_rpc(path, dem=dem, dem_datum=dem_datum, degree=degree, n_gcps=n_gcps,
+                                           n_check=400, seed=0)
         except ValueError as exc:
             if dem is None or isinstance(exc, (InputError, SceneFileError)):  # (RPCFormatError is a SceneFileError)
                 raise
@@ -291,10 +299,12 @@ def load_source(
         mpc = scene_from_camera(camera, degree=degree, n_check=0)
         stand_in = StandIn(f"MPC degree {degree} fitted to the CSM camera", mpc, scene.frame)
     if dem is not None and kind in ("dimap", "dg"):
-        scene, coverage = _dem_terrain(scene, dem)
-        info.update(dem_coverage=coverage)
+        scene, coverage = _dem_terrain(scene, dem, dem_datum)
+        info.update(dem_coverage=coverage, dem_datum=coverage["datum"])
     elif dem is not None:
         check_dem_covers(scene, dem)
+        if report is not None and "dem_datum" in report.info:
+            info.update(dem_datum=report.info["dem_datum"])
     label = f"{path.name} ({info['sensor']})"
     info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns), truth=info["model"])
     if stand_in is not None:
@@ -315,14 +325,19 @@ def source_from_args(args: Any, **options: Any) -> Source:
     if len(given) > 1:
         raise InputError("give one source: " + " and ".join(f"--{k}" for k, _ in given) + " were both given")
     dem = getattr(args, "dem", None)
+    dem_datum = getattr(args, "dem_datum", None)
     if not given:
         if dem is not None:
             raise InputError("--dem goes with --rpc, --dimap or --dg")
+        if dem_datum is not None:
+            raise InputError("--dem-datum goes with --dem")
         from explorer.presets import default_preset_id
 
         return load_source("preset", default_preset_id())
     kind, value = given[0]
-    return load_source(kind, value, dem=dem, **options)
+    if dem_datum is not None and dem is None:
+        raise InputError("--dem-datum goes with --dem")
+    return load_source(kind, value, dem=dem, dem_datum=dem_datum, **options)
 
 
 __all__ = ["DEM_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers", "load_source", "readable_file",

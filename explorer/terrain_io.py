@@ -29,7 +29,12 @@ from explorer.memory import check_allocation
 
 __all__ = [
     "DEFAULT_ASSETS_DIR",
+    "DEFAULT_DEM_DATUM",
+    "DEM_DATUMS",
     "GeoDEM",
+    "datum_statement",
+    "declared_vertical_datum",
+    "normalise_dem_datum",
     "Geoid",
     "read_dem_above_ellipsoid",
     "read_geotiff_dem",
@@ -110,6 +115,10 @@ class GeoDEM:
     vertical_reference : str
         ``"ellipsoid"``, ``"egm96"`` (orthometric) or ``"unknown"``.
     source_path : str or None
+    vertical_reference_source : str
+        How :attr:`vertical_reference` was decided (the file's vertical CRS, the ``.hgt`` format, the caller,
+        the default for a file that declares none): stated beside the results
+        (``docs/conventions.md#dem-heights``).
     """
 
     heights: FloatArray
@@ -117,6 +126,7 @@ class GeoDEM:
     crs: str = ""
     vertical_reference: str = "unknown"
     source_path: str | None = None
+    vertical_reference_source: str = ""
 
     def __post_init__(self) -> None:
         a, b, _, d, e, _ = self.transform
@@ -206,6 +216,83 @@ class GeoDEM:
         return cached
 
 
+#: What a DEM's heights may be measured from: the WGS84 ellipsoid, or the EGM96 geoid (converted, ``h = H + N``).
+DEM_DATUMS = ("ellipsoid", "egm96")
+#: The vertical datum of a GeoTIFF that declares none (GDAL's ``RPC_DEM`` convention; docs/conventions.md).
+DEFAULT_DEM_DATUM = "ellipsoid"
+_DATUM_ALIASES = {"ellipsoid": "ellipsoid", "ellipsoidal": "ellipsoid", "wgs84": "ellipsoid",
+                  "egm96": "egm96", "geoid": "egm96", "orthometric": "egm96"}
+
+
+def normalise_dem_datum(datum: str | None) -> str | None:
+    """``"ellipsoid"``, ``"egm96"`` or None (the file decides) from a user's word (``geoid`` = ``egm96``).
+
+    Raises
+    ------
+    InputError
+        For any other word.
+    """
+    if datum is None:
+        return None
+    key = str(datum).strip().lower()
+    if key not in _DATUM_ALIASES:
+        raise InputError(f"DEM datum {datum!r} is not one of {', '.join(DEM_DATUMS)}")
+    return _DATUM_ALIASES[key]
+
+
+def declared_vertical_datum(crs_wkt: str, path: str | Path) -> tuple[str, str] | None:
+    """The vertical datum a raster's CRS declares: ``("ellipsoid" | "egm96", name)``, or None when it declares none.
+
+    A compound CRS with a vertical part (``EPSG:4326+5773``, GeoTIFF's VerticalCSTypeGeoKey) names it; a 3D
+    geographic CRS (``EPSG:4979``) has ellipsoidal heights.
+
+    Raises
+    ------
+    InputError
+        A vertical datum other than EGM96 (EGM2008, NAVD88, ...: no grid for it is shipped) or heights not in
+        metres: the heights cannot be made ellipsoidal, so they are refused rather than used as they are.
+    """
+    if not crs_wkt:
+        return None
+    try:
+        from pyproj import CRS
+
+        crs = CRS.from_user_input(crs_wkt)
+    except Exception:  # noqa: BLE001 - a CRS PROJ cannot parse declares nothing it can read
+        return None
+    vertical = None
+    if crs.is_compound:
+        vertical = next((sub for sub in crs.sub_crs_list if sub.is_vertical), None)
+    elif crs.is_vertical:
+        vertical = crs
+    if vertical is None:
+        if crs.is_geographic and len(crs.axis_info) == 3:
+            return "ellipsoid", crs.name
+        return None
+    name = vertical.name
+    unit = vertical.axis_info[0].unit_conversion_factor if vertical.axis_info else 1.0
+    if unit != 1.0:
+        raise InputError(f"DEM {path}: its vertical CRS {name!r} has heights in "
+                         f"{vertical.axis_info[0].unit_name}, not metres: convert it (gdal_translate -scale)")
+    datum_name = vertical.datum.name if vertical.datum is not None else ""
+    if vertical.to_epsg() == 5773 or "EGM96" in (name + datum_name).upper().replace(" ", ""):
+        return "egm96", name
+    raise InputError(f"DEM {path}: heights above {name!r} (its vertical CRS): only ellipsoidal or EGM96 heights "
+                     "can be used (convert it to heights above the WGS84 ellipsoid, EPSG:4979)")
+
+
+def datum_statement(dem: object) -> str:
+    """One sentence saying what a DEM's heights were taken as and why (for reports, the GUI, the export)."""
+    inner = getattr(dem, "dem", dem)
+    reference = getattr(inner, "vertical_reference", "unknown")
+    source = getattr(inner, "vertical_reference_source", "") or "given"
+    if reference == "egm96":
+        return f"heights above the EGM96 geoid ({source}), converted to ellipsoidal with the EGM96 grid"
+    if reference == "ellipsoid":
+        return f"heights above the WGS84 ellipsoid ({source})"
+    return f"heights of unknown vertical datum ({source})"
+
+
 #: Peak bytes per DEM cell while reading (the band in its type, the float64 copy, the mask, the filled grid).
 DEM_BYTES_PER_CELL = 32
 
@@ -224,7 +311,9 @@ def read_geotiff_dem(
     band : int
         1-based band index.
     vertical_reference : str
-        What the heights are measured from (files rarely say): ``"ellipsoid"``, ``"egm96"``...
+        What the heights are measured from, when the file does not say (``"ellipsoid"``, ``"egm96"`` or
+        ``"unknown"``).  A file that declares its vertical datum (:func:`declared_vertical_datum`) is read as it
+        declares; a caller's different choice is refused as a contradiction.
     to_geographic : bool
         A DEM in a projected CRS (UTM...) is reprojected on read to WGS84 longitude/latitude at about its
         own resolution, bilinear (no-data cells stay no-data: a node next to one is NaN), so that the
@@ -263,8 +352,10 @@ def read_geotiff_dem(
                 heights[heights == SRTM_NODATA] = np.nan  # SRTM voids in a file without a no-data tag
             transform = tuple(dataset.transform)[:6]
             crs = dataset.crs.to_string() if dataset.crs else ""
+            declared = declared_vertical_datum(dataset.crs.to_wkt(), path) if dataset.crs else None
             if to_geographic and dataset.crs is not None and not dataset.crs.is_geographic:
-                heights, transform, crs = _reproject_to_lonlat(heights, dataset.transform, dataset.crs,
+                heights, transform, crs = _reproject_to_lonlat(heights, dataset.transform,
+                                                               _horizontal_crs(dataset.crs),
                                                                dataset.width, dataset.height)
     except InputError:
         raise
@@ -280,16 +371,40 @@ def read_geotiff_dem(
         i, j = (int(v) for v in np.argwhere(outside)[0])
         raise InputError(f"DEM {path}: height {heights[i, j]:.6g} m at row {i}, column {j} is outside {low:g} .. "
                          f"{high:g} m: not a terrain height (an undeclared no-data value, other units?)")
+    reference, reference_source = vertical_reference, "given" if vertical_reference != "unknown" else ""
+    if declared is not None:
+        if vertical_reference not in ("unknown", declared[0]):
+            raise InputError(f"DEM {path}: its vertical CRS {declared[1]!r} says heights above the "
+                             f"{_DATUM_WORDS[declared[0]]}, but {_DATUM_WORDS[vertical_reference]} was asked "
+                             "(--dem-datum): leave the option out, or fix the file's CRS")
+        reference, reference_source = declared[0], f"the file's vertical CRS {declared[1]!r}"
     try:
         return GeoDEM(
             heights=heights,
             transform=transform,  # type: ignore[arg-type]
             crs=crs,
-            vertical_reference=vertical_reference,
+            vertical_reference=reference,
             source_path=str(path),
+            vertical_reference_source=reference_source,
         )
     except ValueError as exc:  # zero pixel size, non-finite transform
         raise InputError(f"DEM {path}: {exc}") from None
+
+
+_DATUM_WORDS = {"ellipsoid": "WGS84 ellipsoid", "egm96": "EGM96 geoid", "geoid": "EGM96 geoid",
+                "unknown": "unknown datum"}
+
+
+def _horizontal_crs(crs):
+    """The horizontal part of a compound CRS (a projected DEM with a vertical datum), else ``crs`` itself."""
+    from pyproj import CRS
+
+    parsed = CRS.from_user_input(crs.to_wkt())
+    if parsed.is_compound:
+        horizontal = next((sub for sub in parsed.sub_crs_list if not sub.is_vertical), None)
+        if horizontal is not None:
+            return horizontal.to_wkt()
+    return crs
 
 
 def b_or_d_nonzero(transform: tuple[float, ...]) -> bool:
@@ -441,7 +556,7 @@ def read_hgt(path: str | Path) -> GeoDEM:
     step = 1.0 / (side - 1)
     transform = (step, 0.0, lon0 - 0.5 * step, 0.0, -step, lat0 + 1 + 0.5 * step)
     return GeoDEM(heights, transform, crs="EPSG:4326", vertical_reference="egm96",
-                  source_path=str(path))
+                  source_path=str(path), vertical_reference_source="the SRTM .hgt format")
 
 
 @dataclass(frozen=True)
@@ -567,28 +682,60 @@ class EllipsoidalDEM:
         return cached
 
 
-def read_dem_above_ellipsoid(path: str | Path, *, orthometric: bool = False) -> GeoDEM | EllipsoidalDEM:
-    """A DEM file as heights above the WGS84 ellipsoid, the convention of ``pushbroom ortho`` and
-    ``pushbroom rpc localize`` (``docs/conventions.md#dem-heights``).
+def read_dem_above_ellipsoid(
+    path: str | Path, *, datum: str | None = None, orthometric: bool = False
+) -> GeoDEM | EllipsoidalDEM:
+    """A DEM file as heights above the WGS84 ellipsoid: the one DEM reader of every command
+    (``docs/conventions.md#dem-heights``).
 
-    An SRTM ``.hgt`` tile holds heights above the EGM96 geoid: they are always converted (``h + N``, the EGM96
-    grid :meth:`Geoid.egm96`).  A GeoTIFF is taken as ellipsoidal heights (GDAL's ``RPC_DEM`` convention) unless
-    ``orthometric`` says its heights are above EGM96.
+    The vertical datum is, in this order: the file's own declaration (a GeoTIFF's vertical CRS, e.g.
+    ``EPSG:4326+5773`` = EGM96 or ``EPSG:4979`` = ellipsoidal; an SRTM ``.hgt`` tile is EGM96 by its format);
+    else ``datum`` (``--dem-datum``); else :data:`DEFAULT_DEM_DATUM` (ellipsoidal, GDAL's ``RPC_DEM``
+    convention).  A ``datum`` contradicting the file's declaration is refused.  EGM96 heights are converted
+    (``h = H + N``, the EGM96 grid :meth:`Geoid.egm96`).  How the datum was decided is kept
+    (:func:`datum_statement`).
 
     Parameters
     ----------
     path : str or Path
-        GeoTIFF or SRTM ``.hgt``.
+        GeoTIFF (any CRS GDAL reads; projected ones are resampled to longitude/latitude) or SRTM ``.hgt``.
+    datum : {"ellipsoid", "egm96"} or None
+        The heights' datum when the file declares none (``"geoid"`` is ``"egm96"``).
     orthometric : bool
-        The GeoTIFF's heights are above the EGM96 geoid.
+        Same as ``datum="egm96"`` (the former ``--dem-orthometric``).
 
     Returns
     -------
     GeoDEM or EllipsoidalDEM
-        A height source (``height(lon, lat)``, ``min``, ``max``) of ellipsoidal heights.
+        A height source (``height(lon, lat)``, ``min``, ``max``, ``height_grid()``) of ellipsoidal heights.
+
+    Raises
+    ------
+    InputError
+        An unreadable DEM, a vertical datum other than the two, or a ``datum`` the file contradicts.
     """
+    import dataclasses
+
     path = Path(path)
-    dem = read_hgt(path) if path.suffix.lower() == ".hgt" else read_geotiff_dem(path)
-    if orthometric or dem.vertical_reference == "egm96":
+    datum = normalise_dem_datum(datum)
+    if orthometric:
+        if datum == "ellipsoid":
+            raise InputError("--dem-orthometric and --dem-datum ellipsoid contradict each other")
+        datum = "egm96"
+    if path.suffix.lower() == ".hgt":
+        if datum == "ellipsoid":
+            raise InputError(f"DEM {path}: an SRTM .hgt tile holds heights above the EGM96 geoid by its format; "
+                             "--dem-datum ellipsoid contradicts it (leave the option out)")
+        dem = read_hgt(path)
+    else:
+        dem = read_geotiff_dem(path, vertical_reference=datum or "unknown")
+        if datum is not None and dem.vertical_reference_source == "given":
+            dem = dataclasses.replace(dem, vertical_reference_source="--dem-datum")
+        if dem.vertical_reference == "unknown":
+            dem = dataclasses.replace(
+                dem, vertical_reference=DEFAULT_DEM_DATUM,
+                vertical_reference_source="the default: the file declares no vertical datum (--dem-datum egm96 "
+                                          "if its heights are above the geoid)")
+    if dem.vertical_reference == "egm96":
         return EllipsoidalDEM(dem, Geoid.egm96())
     return dem

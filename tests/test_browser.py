@@ -176,7 +176,8 @@ def real_explorer():
     from explorer.sources import load_source
     from tests.real.conftest import DEM_DIR, PHR_2017
 
-    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"))
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"),
+                      dem_datum="egm96")
     box: dict = {}
     stop = threading.Event()
     th = threading.Thread(target=lambda: box.setdefault("rc", serve(
@@ -329,7 +330,8 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
     from explorer.sources import load_source
     from tests.real.conftest import DEM_DIR, PHR_2017
 
-    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"))
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"),
+                      dem_datum="egm96")
     states = []
     with toy_registry(), pytest.MonkeyPatch.context() as mp:
         from explorer.methods import base as methods_base

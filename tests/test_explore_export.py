@@ -89,7 +89,8 @@ def _export_twice_identical(tmp_path, src, capsys) -> dict:
 
 @pytest.mark.slow
 def test_dimap_with_dem_exports_byte_identical_residuals(tmp_path, capsys):
-    a = _export_twice_identical(tmp_path, ["--dimap", str(PHR_2017), "--dem", str(DEM_2017)], capsys)
+    a = _export_twice_identical(tmp_path, ["--dimap", str(PHR_2017), "--dem", str(DEM_2017), "--dem-datum", "egm96"],
+                                capsys)
     _check_offline_page(a["panels.html"])
     summary = json.loads(a["summary.json"])
     assert summary["source"]["kind"] == "dimap" and summary["source"]["dem"] == str(DEM_2017)

@@ -94,7 +94,7 @@ def test_scene_json_round_trip(tmp_path):
 
 
 def test_dimap_with_its_dem_is_named_by_file_and_sensor():
-    src = load_source("dimap", str(PHR_2017), dem=str(DEM_2017))
+    src = load_source("dimap", str(PHR_2017), dem=str(DEM_2017), dem_datum="egm96")
     assert src.label == f"{PHR_2017.name} (Pleiades 1B DIMAP)"
     assert (src.scene.n_rows, src.scene.n_columns) == (49826, 39951)  # the product's published size
     check_dem_covers(src.scene, str(DEM_2017))  # a height under every point of a 21 x 21 image grid

@@ -24,17 +24,16 @@ MAP_STEP = 300.0
 MAP_SHAPE = (10, 16)
 
 
-def _dem(path: str | None) -> Any:
+def _dem(path: str | None, datum: str | None = None) -> Any:
     if path is None:
         return None
-    from explorer.terrain_io import EllipsoidalDEM, Geoid, read_geotiff_dem, read_hgt
+    from explorer.terrain_io import read_dem_above_ellipsoid
 
-    dem = read_hgt(Path(path)) if path.lower().endswith(".hgt") else read_geotiff_dem(path)
-    return EllipsoidalDEM(dem, Geoid.egm96()) if dem.vertical_reference == "egm96" else dem
+    return read_dem_above_ellipsoid(path, datum=datum)  # the one DEM reader (docs/conventions.md#dem-heights)
 
 
 def load_pair(left_path: str, right_path: str, dem_path: str | None = None,
-              kinds: tuple[str, str] = ("auto", "auto")) -> Any:
+              kinds: tuple[str, str] = ("auto", "auto"), dem_datum: str | None = None) -> Any:
     """The :class:`~explorer.stereo.pairview.PairView` of two files.
 
     ``kinds`` says what each file is (:data:`explorer.stereo.files.SENSOR_KINDS`); ``"auto"``: a scene JSON or
@@ -49,7 +48,7 @@ def load_pair(left_path: str, right_path: str, dem_path: str | None = None,
         kind = given if given != "auto" else (json_kind(path) if path.lower().endswith(".json") else "rpc")
         sensors.append(load_sensor(path, kind))
         scenes.append(load_source(kind, path).scene)
-    return pair_view(sensors[0], sensors[1], left_scene=scenes[0], right_scene=scenes[1], dem=_dem(dem_path))
+    return pair_view(sensors[0], sensors[1], left_scene=scenes[0], right_scene=scenes[1], dem=_dem(dem_path, dem_datum))
 
 
 def pair_panels(view: Any, selection: Any) -> tuple[Any, Any, Any]:
@@ -172,7 +171,8 @@ def run_pair(args: Any) -> int:
     if export is None:
         check_listen_address(args.host, args.port)
     view = load_pair(args.pair[0], args.pair[1], getattr(args, "dem", None),
-                     (getattr(args, "left_kind", "auto"), getattr(args, "right_kind", "auto")))
+                     (getattr(args, "left_kind", "auto"), getattr(args, "right_kind", "auto")),
+                     dem_datum=getattr(args, "dem_datum", None))
     if export is not None:
         export_pair(view, export, (view.left.n_rows - 1) / 2.0, (view.left.n_columns - 1) / 2.0)
         return 0

@@ -16,6 +16,8 @@ from explorer.commands import parsed_paths
 from explorer.io_atomic import file_kind
 
 __all__ = [
+    "add_dem_datum_argument",
+    "dem_datum",
     "existing_file",
     "finite_float",
     "float_in_range",
@@ -235,6 +237,30 @@ def raster_file(text: str) -> str:
     except RasterioError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a raster GDAL can read") from None
     return text
+
+
+#: Words ``--dem-datum`` takes (``geoid`` and ``orthometric`` are EGM96): explorer.terrain_io.DEM_DATUMS.
+DEM_DATUM_WORDS = {"ellipsoid": "ellipsoid", "egm96": "egm96", "geoid": "egm96", "orthometric": "egm96"}
+
+
+def dem_datum(text: str) -> str:
+    """``ellipsoid`` or ``egm96`` (``geoid`` is EGM96): the vertical datum of a DEM that declares none."""
+    key = text.strip().lower()
+    if key not in DEM_DATUM_WORDS:
+        raise argparse.ArgumentTypeError(f"{text!r} is not ellipsoid or egm96")
+    return DEM_DATUM_WORDS[key]
+
+
+def add_dem_datum_argument(parser: argparse.ArgumentParser) -> None:
+    """``--dem-datum ellipsoid|egm96`` (and the former ``--dem-orthometric``, the same as ``egm96``): the one
+    vertical-datum option of every command with ``--dem`` (docs/conventions.md#dem-heights)."""
+    parser.add_argument(
+        "--dem-datum", type=dem_datum, default=None, metavar="{ellipsoid,egm96}",
+        help="what a GeoTIFF DEM's heights are measured from when the file does not declare it (default: its "
+             "vertical CRS if it has one, else ellipsoid; an SRTM .hgt is EGM96; EGM96 heights get the geoid "
+             "height N added)")
+    parser.add_argument("--dem-orthometric", dest="dem_datum", action="store_const", const="egm96",
+                        help=argparse.SUPPRESS)
 
 
 def output_file(text: str) -> str:

@@ -22,6 +22,7 @@ from explorer.bench_defaults import (
 from explorer.commands._args import (
     MAX_ATTITUDE_RATE_SCALE,
     MAX_RELIEF_M,
+    add_dem_datum_argument,
     existing_file,
     float_in_range,
     method_list,
@@ -182,6 +183,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(f"--{kind}", default=None, type=existing_file, help=f"benchmark on {what}")
     p.add_argument("--dem", default=None, type=raster_file,
                    help="with --rpc/--dimap/--dg: DEM for the GCP heights and the terrain (GeoTIFF or .hgt)")
+    add_dem_datum_argument(p)
     p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
     p.add_argument("--degree", type=non_negative_int, default=3,
                    help="with --rpc/--dimap/--dg: degree of the MPC polynomials (default 3, as explore; the papers: 2)")

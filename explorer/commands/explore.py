@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from explorer.commands._args import (
+    add_dem_datum_argument,
     method_list,
     name_text,
     port_number,
@@ -72,8 +73,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help=f"with --pair: what the {side} file is (default auto: scene/ISD JSON by content, else an "
                             "RPC; dimap / dg: the rigorous model of the metadata rather than its vendor RPC)")
     p.add_argument("--dem", default=None, metavar="DEM",
-                   help="DEM for --rpc / --dimap / --dg (GeoTIFF with EGM96 heights, or SRTM .hgt); must cover "
-                        "the image footprint")
+                   help="DEM for --rpc / --dimap / --dg / --pair (GeoTIFF or SRTM .hgt; vertical datum: "
+                        "--dem-datum); must cover the image footprint")
+    add_dem_datum_argument(p)
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=port_number, default=8080,
                    help="port (default 8080; 0 picks a free one; a busy port is an error)")

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from explorer.commands._args import (
+    add_dem_datum_argument,
     existing_file,
     finite_float,
     int_in_range,
@@ -104,7 +105,7 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
     if args.dem:
         from explorer.terrain_io import read_dem_above_ellipsoid
 
-        dem = read_dem_above_ellipsoid(args.dem, orthometric=args.dem_orthometric)
+        dem = read_dem_above_ellipsoid(args.dem, datum=args.dem_datum)
     if args.rpc:
         from explorer.rpc import read_rpc
         from explorer.rpc.sensor import RPCSensor
@@ -344,9 +345,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rpc", default=None, type=existing_file, help="RPC file (any supported format) instead of a scene")
     p.add_argument("--rpc-shape", default=None, type=image_shape, help="source size ROWSxCOLS for --rpc --synthetic")
     p.add_argument("--dem", default=None, type=raster_file,
-                   help="GeoTIFF DEM of heights above the ellipsoid, or SRTM .hgt (above EGM96: converted)")
-    p.add_argument("--dem-orthometric", action="store_true",
-                   help="the GeoTIFF DEM's heights are above the EGM96 geoid (added N); .hgt files always are")
+                   help="GeoTIFF or SRTM .hgt DEM (vertical datum: --dem-datum)")
+    add_dem_datum_argument(p)
     p.add_argument("--height", type=finite_float, default=None, help="constant ellipsoidal height, metres")
     p.add_argument("--image", default=None, type=existing_file,
                    help="source image (.npy or any raster rasterio reads); must have the scene's size")

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, TextIO
 
 from explorer.commands._args import (
+    add_dem_datum_argument,
     existing_file,
     height_m,
     latitude,
@@ -136,7 +137,7 @@ def cmd_project(args: argparse.Namespace) -> int:
 def _load_dem(args: argparse.Namespace) -> Any:
     from explorer.terrain_io import read_dem_above_ellipsoid
 
-    return read_dem_above_ellipsoid(args.dem, orthometric=args.dem_orthometric)
+    return read_dem_above_ellipsoid(args.dem, datum=args.dem_datum)
 
 
 def cmd_localize(args: argparse.Namespace) -> int:
@@ -220,10 +221,7 @@ def register(subparsers: Any) -> None:
     localize.add_argument("--col", type=pixel_coordinate)
     localize.add_argument("--h", type=height_m, help="metres above the ellipsoid")
     localize.add_argument("--dem", type=raster_file, help="GeoTIFF or SRTM .hgt DEM to intersect")
-    localize.add_argument(
-        "--dem-orthometric", action="store_true",
-        help="DEM heights are above the EGM96 geoid (added N); .hgt files always are",
-    )  # fmt: skip
+    add_dem_datum_argument(localize)
     localize.add_argument("--points", type=existing_file, help="CSV with columns row,col[,h]")
     localize.add_argument("--out", type=output_file, help="output CSV (default: stdout); adds lon,lat,converged")
     localize.set_defaults(func=cmd_localize)

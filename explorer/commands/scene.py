@@ -20,6 +20,7 @@ import time
 from typing import Any
 
 from explorer.commands._args import (
+    add_dem_datum_argument,
     existing_file,
     int_in_range,
     output_file,
@@ -183,8 +184,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("file", type=existing_file, help="RPC file (any format `pushbroom rpc info` reads)")
     p.add_argument("--dem", type=raster_file,
                    help="DEM (GeoTIFF or SRTM .hgt) for the GCP heights and the scene terrain")
-    p.add_argument("--dem-datum", choices=("geoid", "ellipsoid"), default="geoid",
-                   help="vertical reference of a GeoTIFF DEM (default geoid = EGM96; RPC heights are ellipsoidal)")
+    add_dem_datum_argument(p)
     p.add_argument("--gcps", type=int_in_range(4, 1_000_000, "--gcps"), default=100,
                    help="about this many GCPs per height layer (default 100; at least 4, a 2 x 2 grid)")
     p.add_argument("--layers", type=int_in_range(1, 100, "--layers"), default=3,

@@ -10,7 +10,15 @@ import argparse
 import sys
 from typing import Any
 
-from explorer.commands._args import existing_file, finite_float, height_m, output_file, positive_float, raster_file
+from explorer.commands._args import (
+    add_dem_datum_argument,
+    existing_file,
+    finite_float,
+    height_m,
+    output_file,
+    positive_float,
+    raster_file,
+)
 
 __all__ = ["cmd_grids", "cmd_triangulate", "register"]
 
@@ -27,23 +35,14 @@ def _pair(args: argparse.Namespace) -> tuple[Any, Any]:
     return load_sensor(args.left, args.left_kind), load_sensor(args.right, args.right_kind)
 
 
-def _load_dem(path: str, orthometric: bool) -> Any:
-    from pathlib import Path
-
-    from explorer.terrain_io import EllipsoidalDEM, Geoid, read_geotiff_dem, read_hgt
-
-    dem = read_hgt(Path(path)) if path.lower().endswith(".hgt") else read_geotiff_dem(path)
-    if orthometric or dem.vertical_reference == "egm96":
-        return EllipsoidalDEM(dem, Geoid.egm96())
-    return dem
-
-
 def cmd_grids(args: argparse.Namespace) -> int:
     """``stereo grids LEFT RIGHT (--height H | --dem DEM) --step N --out DIR``."""
     from explorer.stereo.grids import epipolar_grids, write_grids
 
     left, right = _pair(args)
-    dem = _load_dem(args.dem, args.dem_orthometric) if args.dem else None
+    from explorer.terrain_io import read_dem_above_ellipsoid
+
+    dem = read_dem_above_ellipsoid(args.dem, datum=args.dem_datum) if args.dem else None
     grids = epipolar_grids(left, right, height=args.height, dem=dem, step=args.step,
                            elevation_offset_m=args.elevation_offset)
     paths = write_grids(grids, args.out)
@@ -119,8 +118,7 @@ def register(subparsers: Any) -> None:
     where = grids.add_mutually_exclusive_group(required=True)
     where.add_argument("--height", type=height_m, help="grid height, metres above the ellipsoid")
     where.add_argument("--dem", type=raster_file, help="DEM (GeoTIFF or .hgt) under the nodes (RPC left image)")
-    grids.add_argument("--dem-orthometric", action="store_true",
-                       help="DEM heights are above the EGM96 geoid (.hgt files always are)")
+    add_dem_datum_argument(grids)
     grids.add_argument("--step", type=positive_float, default=30.0, help="grid step, pixels (default 30)")
     grids.add_argument("--elevation-offset", type=positive_float, default=50.0,
                        help="metres either side of the height for the local epipolar direction (default 50)")

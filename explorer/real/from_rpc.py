@@ -65,33 +65,38 @@ def rpc_image_size(rpc: RationalFunctionModel) -> tuple[int, int]:
     return int(round(2 * rpc.row_offset + 1)), int(round(2 * rpc.col_offset + 1))
 
 
-def load_dem(dem: Any, datum: str = "geoid") -> Any:
+def load_dem(dem: Any, datum: str | None = None) -> Any:
     """A height source with ellipsoidal heights for :func:`~explorer.rpc.dem.localization_on_dem`.
 
     Parameters
     ----------
     dem : str, Path, GeoDEM or object with ``height(lon, lat)``
-        A GeoTIFF or SRTM ``.hgt`` path, or a loaded DEM.
-    datum : {"geoid", "ellipsoid"}
-        What a GeoTIFF's heights are measured from (``.hgt`` files are always EGM96).
+        A GeoTIFF or SRTM ``.hgt`` path (read by :func:`explorer.terrain_io.read_dem_above_ellipsoid`, the
+        one DEM reader of every command), or a loaded DEM.
+    datum : {"ellipsoid", "egm96"} or None
+        What the heights are measured from when the file does not declare it (``"geoid"`` = ``"egm96"``;
+        None: :data:`explorer.terrain_io.DEFAULT_DEM_DATUM`, see ``docs/conventions.md#dem-heights``).
         Geoid heights are converted with the EGM96 grid (``terrain_io.EllipsoidalDEM``).
     """
-    from explorer.terrain_io import EllipsoidalDEM, GeoDEM, Geoid, read_geotiff_dem, read_hgt
+    from explorer.terrain_io import (
+        DEFAULT_DEM_DATUM,
+        EllipsoidalDEM,
+        GeoDEM,
+        Geoid,
+        normalise_dem_datum,
+        read_dem_above_ellipsoid,
+    )
 
-    if datum not in ("geoid", "ellipsoid"):
-        raise InputError(f"DEM datum must be 'geoid' or 'ellipsoid', got {datum!r}")
+    datum = normalise_dem_datum(datum)
     if isinstance(dem, (str, Path)):
         path = Path(dem)
         if not path.is_file():
             raise InputError(f"DEM not found (or not a file): {path}")
-        if path.suffix.lower() == ".hgt":
-            dem = read_hgt(path)
-        else:
-            dem = read_geotiff_dem(path, vertical_reference="egm96" if datum == "geoid" else "ellipsoid")
-    if isinstance(dem, GeoDEM) and dem.vertical_reference in ("egm96", "geoid"):
-        return EllipsoidalDEM(dem, Geoid.egm96())
-    if isinstance(dem, GeoDEM) and dem.vertical_reference == "unknown" and datum == "geoid":
-        return EllipsoidalDEM(dem, Geoid.egm96())
+        return read_dem_above_ellipsoid(path, datum=datum)
+    if isinstance(dem, GeoDEM):
+        reference = dem.vertical_reference if dem.vertical_reference != "unknown" else (datum or DEFAULT_DEM_DATUM)
+        if reference in ("egm96", "geoid"):
+            return EllipsoidalDEM(dem, Geoid.egm96())
     return dem
 
 
@@ -391,7 +396,7 @@ def scene_from_rpc(
     preset: str | None = None,
     *,
     layers: int = 3,
-    dem_datum: str = "geoid",
+    dem_datum: str | None = None,
     estimate_focal: bool | None = None,
     altitude_m: float | None = None,
     degree: int = 2,
@@ -421,8 +426,9 @@ def scene_from_rpc(
         Number of height layers of the GCP grid when no DEM is given, spanning the RPC's
         validity range ``height_offset +- |height_scale|`` (1: the height offset only, the
         papers' "mean height"; with a DEM the GCPs are on the terrain).
-    dem_datum : {"geoid", "ellipsoid"}
-        Vertical reference of a GeoTIFF DEM (RPC heights are ellipsoidal).
+    dem_datum : {"ellipsoid", "egm96"} or None
+        Vertical datum of a GeoTIFF DEM that declares none (RPC heights are ellipsoidal; None: the default of
+        ``docs/conventions.md#dem-heights``, see :func:`load_dem`).
     estimate_focal : bool, optional
         Default: True without a preset, False with one.
     altitude_m : float, optional
@@ -536,6 +542,10 @@ def scene_from_rpc(
         "preset": preset or "", "initial_method": init_info["initial_method"],
         "initial_altitude_m": float(init_info.get("altitude_m", altitude_m)),
     })  # fmt: skip
+    if height_source is not None:
+        from explorer.terrain_io import datum_statement
+
+        report.info["dem_datum"] = datum_statement(height_source)
     scene.metadata = {
         **scene.metadata,
         "source": "rpc-resection",

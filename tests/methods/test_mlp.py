@@ -158,7 +158,8 @@ def real_scene(request):
     from tests.real.conftest import DEM_DIR, RPC_DIR
 
     kind, name, dem = REAL_SOURCES[request.param]
-    src = load_source(kind, str(RPC_DIR / name), dem=str(DEM_DIR / dem) if dem else None)
+    src = load_source(kind, str(RPC_DIR / name), dem=str(DEM_DIR / dem) if dem else None,
+                      dem_datum="egm96" if dem else None)  # the 2017 DEM: heights above the geoid
     scps = simulate_points(src.scene, 20_000, kind="scp")
     return request.param, src.scene, scps
 

@@ -191,7 +191,8 @@ def test_real_dem_ground_mesh_follows_the_dem_and_is_decimated_for_the_browser()
     from explorer.sources import load_source
     from tests.real.conftest import DEM_DIR, PHR_2017
 
-    scene = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif")).scene
+    scene = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"),
+                        dem_datum="egm96").scene
     n, cells = B.ground_mesh_nodes(scene)
     fp = scene.footprint()
     span = max(np.ptp(fp[:, 0]), np.ptp(fp[:, 1]))
