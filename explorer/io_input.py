@@ -47,6 +47,7 @@ __all__ = [
     "load_xml_file",
     "loads_json",
     "read_input_bytes",
+    "read_csv_table",
     "read_input_text",
     "read_points_csv",
 ]
@@ -290,35 +291,17 @@ def read_points_csv(path: str | os.PathLike[str], columns: tuple[str, ...] | lis
     InputError
         Naming the file, and the line and column of the first bad value.
     """
-    import csv
-    import io
-
     import numpy as np
 
     from explorer.errors import InputError
 
-    text = read_input_text(path, what)
-    check_allocation(len(text) * PARSE_BYTES_PER_CHAR, f"{what} {path} ({len(text) / 1024**2:.0f} MiB of text)",
-                     "split it into smaller files")
-    try:
-        reader = csv.reader(io.StringIO(text, newline=""))
-        table = [row for row in reader if any(cell.strip() for cell in row)]
-    except csv.Error as exc:
-        raise InputError(f"{path}: malformed CSV ({exc})") from None
-    if not table:
-        raise InputError(f"{path}: empty CSV (no header)")
-    header = [h.strip() for h in table[0]]
+    header, body, lines = read_csv_table(path, what)
     lower = [h.lower() for h in header]
-    if len(table) < 2:
-        raise InputError(f"{path}: no data rows")
     missing = [c for c in columns if c.lower() not in lower]
     if missing:
         raise InputError(f"{path}: missing column(s) {', '.join(missing)} (has {', '.join(header)})")
-    rows = []
-    for i, row in enumerate(table[1:]):
-        if len(row) != len(header):
-            raise InputError(f"{path}: line {i + 2} has {len(row)} fields, the header {len(header)}")
-        rows.append(dict(zip(header, row, strict=True)))
+    rows = [dict(zip(header, row, strict=True)) for row in body]
+    table = [header, *body]
     arrays = {}
     for c in columns:
         k = lower.index(c.lower())
@@ -327,20 +310,69 @@ def read_points_csv(path: str | os.PathLike[str], columns: tuple[str, ...] | lis
             values = np.asarray(texts, dtype=np.float64)
         except (TypeError, ValueError):
             i = next(i for i, t in enumerate(texts) if not _is_float(t))
-            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]!r} is not a finite number") from None
+            raise InputError(f"{path}: line {lines[i]}, column {c!r}: {texts[i][:40]!r} is not a finite "
+                             "number") from None
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             i = int(bad[0])
-            raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]!r} is not a finite number")
+            raise InputError(f"{path}: line {lines[i]}, column {c!r}: {texts[i][:40]!r} is not a finite number")
         if c.lower() in COLUMN_RANGES:
             low, high, unit = COLUMN_RANGES[c.lower()]
             out = np.flatnonzero((values < low) | (values > high))
             if out.size:
                 i = int(out[0])
-                raise InputError(f"{path}: line {i + 2}, column {c!r}: {texts[i][:40]} is outside {low:g} .. "
+                raise InputError(f"{path}: line {lines[i]}, column {c!r}: {texts[i][:40]} is outside {low:g} .. "
                                  f"{high:g} {unit}")
         arrays[c] = values
     return rows, arrays
+
+
+def read_csv_table(path: str | os.PathLike[str],
+                   what: str = "CSV file") -> tuple[list[str], list[list[str]], list[int]]:
+    """A CSV file's header (stripped), data rows and their line numbers, checked to be complete.
+
+    The file must **end in a newline** (CSV writers end the last record with one; a file that does not may
+    have been cut inside its last value -- ``123.45`` cut to ``12`` is still a number -- so it is refused,
+    naming its last line), must not end inside a quoted field, and every data row has the header's number of
+    fields.  Blank lines are skipped; line numbers are the file's own (1 = the header line).
+
+    Raises
+    ------
+    InputError
+        Naming the file and the line.
+    """
+    import csv
+    import io
+
+    from explorer.errors import InputError
+
+    text = read_input_text(path, what)
+    check_allocation(len(text) * PARSE_BYTES_PER_CHAR, f"{what} {path} ({len(text) / 1024**2:.0f} MiB of text)",
+                     "split it into smaller files")
+    if text.strip() and not text.endswith(("\n", "\r")):
+        last = len(text.splitlines())
+        tail = text.splitlines()[-1][-40:]
+        raise InputError(f"{path}: line {last} ({tail!r}) does not end in a newline: the file may be cut inside "
+                         "its last value (end it with a newline if it is complete)")
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    table: list[list[str]] = []
+    lines: list[int] = []
+    try:
+        for row in reader:
+            if any(cell.strip() for cell in row):
+                table.append(row)
+                lines.append(reader.line_num)
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {reader.line_num}: malformed CSV ({exc})") from None
+    if not table:
+        raise InputError(f"{path}: empty CSV (no header)")
+    header = [h.strip() for h in table[0]]
+    if len(table) < 2:
+        raise InputError(f"{path}: no data rows")
+    for row, line in zip(table[1:], lines[1:], strict=True):
+        if len(row) != len(header):
+            raise InputError(f"{path}: line {line} has {len(row)} fields, the header {len(header)}")
+    return header, table[1:], lines[1:]
 
 
 def _is_float(text: str) -> bool:

@@ -13,8 +13,6 @@ and column.
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -22,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from explorer.errors import InputError
-from explorer.io_input import read_input_text
+from explorer.io_input import read_csv_table
 
 __all__ = ["PointTable", "read_points_csv"]
 
@@ -71,16 +69,10 @@ def read_points_csv(path: str | os.PathLike[str], columns: Sequence[str] = CONTR
         beyond 90 degrees, an id repeated within one image.
     """
     name = os.fspath(path)
-    # regular file only, any text encoding (a UTF-8 BOM, UTF-16, Latin-1), binary refused: explorer.io_input
-    text = read_input_text(name, "CSV of points")
-    try:
-        records = list(csv.DictReader(io.StringIO(text, newline="")))
-    except csv.Error as exc:
-        raise InputError(f"{name}: not a readable CSV text file ({exc})") from None
-    if not records:
-        raise InputError(f"{name}: no data rows (expected columns {','.join(columns)})")
-    header = [k.strip() for k in records[0] if k is not None]
-    records = [{(k or "").strip(): (v or "").strip() for k, v in r.items()} for r in records]
+    # regular file only, any text encoding (a UTF-8 BOM, UTF-16, Latin-1), binary refused, a file cut inside its
+    # last value (no final newline) or a row with another number of fields refused: explorer.io_input
+    header, body, lines = read_csv_table(name, "CSV of points")
+    records = [{k: v.strip() for k, v in zip(header, row, strict=True)} for row in body]
     missing = [c for c in columns if c not in header]
     if missing:
         raise InputError(f"{name}: missing column(s) {', '.join(missing)} (has {', '.join(header)}; "
@@ -97,21 +89,21 @@ def read_points_csv(path: str | os.PathLike[str], columns: Sequence[str] = CONTR
             except ValueError:
                 values[i] = np.nan
             if not np.isfinite(values[i]):
-                raise InputError(f"{name}: line {i + 2}, column {c!r}: {text!r} is not a finite number")
+                raise InputError(f"{name}: line {lines[i]}, column {c!r}: {text!r} is not a finite number")
         numbers[c] = values
     if "lat" in numbers and (np.abs(numbers["lat"]) > 90.0).any():
         i = int(np.argmax(np.abs(numbers["lat"])))
-        raise InputError(f"{name}: line {i + 2}, column 'lat': {numbers['lat'][i]:g} is beyond 90 degrees")
+        raise InputError(f"{name}: line {lines[i]}, column 'lat': {numbers['lat'][i]:g} is beyond 90 degrees")
     ids = [r["id"] for r in records]
     if any(not i for i in ids):
-        raise InputError(f"{name}: line {ids.index('') + 2}: empty id")
+        raise InputError(f"{name}: line {lines[ids.index('')]}: empty id")
     image = [r["image"] for r in records] if "image" in header else None
     keys = list(zip(ids, image or [""] * len(ids), strict=True))
     if len(set(keys)) != len(keys):
         seen: set[tuple[str, str]] = set()
         for i, k in enumerate(keys):
             if k in seen:
-                raise InputError(f"{name}: line {i + 2}: id {k[0]!r} appears twice"
+                raise InputError(f"{name}: line {lines[i]}: id {k[0]!r} appears twice"
                                  + (f" in image {k[1]!r}" if image else ""))
             seen.add(k)
     return PointTable(ids=ids, row=numbers["row"], col=numbers["col"], lon=numbers.get("lon"),
