@@ -117,6 +117,8 @@ def needed_units(command: str, *, source: str = "preset", methods: Sequence[str]
     units.append("scene:relief" if relief else "scene")
     if source in ("rpc", "isd"):
         units.append(source)
+    if source in ("dimap", "dg", "scene"):  # a rigorous line-scan model (a scene file may hold one)
+        units.append("linescan")
     for m in methods:
         units.append(f"method:{m}")
         if relief:

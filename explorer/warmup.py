@@ -147,6 +147,7 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
             out.append((f"{pid}: compiled methods", partial(_warm_compiled_methods, pid)))
     out.append(("orthorectification block", _warm_ortho))
     out.append(("stereo pair (triangulation, epipolar curve)", _warm_stereo))
+    out.append(("rigorous line-scan model (DIMAP / DigitalGlobe line geometry)", _warm_linescan))
     out.append(("every other kernel of the manifest (explorer.kernel_cache)", _warm_manifest))
     return out
 
@@ -189,6 +190,42 @@ def _warm_scene(scene) -> None:
     simulate_points(scene, 25_000, kind="scp")  # above the parallel thresholds
     centre = np.array([(scene.n_rows - 1) / 2.0]), np.array([(scene.n_columns - 1) / 2.0])
     scene.image_to_ground(*centre)
+
+
+def _rigorous_scene_for_warmup(aberration: bool = True, refraction: bool = True):
+    """A rigorous line-scan scene (:class:`explorer.real.linescan.RigorousLineScanScene`, the model ``--dimap`` /
+    ``--dg`` load) sampled from the default preset's orbit: ECEF ephemeris and attitude tables, no file needed."""
+    from explorer.presets import build_scene, default_preset_id
+    from explorer.real.linescan import (
+        AttitudeTable,
+        Ephemeris,
+        LineScanExterior,
+        RigorousLineScanScene,
+        matrix_to_quaternion,
+    )
+
+    mpc = build_scene(default_preset_id())
+    lo, hi = mpc.time_range()
+    t = np.linspace(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), 12)
+    e = mpc.frame.enu_to_ecef_rotation
+    ephemeris = Ephemeris(t, mpc.frame.enu_to_ecef(mpc.exterior.position(t)), mpc.exterior.velocity(t) @ e.T)
+    attitude = AttitudeTable(t, matrix_to_quaternion(np.einsum("ij,njk->nik", e, mpc.exterior.rotation(t))))
+    return RigorousLineScanScene(name="warm-up rigorous", interior=mpc.interior,
+                                 exterior=LineScanExterior(ephemeris, attitude, mpc.frame), timing=mpc.timing,
+                                 n_rows=mpc.n_rows, terrain=mpc.terrain, frame=mpc.frame, aberration=aberration,
+                                 refraction=refraction)
+
+
+def _warm_linescan() -> None:
+    """The compiled line geometry of the rigorous models (``--dimap``, ``--dg``; ``explorer/real/_linescan_kernel.py``):
+    its serial and threaded loops (from 200,000 points), the scene's ground to image and the search methods on its
+    line geometry."""
+    scene = _rigorous_scene_for_warmup()
+    for n in (2, 200_000):
+        rows = np.linspace(0.0, scene.n_rows - 1.0, n)
+        cols = np.linspace(0.0, scene.n_columns - 1.0, n)
+        scene.focal_plane(scene.image_to_ground(rows, cols), scene.scanline_time(rows))
+    _warm_methods(scene, ["exact", "nr"], n_scops=30, n_scps=200)
 
 
 def _isd_scene(path: Path) -> object:
@@ -241,6 +278,7 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         "rpc": _warm_rpc,
         "ortho": _warm_ortho,
         "stereo": _warm_stereo,
+        "linescan": _warm_linescan,
     }
     isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
     if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
