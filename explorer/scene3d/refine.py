@@ -84,7 +84,8 @@ def add_refined_trajectories(
     -------
     handles : dict
     info : dict
-        ``position_factor``, ``attitude_factor`` (as drawn), ``text`` (the label), and the comparison's
+        ``position_factor``, ``attitude_factor`` (as drawn), ``text`` (what was drawn, with the true ranges, for
+        the GUI), ``label`` (the scene's short label, at the middle of the adjusted track), and the comparison's
         :meth:`~explorer.refine.trajectory.TrajectoryComparison.summary`.
     """
     auto_p, auto_a = auto_factors(comparison, frame)
@@ -110,6 +111,7 @@ def add_refined_trajectories(
     d, a = summary["displacement_m"], summary["attitude_change_urad"]
     text = (f"adjusted trajectory (red) vs original (grey): centres moved {d[0]:.3g}..{d[1]:.3g} m, drawn x{kp:g}; "
             f"attitude turned {a[0]:.3g}..{a[1]:.3g} urad, drawn x{ka:g}")
-    out["/refine/label"] = api.add_label("/refine/label", text, position=frame.sensor(centres[:1])[0],
-                                         anchor="bottom-right")
-    return out, {"position_factor": kp, "attitude_factor": ka, "text": text, **summary}
+    label = f"adjusted trajectory (red): position x{kp:g}, attitude x{ka:g}"
+    middle = frame.sensor(centres[len(centres) // 2: len(centres) // 2 + 1])[0]
+    out["/refine/label"] = api.add_label("/refine/label", label, position=middle, anchor="bottom-center")
+    return out, {"position_factor": kp, "attitude_factor": ka, "text": text, "label": label, **summary}

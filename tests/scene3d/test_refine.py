@@ -74,7 +74,8 @@ def test_drawn_tracks_and_stated_factors(distance):
     np.testing.assert_allclose(axes_a, axes_o @ rx.T, atol=1e-12 * frame.diagonal_km)
     assert not np.allclose(axes_a, axes_o, atol=1e-3 * frame.diagonal_km)  # visibly turned
     assert f"drawn x{kp:g}" in info["text"] and f"drawn x{ka:g}" in info["text"] and "50 m" in info["text"]
-    assert nodes["/refine/label"].args[0] == info["text"]
+    want = f"adjusted trajectory (red): position x{kp:g}, attitude x{ka:g}"
+    assert nodes["/refine/label"].args[0] == info["label"] == want
     assert info["displacement_m"] == pytest.approx([50.0, 50.0])
     fixed, info2 = add_refined_trajectories(RecordingScene(), comp, frame, position_factor=1.0, attitude_factor=1.0)
     np.testing.assert_allclose(fixed["/refine/adjusted/track"].args[0] - orig,

@@ -1,0 +1,171 @@
+"""``explore SOURCE --gcps`` in a real browser (headless Debian Chromium through Playwright, network blocked):
+the Refinement folder shows the residual quiver, the parameter table and the trajectory panel, the 3D scene
+draws the original and the adjusted trajectories, and dropping a point in the browser re-adjusts.
+
+Sources: an MPC scene file (``--scene``) and the 2017 Pleiades DIMAP file (``--dimap``: refined through its MPC
+stand-in until its own differentiable model lands).  The control points are the sensor's own projections of
+seeded ground points plus a known bias and 0.3 px noise.  Skipped without /usr/bin/chromium.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import threading
+import time
+from argparse import Namespace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.slow,
+    pytest.mark.skipif(not os.path.exists(CHROMIUM), reason="needs Debian chromium at /usr/bin/chromium"),
+]
+sync_api = pytest.importorskip("playwright.sync_api")
+Image = pytest.importorskip("PIL.Image")
+pytest.importorskip("torch")
+
+from explorer.app import serve  # noqa: E402
+from explorer.app.server import _refine_folder  # noqa: E402
+from explorer.refine.points_io import PointTable  # noqa: E402
+from explorer.scene3d.refine import ADJUSTED_RGB  # noqa: E402
+from explorer.sources import load_source  # noqa: E402
+from tests.refine.cases import write_points_csv  # noqa: E402
+
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-quic",
+        "--no-first-run", "--disable-component-update", "--disable-sync"]
+TIMEOUT_MS = 240_000
+PHR_2017 = Path(__file__).resolve().parent / "data" / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
+BIAS = np.array([3.0, -2.0])  # rows, columns added to the sensor's projection
+
+
+def _control(sensor, n: int, seed: int, prefix: str) -> PointTable:
+    """``n`` seeded ground points seen by ``sensor`` (on heights over +-200 m), measured at the sensor's own
+    pixels plus :data:`BIAS` plus 0.3 px Gaussian noise."""
+    rng = np.random.default_rng(seed)
+    r = rng.uniform(0.05, 0.95, n) * sensor.n_rows
+    c = rng.uniform(0.05, 0.95, n) * sensor.n_columns
+    g = sensor.image_to_ground(r, c, height=float(sensor.terrain.mean_height) + rng.uniform(-200, 200, n))
+    proj = sensor.project(g)
+    assert proj.valid.all()
+    lon, lat, h = sensor.frame.enu_to_geodetic(g)
+    return PointTable([f"{prefix}{i}" for i in range(n)], proj.row + BIAS[0] + rng.normal(0, 0.3, n),
+                      proj.col + BIAS[1] + rng.normal(0, 0.3, n), lon, lat, h)
+
+
+def _serve(source, tmp_path: Path):
+    gcps = write_points_csv(tmp_path / "gcps.csv", _control(source.scene, 16, 1, "g"))
+    check = write_points_csv(tmp_path / "check.csv", _control(source.scene, 20, 2, "c"))
+    args = Namespace(gcps=str(gcps), check=str(check), sigma_px=0.3)
+    ready = _refine_folder(args, source)
+    box: dict = {}
+    stop = threading.Event()
+
+    def on_ready(app) -> None:
+        ready(app)
+        box["app"] = app
+
+    th = threading.Thread(target=lambda: box.setdefault("rc", serve(
+        source.label, port=0, methods=["lrm"], sources=[source], stop_event=stop, ready=on_ready,
+        scp_count=2000, sweep=False)), daemon=True)
+    th.start()
+    t0 = time.monotonic()
+    while "app" not in box and th.is_alive() and time.monotonic() - t0 < 240:
+        time.sleep(0.1)
+    app = box["app"]
+    assert app.wait_idle(240)
+    return app, stop, th, box
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield b
+        b.close()
+
+
+def _open(browser, url: str):
+    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(url)
+                  or route.request.url.startswith(url.replace("http", "ws")) else route.abort())
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    page.goto(url)
+    page.wait_for_function("() => Array.from(document.querySelectorAll('canvas')).some(c => c.width > 300)")
+    return page
+
+
+RECT_3D = """() => {
+  let best = null, area = 0;
+  for (const c of document.querySelectorAll('canvas')) {
+    const r = c.getBoundingClientRect();
+    if (r.width * r.height > area) { area = r.width * r.height; best = r; }
+  }
+  return {x: best.x, y: best.y, width: best.width, height: best.height};
+}"""
+
+
+def _near(page, rgb, tol: int = 60) -> int:
+    """Pixels of the 3D canvas within ``tol`` (sum of |channel differences|) of ``rgb``."""
+    png = page.screenshot(clip=page.evaluate(RECT_3D))
+    px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+    return int((np.abs(px - np.array(rgb)).sum(axis=2) < tol).sum())
+
+
+def _plot_texts(page) -> str:
+    return page.evaluate("() => Array.from(document.querySelectorAll('.js-plotly-plot')).map(e => e.innerText)"
+                         ".join('\\n')")
+
+
+@pytest.mark.parametrize("kind", ["scene", "dimap"])
+def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
+    if kind == "scene":
+        from explorer.presets import build_scene
+
+        path = tmp_path / "wsu.json"
+        build_scene("WSU").save(path)
+        source = load_source("scene", str(path))
+    else:
+        source = load_source("dimap", str(PHR_2017))
+    app, stop, th, box = _serve(source, tmp_path)
+    try:
+        view = app.refine_view
+        assert view.error is None and view.has_trajectory
+        page = _open(browser, app.url)
+        page.wait_for_function("() => document.body.innerText.includes('trajectory moved by')")
+        page.screenshot(path=str(tmp_path / f"refine_{kind}.png"), full_page=True)
+        text = _plot_texts(page)
+        assert "residuals (measured - model)" in text and "before (vectors" in text  # the quiver
+        assert "position_e_m" in text and "kappa_rad" in text and "sigma" in text  # the parameter table
+        body = page.evaluate("() => document.body.innerText")
+        assert ("(a stand-in)" in body) == (kind == "dimap")
+        assert "adjusted trajectory (red) vs original (grey)" in body  # the folder states the 3D factors
+        red = _near(page, ADJUSTED_RGB)
+        view.draw_3d(visible=False)
+        page.wait_for_timeout(1500)
+        hidden = _near(page, ADJUSTED_RGB)
+        view.draw_3d(visible=True)
+        assert red > hidden + 50, (red, hidden)  # the adjusted trajectory is drawn in 3D
+
+        # drop a point in the browser: the adjustment re-runs and the parameters change
+        before = view.refinement.parameters.copy()
+        box_ = page.locator("xpath=//label[text()='Drop point ids']"
+                            "/ancestor::div[contains(@class, 'mantine-Flex-root')][1]//input")
+        box_.fill("g0, g1")
+        box_.press("Enter")
+        t0 = time.monotonic()
+        while view.refinement.result.outlier.size != 14 and time.monotonic() - t0 < 60:
+            time.sleep(0.2)
+        assert view.refinement.result.outlier.size == 14
+        assert np.abs(view.refinement.parameters - before).max() > 0
+        page.wait_for_function("() => document.body.innerText.includes('2 point(s) dropped')")
+        page.context.close()
+    finally:
+        stop.set()
+        th.join(60)
+    assert box["rc"] == 0
