@@ -87,7 +87,9 @@ class RefineView:
         self.sensor, self.control, self.check, self.sigma_px = self.target.model, control, check, sigma_px
         adapter = image_adapter(self.sensor)
         self.models = list(adapter.models)
-        self.has_trajectory = getattr(adapter, "adjusted_sensor", None) is not None
+        from explorer.sensor import has_line_geometry
+
+        self.has_trajectory = has_line_geometry(self.sensor)
         self.is_scene = adapter.kind == "scene"
         self.stand_in_px = self.target.stand_in_error_px(control, check)
         self.scene_api, self.display_frame = scene_api, display_frame

@@ -177,10 +177,12 @@ def trajectory_figure(ref: Refinement, image: int = 0, *, n: int = 30, boresight
 
 def refinement_html(ref: Refinement) -> str:
     """Every panel of the refinement as one offline HTML page (plotly.js inlined once)."""
+    from explorer.sensor import has_line_geometry
+
     figures = [parameter_table_figure(ref)]
     for k in range(len(ref.images)):
         figures += [residual_quiver_figure(ref, k), correction_field_figure(ref, k)]
-        if getattr(ref.images[k], "adjusted_sensor", None) is not None:
+        if has_line_geometry(ref.images[k].sensor):
             figures.append(trajectory_figure(ref, k))
     parts = [fig.to_html(full_html=False, include_plotlyjs=(k == 0)) for k, fig in enumerate(figures)]
     return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>refinement</title></head><body>"

@@ -123,15 +123,22 @@ def trajectory_comparison(original: Any, adjusted: Any, n: int = 25) -> Trajecto
 
 
 def refinement_trajectory(ref: Refinement, image: int = 0, n: int = 25) -> TrajectoryComparison:
-    """The trajectory of image ``image`` of a refinement, before and after (its adapter's adjusted sensor).
+    """The trajectory of image ``image`` of a refinement, before and after (its adapter's adjusted sensor:
+    ``adjusted_sensor(model, params)``, else the ``adjusted`` sensor it kept).
 
     Raises
     ------
     ValueError
         For an image without scanlines (an RPC).
     """
+    from explorer.sensor import has_line_geometry
+
     adapter = ref.images[image]
-    adjusted_sensor = getattr(adapter, "adjusted_sensor", None)
-    if adjusted_sensor is None:
+    if not has_line_geometry(adapter.sensor):
         raise ValueError(f"an {adapter.what} has no trajectory: the 3D view needs a sensor with scanlines")
-    return trajectory_comparison(adapter.sensor, adjusted_sensor(ref.model, ref.result.parameters[image]), n)
+    make = getattr(adapter, "adjusted_sensor", None)
+    # the adapter's adjusted sensor for these parameters, else the one it kept from the adjustment
+    adjusted = make(ref.model, ref.result.parameters[image]) if make is not None else getattr(adapter, "adjusted", None)
+    if adjusted is None:
+        raise ValueError(f"the {adapter.what} adapter keeps no adjusted sensor: no trajectory")
+    return trajectory_comparison(adapter.sensor, adjusted, n)
