@@ -578,8 +578,12 @@ def test_gui_export_is_every_point_and_reproducible(server):
     app = make_app(server)
     a, b = app.export_bytes(), app.export_bytes()
     za, zb = zipfile.ZipFile(io.BytesIO(a)), zipfile.ZipFile(io.BytesIO(b))
-    assert sorted(za.namelist()) == ["panels.html", "residuals.csv", "summary.json"]
-    assert za.read("residuals.csv") == zb.read("residuals.csv")
+    assert sorted(za.namelist()) == ["panels.html", "residuals.csv", "summary.json", "timing.js", "timing.json"]
+    from explorer.app.export import RUN_DEPENDENT
+
+    for name in za.namelist():  # every file but the measured times, byte for byte
+        if name not in RUN_DEPENDENT:
+            assert za.read(name) == zb.read(name), name
     rows = za.read("residuals.csv").decode().splitlines()
     n = len(app.model.scps(app.settings()))
     assert rows[0].startswith("method,scp_index,row_px,col_px,row_residual_px,col_residual_px")
@@ -589,6 +593,9 @@ def test_gui_export_is_every_point_and_reproducible(server):
     summary = json.loads(za.read("summary.json"))
     assert summary["methods"]["toy_bisect"]["n_valid"] + summary["methods"]["toy_bisect"]["n_invalid"] == n
     assert summary["settings"]["subsampled"] is False
+    assert sorted(summary["run_dependent"]) == ["timing.js", "timing.json"]
+    timing = json.loads(za.read("timing.json"))["methods"]
+    assert timing["toy_bisect"]["n_evaluated"] == n and timing["toy_bisect"]["eval_s"] > 0
 
 
 def test_slider_drag_is_debounced_to_the_last_value(server):

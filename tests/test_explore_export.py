@@ -2,10 +2,11 @@
 same bytes on every run.
 
 Real files (provenance: tests/data/rpc/PROVENANCE.md, assets/dem/PROVENANCE.md): the shareloc
-Pleiades 2017 DIMAP with its DEM, and a Pleiades RPC (DIMAP v2 RPC XML).  Each is exported twice
-in separate directories; ``residuals.csv`` must be byte-identical and ``summary.json`` identical
-except the timings.  Truth for the numbers: the exact method ``nr`` reproduces the simulated rows
-to 1e-8 px, and the summary's RMSE / max / counts are recomputed here from the CSV rows.
+Pleiades 2017 DIMAP with its DEM, and a Pleiades RPC (DIMAP v2 RPC XML), usgscsm's ISDs and the default
+preset.  Each is exported twice in separate directories; every file but the run-dependent ones named in
+``summary.json["run_dependent"]`` (``timing.json``, ``timing.js``: the measured times) must be byte-identical.
+Truth for the numbers: the exact method ``nr`` reproduces the simulated rows to 1e-8 px, and the summary's
+RMSE / max / counts are recomputed here from the CSV rows.
 """
 
 from __future__ import annotations
@@ -23,26 +24,39 @@ from tests.real.conftest import DEM_DIR, PHR_2017, RPC_DIR
 
 DEM_2017 = DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"
 RPC_PHR = RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"
-TIMINGS = ("fit_s", "eval_s")
+FILES = ("summary.json", "residuals.csv", "panels.html", "timing.json", "timing.js")
+RUN_DEPENDENT = ("timing.json", "timing.js")
 
 
-def _export(tmp_path, name: str, source: list[str], capsys) -> dict:
+def _export(tmp_path, name: str, source: list[str], capsys, methods: str = "lrm,prm,nr",
+            extra: tuple[str, ...] = ()) -> dict:
     out = tmp_path / name
-    rc = main(["explore", *source, "--methods", "lrm,prm,nr", "--scops", "50", "--scps", "4000", "--seed", "3",
-               "--export", str(out)])
+    rc = main(["explore", *source, "--methods", methods, "--scops", "50", "--scps", "4000", "--seed", "3",
+               "--export", str(out), *extra])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     assert "http://" not in captured.out  # exported, not served
-    return {f: (out / f).read_bytes() for f in ("summary.json", "residuals.csv", "panels.html")}
+    assert sorted(p.name for p in out.iterdir()) == sorted(FILES)  # nothing else
+    return {f: (out / f).read_bytes() for f in FILES}
 
 
-def _without_timings(summary: bytes) -> dict:
-    d = json.loads(summary)
-    for m in d["methods"].values():
-        for k in TIMINGS:
-            assert m[k] is None or m[k] >= 0.0
-            m.pop(k)
-    return d
+def _assert_byte_identical_but_timing(a: dict, b: dict) -> None:
+    """Every file of two exports byte for byte, except the measured times, which are where summary.json says."""
+    assert sorted(json.loads(a["summary.json"])["run_dependent"]) == sorted(RUN_DEPENDENT)
+    for f in FILES:
+        if f not in RUN_DEPENDENT:
+            assert a[f] == b[f], f"{f} differs between two exports with the same settings"
+    for files in (a, b):
+        timing = json.loads(files["timing.json"])
+        assert files["timing.js"].decode() == f"window.PUSHBROOM_TIMING = {files['timing.json'].decode().rstrip()};\n"
+        summary = json.loads(files["summary.json"])
+        assert set(timing["methods"]) == set(summary["methods"])
+        for name, t in timing["methods"].items():
+            assert t["fit_s"] >= 0.0 and (t["eval_s"] is None or t["eval_s"] > 0.0)
+            m = summary["methods"][name]
+            assert t["n_evaluated"] == m["n_valid"] + m["n_invalid"]
+        for m in summary["methods"].values():  # no time left in the reproducible files
+            assert "fit_s" not in m and "eval_s" not in m
 
 
 def _check_summary_against_csv(files: dict) -> None:
@@ -68,21 +82,22 @@ def _check_summary_against_csv(files: dict) -> None:
 
 def _check_offline_page(page: bytes) -> None:
     text = page.decode()
-    assert "<script src=" not in text.replace(" ", "")  # nothing loaded from the network
+    # nothing loaded from the network: the one script file is timing.js, beside the page
+    assert re.findall(r"<script\s+src=[^>]*>", text) == ['<script src="timing.js">']
     assert "Plotly.newPlot" in text and text.count("* plotly.js") == 1  # plotly.js inlined once
     assert 1_400_000 < len(page) < 5_000_000  # issue 24: rasters, not points
     assert "nr row: RMSE" in text and "nr column: RMSE" in text
-    # the Timing panel is filled: a fit time for the learned methods (not "no fit" everywhere)
+    # the Timing panel is there, filled from timing.js when the page opens (tests/test_browser_export.py)
     assert '"text":"fit (s)"' in text.replace(": ", ":") and "ground-to-image (us" in text
-    assert re.search(r'"text":\["[0-9.e+-]+ s"', text)  # lrm's fit time, the first bar
+    assert "window.PUSHBROOM_TIMING" in text and "Plotly.restyle" in text
+    assert "Accuracy vs SCOP density" in text and 'id="summary-table"' in text
 
 
 def _export_twice_identical(tmp_path, src, capsys) -> dict:
-    """Export ``src`` twice: the residuals byte-identical, the summaries equal but for timings, both consistent."""
+    """Export ``src`` twice: every file byte-identical but the measured times, the summary consistent."""
     a = _export(tmp_path, "a", src, capsys)
     b = _export(tmp_path, "b", src, capsys)
-    assert a["residuals.csv"] == b["residuals.csv"]
-    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    _assert_byte_identical_but_timing(a, b)
     _check_summary_against_csv(a)
     return a
 
@@ -127,6 +142,26 @@ def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):
         assert "Traceback" not in captured.err
 
 
+def test_default_preset_exports_byte_identical_with_the_gui_panels(tmp_path, capsys):
+    """Issues 23/24: the default preset with the GUI's default methods (mlp trains with torch) and its
+    accuracy-vs-SCOPs sweep, twice: byte-identical but for the times; the sweep is in the summary and the page,
+    and its entry at the chosen SCOP count is the map's own RMSE (same fit, the same check points)."""
+    a = _export(tmp_path, "a", [], capsys, methods="lrm,prm,mlp,nr")
+    b = _export(tmp_path, "b", [], capsys, methods="lrm,prm,mlp,nr")
+    _assert_byte_identical_but_timing(a, b)
+    _check_summary_against_csv(a)
+    _check_offline_page(a["panels.html"])
+    summary = json.loads(a["summary.json"])
+    sweep = summary["accuracy_vs_scops"]
+    assert [e["n_scops"] for e in sweep["lrm"]] == [10, 20, 30, 50, 100, 300, 500, 1000]
+    assert [e["n_scops"] for e in sweep["nr"]] == [0]  # needs no SCOPs: one point
+    n = summary["settings"]["scps_used"]
+    for name in ("lrm", "prm", "mlp"):
+        (at_50,) = [e for e in sweep[name] if e["n_scops"] == 50]
+        assert at_50["n_evaluated"] == n  # the sweep evaluates min(sweep_scps, SCPs): here every SCP
+        assert at_50["rmse_px"] == pytest.approx(summary["methods"][name]["rmse_row_px"], rel=1e-12)
+
+
 def test_isd_exports_byte_identical_residuals(tmp_path, capsys):
     isd = RPC_DIR.parent / "usgscsm" / "orbitalLineScan.json"  # usgscsm's public-domain fixture
     a = _export_twice_identical(tmp_path, ["--isd", str(isd)], capsys)
@@ -145,12 +180,12 @@ def test_isd_export_is_measured_against_the_camera_itself(tmp_path, capsys, isd)
     outs = []
     for name in ("a", "b"):
         out = tmp_path / name
-        assert main(["explore", "--isd", str(path), "--scops", "50", "--scps", "600", "--export", str(out)]) == 0
+        assert main(["explore", "--isd", str(path), "--scops", "50", "--scps", "600", "--export", str(out),
+                     "--no-sweep"]) == 0
         capsys.readouterr()
-        outs.append({f: (out / f).read_bytes() for f in ("summary.json", "residuals.csv")})
+        outs.append({f: (out / f).read_bytes() for f in FILES})
     a, b = outs
-    assert a["residuals.csv"] == b["residuals.csv"]
-    assert _without_timings(a["summary.json"]) == _without_timings(b["summary.json"])
+    _assert_byte_identical_but_timing(a, b)
     summary = json.loads(a["summary.json"])
     assert summary["truth"]["model"].startswith("USGS CSM") and summary["stand_in"]["model"].startswith("MPC")
     assert summary["stand_in"]["n_valid"] == summary["settings"]["scps_used"]

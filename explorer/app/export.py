@@ -1,4 +1,5 @@
-"""Export what the explorer's panels show: ``summary.json``, ``residuals.csv``, ``panels.html``.
+"""Export what the explorer's panels show: ``summary.json``, ``residuals.csv``, ``panels.html``, ``timing.json``,
+``timing.js``.
 
 ``pushbroom explore <source> --export DIR`` (and the GUI's *Export* button, as a zip) fits
 every chosen method on the SCOPs and evaluates it on **every** SCP -- never a subsample --
@@ -6,23 +7,34 @@ then writes
 
 * ``summary.json`` -- ``{"source": {...}, "settings": {...}, "truth": {"model", "body", ...},
   "methods": {name: {"rmse_row_px", "rmse_col_px", "max_row_px", "max_col_px", "n_valid", "n_invalid",
-  "n_refused", "n_not_converged", "n_outside_image", "ce_per_point", "fit_s", "eval_s", "error"}},
-  "stand_in": {"model", "against", "rmse_row_px", ...} or null}``: ``truth`` names the sensor every residual is
-  measured against (its own ground to image), ``stand_in`` the model-vs-model map of a file source (the MPC
-  fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG model) against it;
+  "n_refused", "n_not_converged", "n_outside_image", "n_scops", "ce_per_point", "error", "warnings"}},
+  "accuracy_vs_scops": {name: [{"n_scops", "rmse_px", "dr_max_px", "n_evaluated"}, ...]} or null,
+  "stand_in": {"model", "against", "rmse_row_px", ...} or null, "run_dependent": {file: why}}``: ``truth``
+  names the sensor every residual is measured against (its own ground to image), ``stand_in`` the
+  model-vs-model map of a file source (the MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
+  model) against it, ``accuracy_vs_scops`` the GUI's accuracy-vs-SCOPs sweep (each method refitted at every
+  density of :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs);
 * ``residuals.csv`` -- one row per check point per method (and per stand-in, method ``stand-in``):
   ``method, scp_index, row_px, col_px, row_residual_px, col_residual_px, status, x_m, y_m, z_m`` (the
   sensor's own image position of the SCP, estimated minus exact, empty where the method gave no answer;
   status as in :data:`explorer.app.model.STATUS_NAMES`; the SCP's body-fixed coordinates, ECEF on the Earth),
   plus ``line, sample`` for an ISD source (the camera's own image position, usgscsm's convention:
   ``row + 0.5, col + 0.5``);
-* ``panels.html`` -- the residual maps (row and column, every point drawn) and the timing
-  bars in one page that opens offline (plotly.js inlined, nothing loaded from the network).
+* ``panels.html`` -- the GUI's panels in one page that opens offline (plotly.js inlined, nothing loaded from
+  the network): the residual maps (row and column rasters of every check point, the stand-in's beside them),
+  the accuracy-vs-SCOPs sweep, the summary table and the Timing panel;
+* ``timing.json`` -- **the one run-dependent file**: the fit and evaluation times measured on this run
+  (``{"methods": {name: {"fit_s", "eval_s", "n_evaluated", "n_scops"}}}``), which depend on the machine and
+  its load;
+* ``timing.js`` -- the same numbers as a script (``window.PUSHBROOM_TIMING = {...};``) that ``panels.html``
+  loads from its own folder (a relative ``<script src="timing.js">``, no network) to fill its Timing panel
+  when opened; without it the panel says where the times are.
 
 Reproducible: the points are seeded grids, the fits and evaluations take no timing-dependent
-decision (no time budget), and numbers are written with 17 significant digits, so two runs
-with the same settings give byte-identical ``residuals.csv``; timings appear only in
-``summary.json`` (``fit_s``, ``eval_s``) and the timing panel.
+decision (no time budget), numbers are written with 17 significant digits and JSON keys sorted, and
+plotly's element ids are fixed, so two runs with the same settings give byte-identical ``summary.json``,
+``residuals.csv`` and ``panels.html``; only the files named in ``summary.json["run_dependent"]``
+(:data:`RUN_DEPENDENT`) differ (docs/explorer.md#export).
 """
 
 from __future__ import annotations
@@ -44,6 +56,13 @@ CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "co
                "x_m", "y_m", "z_m")
 """Columns of ``residuals.csv``; an ISD source adds ``line, sample`` (:data:`NATIVE_PIXEL_COLUMNS`)."""
 NATIVE_PIXEL_COLUMNS = ("line", "sample")
+TIMING_JSON, TIMING_JS = "timing.json", "timing.js"
+RUN_DEPENDENT = {
+    TIMING_JSON: "fit and evaluation times measured on this run (they depend on the machine and its load); "
+                 "every other file is byte-identical for the same settings",
+    TIMING_JS: f"the same times as {TIMING_JSON}, as the script panels.html loads to fill its Timing panel",
+}
+"""The export's run-dependent files and why; written as ``summary.json["run_dependent"]``."""
 # STAND_IN_METHOD (explorer.evaluate): the method name of the stand-in's rows and map
 
 
@@ -86,9 +105,9 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
-    """The JSON entry of one method (see the module docstring)."""
+    """The JSON entry of one method (see the module docstring); no timing (that is :func:`method_timing`)."""
     if ev is None:
-        return {"error": error or fit.error, "fit_s": fit.fit_s, "eval_s": None, "n_valid": 0, "n_invalid": 0}
+        return {"error": error or fit.error, "n_valid": 0, "n_invalid": 0}
     r, c = np.asarray(ev.residual_row), np.asarray(ev.residual_col)
     ok_r, ok_c = np.isfinite(r), np.isfinite(c)
     counts = np.bincount(np.asarray(status, dtype=np.int64), minlength=len(STATUS_NAMES))
@@ -99,10 +118,45 @@ def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRec
         "max_col_px": _finite_or_none(float(np.max(np.abs(c[ok_c]))) if ok_c.any() else math.nan),
         "n_valid": int(ok_r.sum()), "n_invalid": int((~ok_r).sum()),
         "n_refused": int(counts[1]), "n_not_converged": int(counts[2]), "n_outside_image": int(counts[3]),
-        "n_scops": int(fit.n_scops), "ce_per_point": float(ev.ce_evals_per_point),
-        "fit_s": float(fit.fit_s), "eval_s": float(ev.locate_s), "error": None,
+        "n_scops": int(fit.n_scops), "ce_per_point": float(ev.ce_evals_per_point), "error": None,
         "warnings": list(fit.warnings),
     }
+
+
+def method_timing(ev: Evaluation | None, fit: FitRecord) -> dict:
+    """The run-dependent entry of one method in ``timing.json``: ``fit_s``, ``eval_s`` (seconds, None without an
+    evaluation), ``n_evaluated`` (the points ``eval_s`` was measured on) and ``n_scops``."""
+    return {"fit_s": float(fit.fit_s), "eval_s": None if ev is None else float(ev.locate_s),
+            "n_evaluated": 0 if ev is None else int(ev.n_evaluated), "n_scops": int(fit.n_scops)}
+
+
+def _sweep_summary(sweeps: dict[str, list[Evaluation]]) -> dict[str, list[dict]]:
+    return {name: [{"n_scops": int(e.n_scops), "rmse_px": _finite_or_none(e.rmse_px),
+                    "dr_max_px": _finite_or_none(e.dr_max_px), "n_evaluated": int(e.n_evaluated)} for e in evs]
+            for name, evs in sweeps.items()}
+
+
+def _markdown_html(text: str) -> str:
+    """The GUI's summary table (:func:`explorer.app.model.summary_markdown`: a pipe table, then ``- `` notes
+    with ``**bold**`` names) as HTML."""
+    import html
+    import re
+
+    out, rows = [], []
+    for line in text.splitlines():
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if not all(set(c) <= {"-", ":"} for c in cells):
+                rows.append(cells)
+        elif line.startswith("- "):
+            out.append("<li>" + re.sub(r"\*\*(.+?)\*\*", r"<b>\1</b>", html.escape(line[2:])) + "</li>")
+    table = ""
+    if rows:
+        head = "".join(f"<th>{html.escape(c)}</th>" for c in rows[0])
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows[1:])
+        table = (f'<table border="1" cellpadding="4" style="border-collapse: collapse" id="summary-table">'
+                 f"<tr>{head}</tr>{body}</table>")
+    return table + (f"<ul>{''.join(out)}</ul>" if out else "")
 
 
 def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
@@ -128,6 +182,7 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     native_pixels : bool
         Add the camera's ``line, sample`` columns (a USGS CSM source).
     """
+    from explorer.app.model import MethodRun, summary_markdown
     from explorer.panels import figures as F  # noqa: N812
 
     model = ExplorerModel(preview_after_s=None, seed=seed, scenes={s.preset: scene})
@@ -136,14 +191,20 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     evaluations: dict[str, Evaluation] = {}
     status: dict[str, np.ndarray] = {}
     summary: dict[str, Any] = {}
+    timing: dict[str, Any] = {}
+    runs: dict[str, MethodRun] = {}
     for name in s.methods:
         rec = (fits or {}).get(name) or model.fit(name, s)
         # the GUI's own path (ExplorerModel.evaluate): every SCP, fit time and status included
         run = model.evaluate(name, s, fit=rec)
+        runs[name] = run
         ev, st, err = run.evaluation, run.status, run.error or rec.error
         if ev is not None and st is not None:
             evaluations[name], status[name] = ev, st
         summary[name] = method_summary(ev, st, rec, err)
+        timing[name] = method_timing(ev, rec)
+    # the GUI's accuracy-vs-SCOPs panel: the same sweep (ExplorerModel.sweep), fits at every density
+    sweeps = {name: model.sweep(name, s) for name in s.methods} if s.sweep else {}
     maps = dict(evaluations)
     map_status = dict(status)
     stand_in_summary: dict[str, Any] | None = None
@@ -152,29 +213,44 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         maps[STAND_IN_METHOD], map_status[STAND_IN_METHOD] = ev_s, st_s
         stand_in_summary = {"model": stand_in.label, "against": source.get("truth"),
                             **method_summary(ev_s, st_s, FitRecord(None, 0.0, 0, {}), None)}
-        for k in ("n_scops", "ce_per_point", "fit_s", "eval_s", "warnings", "n_refused", "n_not_converged"):
+        for k in ("n_scops", "ce_per_point", "warnings", "n_refused", "n_not_converged"):
             stand_in_summary.pop(k, None)
     settings = {"methods": list(s.methods), "scops": int(s.scop_density), "scops_used": len(scops),
                 "scps": int(s.scp_count), "scps_used": len(scps), "seed": int(seed),
                 "mlp_layers": int(s.mlp_layers), "mlp_neurons": int(s.mlp_neurons),
-                "image_rows": int(scene.n_rows), "image_columns": int(scene.n_columns), "subsampled": False}
+                "image_rows": int(scene.n_rows), "image_columns": int(scene.n_columns), "subsampled": False,
+                "sweep_scps": int(model.sweep_points) if s.sweep else None}
     truth = {"model": source.get("truth", type(scene).__name__), "body": scene.body.to_dict(),
              "residuals": "estimated minus the sensor's own ground_to_image at each check point",
              "check_points": "simulated by the sensor's own image_to_ground on its terrain"}
     payload = {"source": source, "settings": settings, "truth": truth, "methods": summary,
-               "stand_in": stand_in_summary}
+               "accuracy_vs_scops": _sweep_summary(sweeps) if s.sweep else None,
+               "stand_in": stand_in_summary, "run_dependent": dict(RUN_DEPENDENT)}
+    timing_payload = {"methods": timing, "about": RUN_DEPENDENT[TIMING_JSON],
+                      "units": {"fit_s": "s", "eval_s": "s (ground to image of n_evaluated check points)"}}
+    timing_text = json.dumps(timing_payload, indent=1, sort_keys=True, allow_nan=False)
     body_fixed = scene.frame.enu_to_ecef(scps.ground)
     files = {"summary.json": (json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n").encode(),
              "residuals.csv": residuals_csv(maps, map_status, scps, body_fixed, native_pixels)}
-    figs = []
+    colors = F.method_colors(list(s.methods))
+    figs: list[tuple] = []
     if maps:
         labels = {STAND_IN_METHOD: f"stand-in: {stand_in.label}"} if stand_in is not None else None
         figs.append((f"Residual maps (row and column; every check point, cell {s.aggregate})" + (
             "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
             F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
                             component="row and column", status=map_status, aggregate=s.aggregate, labels=labels)))
+    if sweeps:
+        figs.append((f"Accuracy vs SCOP density (each method refitted at every density, evaluated on "
+                     f"{min(model.sweep_points, len(scps)):,} check points)",
+                     F.accuracy_vs_density(sweeps, colors=colors)))
+    if runs:
+        figs.append(("Summary (every check point)", _markdown_html(summary_markdown(runs, len(scps)))))
     if evaluations:
-        figs.append(("Timing", F.timing_bars(evaluations)))
+        # the measured times are run-dependent: they come from timing.js, so this page stays byte-identical
+        figs.append(("Timing (measured on this run: timing.json / timing.js beside this page)",
+                     F.timing_bars(evaluations, colors=colors, deferred=True),
+                     F.timing_fill_script(list(evaluations))))
     notes = [f"source: {source.get('label', '')}", f"truth: {truth['model']}",
              f"{len(scps):,} check points (SCPs), {len(scops):,} SCOPs, "
              f"seed {seed}; every method evaluated on every SCP (no subsample)."]
@@ -183,7 +259,11 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     coverage = source.get("dem_coverage")
     if coverage:
         notes.append(f"DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}")
-    files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes).encode()
+    notes.append(f"Every file of this export is the same on every run with the same settings except "
+                 f"{TIMING_JSON} and {TIMING_JS} (the measured times).")
+    files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes, scripts=[TIMING_JS]).encode()
+    files[TIMING_JSON] = (timing_text + "\n").encode()
+    files[TIMING_JS] = (f"window.{F.TIMING_GLOBAL} = {timing_text};\n").encode()
     return files
 
 
@@ -198,8 +278,8 @@ def default_file_methods() -> list[str]:
 
 
 def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = None, scops: int = 100,
-               scps: int = 50_000, seed: int = 0, log: Any = print) -> dict[str, Path]:
-    """``pushbroom explore ... --export DIR``: compute and write the three files into ``out_dir``.
+               scps: int = 50_000, seed: int = 0, sweep: bool = True, log: Any = print) -> dict[str, Path]:
+    """``pushbroom explore ... --export DIR``: compute and write the export's files into ``out_dir``.
 
     Parameters
     ----------
@@ -211,6 +291,8 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     scops, scps : int
         SCOP density and SCP count (seeded grids).
     seed : int
+    sweep : bool
+        Include the accuracy-vs-SCOPs sweep (the GUI's default; ``--no-sweep`` leaves it out).
     log : callable
         Progress lines.
 
@@ -244,7 +326,7 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     else:
         scene, label = source.scene, source.label
     s = Settings(preset=label, scop_density=int(scops), scp_count=int(scps), methods=tuple(methods),
-                 color_method=methods[0] if methods else None)
+                 color_method=methods[0] if methods else None, sweep=bool(sweep))
     t0 = time.perf_counter()
     files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,
                          native_pixels=source.kind == "isd")
@@ -256,4 +338,5 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     return written
 
 
-__all__ = ["CSV_COLUMNS", "export_files", "method_summary", "residuals_csv", "run_export", "sensor_truth"]
+__all__ = ["CSV_COLUMNS", "RUN_DEPENDENT", "export_files", "method_summary", "method_timing", "residuals_csv",
+           "run_export", "sensor_truth"]

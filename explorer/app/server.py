@@ -307,7 +307,8 @@ def run_explore(args: Any) -> int:
         if export is not None:
             from explorer.app.export import run_export
 
-            run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed)
+            run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed,
+                       sweep=not getattr(args, "no_sweep", False))
             return 0
         if methods is not None:
             from explorer.methods import available
@@ -322,7 +323,8 @@ def run_explore(args: Any) -> int:
         # the GUI shows its own line (ExplorerApp; each update counts what it needs, _expect_compiles)
         return serve(source.label, host=args.host, port=args.port, methods=methods, ready=ready,
                      sources=[source] if source.scene is not None else [],
-                     model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops, compile_progress=progress)
+                     model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops, compile_progress=progress,
+                     sweep=not getattr(args, "no_sweep", False))
     finally:
         progress.uninstall()
         progress.finish()

@@ -2,8 +2,8 @@
 
 One source: ``--preset ID | --scene FILE | --rpc FILE | --dimap FILE | --dg FILE | --isd FILE``
 (``--dem`` with the last three), checked before anything is served; ``--export DIR`` writes
-``summary.json``, ``residuals.csv`` and ``panels.html`` and exits.  Only the standard library is
-imported here; the explorer (viser, plotly, the methods) loads inside :func:`cmd_explore`.
+``summary.json``, ``residuals.csv``, ``panels.html``, ``timing.json`` and ``timing.js`` and exits.  Only the
+standard library is imported here; the explorer (viser, plotly, the methods) loads inside :func:`cmd_explore`.
 """
 
 from __future__ import annotations
@@ -85,7 +85,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scps", type=positive_int, default=50_000, help="SCPs (check points) of the maps (default 50000)")
     p.add_argument("--seed", type=random_seed, default=0, help="seed of the point heights and subsamples (default 0)")
     p.add_argument("--export", default=None, metavar="DIR",
-                   help="write DIR/summary.json, residuals.csv and panels.html (every SCP) and exit without serving")
+                   help="write DIR/summary.json, residuals.csv, panels.html (every SCP; byte-identical on every run "
+                        "with the same settings) and timing.json / timing.js (the measured times) and exit without "
+                        "serving")
+    p.add_argument("--no-sweep", action="store_true",
+                   help="leave out the accuracy-vs-SCOPs sweep (it refits every learned method at 8 SCOP counts) "
+                        "from the GUI and the export")
     p.add_argument("--gcps", default=None, metavar="CSV",
                    help="control points id,lon,lat,h,row,col: a Refinement folder adjusts the --rpc or --scene "
                         "source to them, live (docs/refine.md)")

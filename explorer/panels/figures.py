@@ -522,6 +522,7 @@ def timing_bars(
     *,
     labels: Mapping[str, str] | None = None,
     colors: Mapping[str, str] | None = None,
+    deferred: bool = False,
 ) -> go.Figure:
     """Fit time and ground-to-image time per method, as bars (log y).
 
@@ -529,6 +530,11 @@ def timing_bars(
     ----------
     evaluations : mapping of str to Evaluation
     labels, colors : mapping, optional
+    deferred : bool
+        Leave the measured times out (bars empty, texts "timing.js not loaded"): the figure then depends
+        only on what is reproducible (method names, SCOP and point counts) and
+        :func:`timing_fill_script` fills it in the browser from ``timing.js`` (the export's one
+        run-dependent file, ``explorer.app.export``).
 
     Returns
     -------
@@ -557,12 +563,48 @@ def timing_bars(
          "hovertemplate": "%{x}<br>%{y:.3g} us/point<br>%{customdata[0]:.3g} s on "
                           "%{customdata[1]:,} points<extra></extra>"},
     ]
+    if deferred:  # only the reproducible parts; timing_fill_script puts the measured times in
+        data[0].update(y=[None] * len(names), text=[TIMING_NOT_LOADED] * len(names))
+        data[1].update(y=[None] * len(names), customdata=[[None, evaluations[n].n_evaluated] for n in names])
     for ax in ("yaxis", "yaxis2"):
         layout[ax].update(type="log", exponentformat="power")
     layout.update(height=300, margin={"l": 50, "r": 10, "t": 40, "b": 40},
-                  meta={"height_over_width": 0.6})
+                  meta={"height_over_width": 0.6, "methods": names, "deferred": bool(deferred)})
     fig = go.Figure(data=data, layout=layout)
     return fig
+
+
+TIMING_NOT_LOADED = "timing.js not loaded"
+"""Bar text of a deferred timing panel until :func:`timing_fill_script` has filled it."""
+TIMING_GLOBAL = "PUSHBROOM_TIMING"
+"""The global (``window.PUSHBROOM_TIMING``) that ``timing.js`` sets: ``{"methods": {name: {"fit_s", "eval_s",
+"n_evaluated", ...}}, ...}`` (the content of ``timing.json``)."""
+
+
+def timing_fill_script(names: Sequence[str]) -> str:
+    """JavaScript (a plotly ``post_script``, ``{plot_id}`` = the timing figure's div) that fills a
+    :func:`timing_bars` figure drawn with ``deferred=True`` from ``window.PUSHBROOM_TIMING`` (set by the
+    export's ``timing.js``, loaded beside the page), with the texts :func:`timing_bars` writes (3
+    significant digits, "no fit" for a method that does not learn).  Without it the panel says so."""
+    import json
+
+    return ("(function () {\n"
+            "  var gd = document.getElementById('{plot_id}'), t = window." + TIMING_GLOBAL + ";\n"
+            "  var names = " + json.dumps(list(names)) + ";\n"
+            "  if (!t || !t.methods) {\n"
+            "    Plotly.relayout(gd, {'annotations[2]': {text: 'the measured times are in timing.js beside this "
+            "page (not found)', x: 0.5, y: 0.5, xref: 'paper', yref: 'paper', showarrow: false}});\n"
+            "    return;\n  }\n"
+            "  function g3(v) { return String(Number(v.toPrecision(3))); }\n"
+            "  var fit = [], fitText = [], per = [], perData = [];\n"
+            "  names.forEach(function (n) {\n"
+            "    var m = t.methods[n] || {}, f = m.fit_s, e = m.eval_s, k = m.n_evaluated || 0;\n"
+            "    fit.push(f > 0 ? f : null); fitText.push(f > 0 ? g3(f) + ' s' : 'no fit');\n"
+            "    per.push(e != null && k > 0 ? 1e6 * e / k : null); perData.push([e, k]);\n"
+            "  });\n"
+            "  Plotly.restyle(gd, {y: [fit], text: [fitText]}, [0]);\n"
+            "  Plotly.restyle(gd, {y: [per], customdata: [perData]}, [1]);\n"
+            "})();")
 
 
 CARTESIAN_TRACE_TYPES = frozenset({"bar", "box", "candlestick", "contour", "funnel", "heatmap", "histogram",
@@ -589,36 +631,52 @@ def _plotlyjs_for(figures: Sequence[go.Figure]) -> str:
     return get_plotlyjs()
 
 
-def figures_html(figures: Sequence[tuple[str, go.Figure]], title: str, notes: Sequence[str] = ()) -> str:
+def figures_html(figures: Sequence[tuple], title: str, notes: Sequence[str] = (),
+                 scripts: Sequence[str] = ()) -> str:
     """The figures in one self-contained HTML page: plotly.js inlined once (its cartesian partial bundle
     when the figures need nothing else, :func:`_plotlyjs_for`), no script or style loaded from the
     network (opens offline), deterministic element ids.
 
     Parameters
     ----------
-    figures : sequence of (heading, go.Figure)
+    figures : sequence of (heading, go.Figure), (heading, go.Figure, post_script) or (heading, str)
+        ``post_script``: JavaScript run once the figure is drawn (``{plot_id}`` is its div's id); a ``str``
+        in place of the figure is an HTML block written as it is (a table).
     title : str
         Page title and top heading.
     notes : sequence of str
         Paragraphs under the heading (what was computed, on which points).
+    scripts : sequence of str
+        File names *relative to the page* (files written beside it, never a URL) loaded before the figures
+        with ``<script src>``; a missing one leaves the page working (the post-scripts check for it).
     """
     import html
 
-    figs = [go.Figure(fig) for _, fig in figures]
+    for src in scripts:
+        if "/" in src or ":" in src or not src.endswith(".js"):
+            raise ValueError(f"scripts must be .js files beside the page, got {src!r}")
+    figs = [go.Figure(entry[1]) for entry in figures if not isinstance(entry[1], str)]
     parts = [f"<h1>{html.escape(title)}</h1>"] + [f"<p>{html.escape(t)}</p>" for t in notes]
+    parts += [f'<script src="{html.escape(src)}"></script>' for src in scripts]
     if figs:
         parts.append('<script type="text/javascript">' + _plotlyjs_for(figs) + "</script>")
-    for k, ((heading, _), fig) in enumerate(zip(figures, figs, strict=True)):
+    for k, entry in enumerate(figures):
+        heading, body = entry[0], entry[1]
+        parts.append(f"<h2>{html.escape(heading)}</h2>")
+        if isinstance(body, str):  # an HTML block (a table), as given
+            parts.append(body)
+            continue
+        fig = go.Figure(body)
+        post = entry[2] if len(entry) > 2 else None
         aspect = float((fig.layout.meta or {}).get("height_over_width", 0.6))
         fig.update_layout(width=1000, height=int(1000 * aspect))
-        parts.append(f"<h2>{html.escape(heading)}</h2>")
         parts.append(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{k}",
-                                 config=PLOTLY_CONFIG))
+                                 config=PLOTLY_CONFIG, post_script=post))
     return ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + html.escape(title)
             + "</title></head><body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
 
 
 __all__ = [
     "CARTESIAN_TRACE_TYPES", "PLOTLY_CONFIG", "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure",
-    "figures_html", "method_colors", "residual_maps", "timing_bars",
+    "figures_html", "method_colors", "residual_maps", "timing_bars", "timing_fill_script",
 ]

@@ -74,14 +74,7 @@ def test_result_arrays_have_the_input_length_and_documented_dtypes(name):
     assert len(res) == n and np.all(res.ce_evaluations >= 0)
 
 
-#: Known defect (left open in the session note of 2026-11-26): nn-rfm's training is fragile in its seed and in
-#: the SCOP layout -- on this scene's 200 x 3 SCOPs it reaches 2.05 px (seed 0), 111 px (seed 1), 2,381 px
-#: (seed 2); on the 196 x 3 regular grid of the old generator 0.05 / 24,625 / 0.86 px.  Passing here was luck.
-FRAGILE = {"nn-rfm": "nn-rfm training is seed-fragile (0.05 px to 24,625 px over seeds on the same SCOPs)"}
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=FRAGILE[n], strict=False))
-                                  if n in FRAGILE else n for n in METHODS])
+@pytest.mark.parametrize("name", METHODS)
 def test_rows_meet_the_declared_exactness(name):
     res, check = contract_result(name), contract_points()[1]
     assert res.valid.all()

@@ -127,3 +127,75 @@ def test_surface_variant_on_flat_terrain():
     assert np.sqrt(np.mean((res.col - check.col) ** 2)) < 0.1
     with pytest.raises(ValueError):
         create("nn-rfm", scene, synthetic="surface", grid=(10, 10, 3)).fit(simulate_points(scene, 50))
+
+
+#: The contract scene (tests/methods/test_contract.py: WSU, 800 m relief, 200 SCOPs on 3 height layers, 500
+#: check points on the terrain), where Yue et al.'s free-Z network made nn-rfm seed-fragile.
+FRAGILE_SEEDS = (1, 2)  # the free network: 111 px and 2,381 px at these seeds (measured)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4, 5])
+def test_line_of_sight_network_meets_the_sub_pixel_bar_at_every_seed(seed):
+    """The seed fragility is gone: every seed is sub-pixel on the contract scene (the approximate bar, 1 px;
+    measured 0.0006-0.06 px over seeds 0-7), and the network between the training heights is a line of sight:
+    its ground error at the check points' own heights is centimetres (it was 1.6 / 440 / 446 m for seeds 0-2)."""
+    from tests.methods.test_contract import BAR_PX, contract_points
+
+    scops, check = contract_points()
+    method = create("nn-rfm", scops_scene(), seed=seed).fit(scops)
+    res = method.ground_to_image(check.ground)
+    assert res.valid.all()
+    assert np.max(np.abs(res.row - check.row)) <= BAR_PX["approximate"]
+    assert np.max(np.abs(res.col - check.col)) <= BAR_PX["approximate"]
+    x, y = method.network.image_to_ground(check.row, check.col, check.ground[:, 2])
+    assert np.max(np.hypot(x - check.ground[:, 0], y - check.ground[:, 1])) < 0.5  # metres (GSD 0.5 m)
+
+
+@pytest.mark.slow
+def test_the_free_z_network_is_what_was_fragile():
+    """The cause, shown: the same chain with Yue et al.'s free-Z network (``network="free"``) misses the bar by
+    orders of magnitude at the seeds that failed, while fitting its 3 training layers to centimetres."""
+    from tests.methods.test_contract import contract_points
+
+    scops, check = contract_points()
+    for seed in FRAGILE_SEEDS:
+        method = create("nn-rfm", scops_scene(), seed=seed, network="free").fit(scops)
+        assert max(method.fit_info["network"]["train_rms"]) < 0.05  # metres, on the 3 layers
+        x, y = method.network.image_to_ground(check.row, check.col, check.ground[:, 2])
+        assert np.max(np.hypot(x - check.ground[:, 0], y - check.ground[:, 1])) > 100.0  # between the layers
+        res = method.ground_to_image(check.ground)
+        assert np.nanmax(np.abs(res.row - check.row)) > 10.0
+
+
+def test_line_of_sight_network_is_affine_in_height_at_an_image_point():
+    """(X, Y) at a fixed (row, col) is exactly affine in Z (a straight line of sight), whatever the weights."""
+    from explorer.methods.nn_rfm import LineOfSightNetwork
+
+    scene = build_scene("WSU", relief_m=400.0)
+    scops = simulate_points(scene, 100, layers=3)
+    net = LineOfSightNetwork(5, max_iter=30, seed=3).fit(scops.row, scops.col, scops.ground[:, 2],
+                                                         scops.ground[:, 0], scops.ground[:, 1])
+    z = np.linspace(-800.0, 1500.0, 7)
+    x, y = net.image_to_ground(np.full(7, 1234.5), np.full(7, 987.0), z)
+    for v in (x, y):
+        second = np.diff(v, 2)  # second differences of an affine function vanish
+        assert np.max(np.abs(second)) < 1e-9 * max(1.0, np.max(np.abs(v)))
+    # and the hand-written Jacobian is the derivative of the forward pass (central differences)
+    import torch
+
+    theta = net._theta.clone()
+    u = net._normalise_inputs(np.column_stack([scops.row[:5], scops.col[:5], scops.ground[:5, 2]]))
+    jac = net._jacobian(theta, u)
+    h = 1e-6
+    for k in (0, 7, theta.numel() - 1):
+        e = torch.zeros_like(theta)
+        e[k] = h
+        fd = (net._forward(theta + e, u) - net._forward(theta - e, u)).reshape(-1) / (2 * h)
+        np.testing.assert_allclose(jac[:, k].numpy(), fd.numpy(), rtol=1e-6, atol=1e-8)
+
+
+def scops_scene():
+    from tests.methods.cases import scene_for
+
+    return scene_for("WSU", 800.0)

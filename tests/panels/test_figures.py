@@ -224,6 +224,15 @@ def test_timing_bars(results):
         assert per.y[k] == pytest.approx(1e6 * evs[n].locate_s / evs[n].n_evaluated)
     assert fig.layout.yaxis.type == "log" and fig.layout.yaxis2.type == "log"
     assert "500 pts" in per.text[1]
+    # deferred (the export): no measured time in the figure, the reproducible parts kept
+    later = F.timing_bars(evs, deferred=True)
+    assert list(later.data[0].y) == [None, None] and list(later.data[1].y) == [None, None]
+    assert list(later.data[0].text) == [F.TIMING_NOT_LOADED] * 2 and "500 pts" in later.data[1].text[1]
+    assert later.to_json() == F.timing_bars(_slower(evs), deferred=True).to_json()
+
+
+def _slower(evs):
+    return {n: dataclasses.replace(e, fit_s=e.fit_s * 3 + 1, locate_s=e.locate_s * 7) for n, e in evs.items()}
 
 
 def test_empty_inputs():
@@ -360,3 +369,11 @@ def test_panels_html_opens_offline_and_is_deterministic(results):
     assert F.PLOTLY_CONFIG["showSendToCloud"] is False
     assert "sendDataToCloud" in F.PLOTLY_CONFIG["modeBarButtonsToRemove"]
     assert '"showSendToCloud": false' in page and '"displaylogo": false' in page
+    # a script beside the page and a post-script: loaded relatively, run after the figure is drawn
+    with_timing = F.figures_html([("timing", F.timing_bars(evs, deferred=True), F.timing_fill_script(list(evs)))],
+                                 "export", scripts=["timing.js"])
+    assert '<script src="timing.js"></script>' in with_timing and "Plotly.restyle(gd" in with_timing
+    assert "document.getElementById('panel-0')" in with_timing
+    for bad in ("https://cdn.plot.ly/plotly.js", "../timing.js", "timing.json"):
+        with pytest.raises(ValueError):
+            F.figures_html([], "export", scripts=[bad])
