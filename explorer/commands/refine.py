@@ -1,9 +1,14 @@
-"""``refine``: adjust RPCs (image-space corrections) or MPC scenes (exterior offsets and drifts) to points.
+"""``refine``: adjust RPCs (image-space corrections), MPC scenes (exterior offsets and drifts), rigorous
+DIMAP/DG models and USGS CSM cameras (position / attitude offsets, drifts, jitter of their tables) to points.
 
 ``pushbroom refine SOURCE --gcps gcps.csv [--model shift|affine|poly2] [--check check.csv] --out DIR``
-(one image) and ``pushbroom refine --images A B [C ...] --ties ties.csv [--gcps gcps.csv] --out DIR``
-(bundle adjustment).  Files and results: :mod:`explorer.refine.adjust`, :mod:`explorer.refine.points_io`.
-Pixels are 0-based, integer = pixel centre (``docs/conventions.md``).
+(one image), ``pushbroom refine --dimap X.XML|--dg X.XML|--isd X.json --gcps gcps.csv [--model attitude|
+attitude-drift|position-attitude|position-attitude-drift|jitter] --out DIR`` (a line scanner, read by
+:func:`explorer.sources.load_source`; the adjusted model is ``DIR/adjusted_model.json``, a sidecar
+:func:`explorer.refine.line_adjust.load_adjusted` reads back) and ``pushbroom refine --images A B [C ...]
+--ties ties.csv [--gcps gcps.csv] --out DIR`` (bundle adjustment).  Files and results:
+:mod:`explorer.refine.adjust`, :mod:`explorer.refine.points_io`.  Pixels are 0-based, integer = pixel centre
+(``docs/conventions.md``).
 """
 
 from __future__ import annotations
@@ -15,7 +20,9 @@ from explorer.commands._args import existing_file, positive_float, positive_int
 
 __all__ = ["cmd_refine", "register"]
 
-MODELS = ("shift", "affine", "poly2", "attitude", "attitude-drift")
+MODELS = ("shift", "affine", "poly2", "attitude", "attitude-drift", "position-attitude", "position-attitude-drift",
+          "jitter")
+LINE_SOURCES = ("dimap", "dg", "isd")
 
 
 def _probability(text: str) -> float:
@@ -41,10 +48,16 @@ def cmd_refine(args: argparse.Namespace) -> int:
     from explorer.rpc import read_rpc
 
     images = list(args.images or [])
+    line_given = [(k, getattr(args, k)) for k in LINE_SOURCES if getattr(args, k, None)]
+    if len(line_given) > 1 or (line_given and (args.source or images)):
+        raise InputError("give one image: SOURCE, --images, " + ", ".join(f"--{k}" for k in LINE_SOURCES)
+                         + " exclude each other")
     if args.source and images:
         raise InputError("give either SOURCE (one image) or --images (several), not both")
     if args.source:
         images = [args.source]
+    if line_given:
+        images = [line_given[0][1]]
     if not images:
         raise InputError("no image: give SOURCE or --images A B ...")
     if args.ties and len(images) < 2:
@@ -54,18 +67,29 @@ def cmd_refine(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {args.out}: exists and is not a folder")
-    if args.model.startswith("attitude"):  # exterior corrections of MPC scene files (pushbroom scene ...)
+    kinds: list[str] | None = None
+    if line_given:  # a rigorous DIMAP/DG model or a CSM camera: the one file -> Sensor loader
+        from explorer.sources import load_source
+
+        kind = line_given[0][0]
+        model = args.model or "attitude"
+        sensors: list = [load_source(kind, images[0]).scene]
+        kinds = [kind]
+    elif args.model and args.model not in ("shift", "affine", "poly2"):
+        # exterior corrections of MPC scene files (pushbroom scene ...)
         from explorer.real.linescan import load_scene
 
-        sensors: list = [load_scene(p) for p in images]
+        model = args.model
+        sensors = [load_scene(p) for p in images]
     else:
+        model = args.model or "affine"
         sensors = [read_rpc(p) for p in images]
     names = [Path(p).name for p in images]
     if len(set(names)) != len(names):
         names = list(images)
     refinement = refine_images(
         sensors,
-        model=args.model,
+        model=model,
         control=read_points_csv(args.gcps, CONTROL_COLUMNS) if args.gcps else None,
         ties=read_points_csv(args.ties, TIE_COLUMNS) if args.ties else None,
         check=read_points_csv(args.check, CONTROL_COLUMNS) if args.check else None,
@@ -76,6 +100,9 @@ def cmd_refine(args: argparse.Namespace) -> int:
         loss_scale=args.loss_scale,
         outlier_probability=args.outlier_probability,
         max_iterations=args.max_iterations,
+        image_files=list(images) if kinds else None,
+        source_kinds=kinds,
+        jitter_hz=tuple(args.jitter_hz) if args.jitter_hz else None,
     )
     refinement.write(out)
     if not args.no_panels:
@@ -103,20 +130,29 @@ def cmd_refine(args: argparse.Namespace) -> int:
 def register(subparsers: Any) -> None:
     """Add the ``refine`` command to ``subparsers`` (argparse only)."""
     p = subparsers.add_parser(
-        "refine", help="adjust RPC image-space corrections to control / tie points (bundle adjustment)",
-        description="Adjust an image-space correction of one RPC to control points, or of several RPCs to tie "
+        "refine", help="adjust RPCs, rigorous DIMAP/DG models or CSM cameras to control / tie points",
+        description="Adjust an image-space correction of one RPC, or the position / attitude of a rigorous "
+                    "DIMAP/DG model or a CSM camera (--dimap/--dg/--isd), to control points, or of several RPCs to tie "
                     "points and control points (Levenberg-Marquardt, robust loss). Pixels are 0-based, "
                     "integer = pixel centre.",
     )  # fmt: skip
     p.add_argument("source", nargs="?", type=existing_file,
                    help="RPC file of one image (MPC scene JSON with --model attitude / attitude-drift)")
+    p.add_argument("--dimap", type=existing_file, metavar="XML",
+                   help="Pleiades DIMAP metadata: refine the rigorous model (position / attitude of its tables)")
+    p.add_argument("--dg", type=existing_file, metavar="XML", help="DigitalGlobe metadata: refine the rigorous model")
+    p.add_argument("--isd", type=existing_file, metavar="JSON", help="USGS CSM line-scan ISD: refine the camera")
+    p.add_argument("--jitter-hz", type=positive_float, nargs="+", metavar="HZ",
+                   help="--model jitter: frequencies of the attitude harmonics (default 1/T and 2/T, T the exposure)")
     p.add_argument("--images", nargs="+", type=existing_file, metavar="FILE", help="files of several images")
     p.add_argument("--gcps", type=existing_file, help="control points CSV: id,lon,lat,h,row,col[,image]")
     p.add_argument("--ties", type=existing_file, help="tie points CSV: id,image,row,col")
     p.add_argument("--check", type=existing_file, help="check points CSV: id,lon,lat,h,row,col[,image]")
-    p.add_argument("--model", choices=MODELS, default="affine",
+    p.add_argument("--model", choices=MODELS, default=None,
                    help="RPC: shift, affine (default), poly2; MPC scene: attitude (position and angle offsets), "
-                        "attitude-drift (and their rates)")
+                        "attitude-drift (and their rates); --dimap/--dg/--isd: attitude (default; roll, pitch, yaw), "
+                        "attitude-drift, position-attitude, position-attitude-drift, jitter "
+                        "(docs/refinement.md)")
     p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a measured coordinate, px")
     p.add_argument("--sigma-ground", type=_non_negative, default=0.0,
                    help="sigma of control points' ground coordinates, m (0 = fixed; default)")

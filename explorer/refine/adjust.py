@@ -38,7 +38,8 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.refine.bundle import BundleProblem, BundleResult, bundle_adjust, metres_per_degree
-from explorer.refine.images import RPCImage, SceneImage, image_adapter
+from explorer.refine.line_adjust import is_line_scanner
+from explorer.refine.images import LineScanImage, RPCImage, SceneImage, image_adapter
 from explorer.refine.points_io import PointTable
 
 __all__ = ["Refinement", "image_size", "refine_images"]
@@ -62,7 +63,7 @@ class Refinement:
 
     model: str
     image_names: list[str]
-    images: list[RPCImage | SceneImage]
+    images: list[RPCImage | SceneImage | LineScanImage]
     parameter_names: list[str]
     result: BundleResult
     observations: dict[str, Any]
@@ -191,7 +192,8 @@ def _image_of(table: PointTable, names: list[str]) -> np.ndarray:
     return out
 
 
-def _check_inside(table: PointTable, image: np.ndarray, images: list[RPCImage | SceneImage], role: str) -> None:
+def _check_inside(table: PointTable, image: np.ndarray, images: list[RPCImage | SceneImage | LineScanImage],
+                  role: str) -> None:
     """InputError for a measurement outside its image or a ground point outside the model's domain."""
     for k, adapter in enumerate(images):
         sel = np.flatnonzero(image == k)
@@ -212,7 +214,7 @@ def _check_inside(table: PointTable, image: np.ndarray, images: list[RPCImage | 
                                  "domain")
 
 
-def _initial_ground(images: list[RPCImage | SceneImage], image: np.ndarray, row: np.ndarray,
+def _initial_ground(images: list[RPCImage | SceneImage | LineScanImage], image: np.ndarray, row: np.ndarray,
                     col: np.ndarray) -> np.ndarray:
     """Start (lon, lat, h) (N, 3) of tie points: each localised in its first image (``image``, (N,)) at the
     RPC's height offset or on the scene's terrain (vectorised per image)."""
@@ -243,18 +245,23 @@ def refine_images(
     loss_scale: float = 1.5,
     outlier_probability: float = 0.999,
     max_iterations: int = 50,
+    image_files: list[str] | None = None,
+    source_kinds: list[str] | None = None,
+    jitter_hz: tuple[float, ...] | None = None,
 ) -> Refinement:
     """Adjust a correction of each image's model to control and tie points.
 
     Parameters
     ----------
-    sensors : list of RationalFunctionModel or Scene
-        The images (one for a resection to control points, several for a bundle adjustment), all RPCs or
-        all MPC scenes (on one body).
+    sensors : list of RationalFunctionModel, Scene, RigorousLineScanScene or CsmScene
+        The images (one for a resection to control points, several for a bundle adjustment), all RPCs, all
+        MPC scenes or all line scanners (rigorous DIMAP/DG models, CSM cameras), on one body.
     model : str
         The same for every image: for RPCs ``shift``, ``affine`` or ``poly2`` (image space,
         :mod:`explorer.refine.corrections`); for MPC scenes ``attitude`` or ``attitude-drift`` (exterior
-        orientation, :mod:`explorer.refine.torch_scene`).
+        orientation, :mod:`explorer.refine.torch_scene`); for rigorous and CSM line scanners ``attitude``,
+        ``attitude-drift``, ``position-attitude``, ``position-attitude-drift`` or ``jitter`` (their tables,
+        :mod:`explorer.refine.line_corrections`).
     control, ties, check : PointTable, optional
         Control points (``id,lon,lat,h,row,col`` [+ ``image``]), tie points (``id,image,row,col``) and
         check points (as control; never used as control).
@@ -266,6 +273,11 @@ def refine_images(
         Stated sigma of each control point's ground coordinates (east, north, up), metres; 0 fixes them.
     loss, loss_scale, outlier_probability, max_iterations
         As :func:`explorer.refine.bundle.bundle_adjust` (``loss_scale`` in sigmas).
+    image_files, source_kinds : list of str, optional
+        Line scanners: the file each image was read from and its kind (``dimap``, ``dg``, ``isd``), named
+        with its SHA-256 in the adjusted model's sidecar.
+    jitter_hz : tuple of float, optional
+        Line scanners, ``jitter`` model: the harmonics' frequencies (default ``1/T, 2/T`` of the exposure).
 
     Returns
     -------
@@ -279,11 +291,14 @@ def refine_images(
     """
     if not sensors:
         raise InputError("no image to refine")
-    images = [image_adapter(s) for s in sensors]
+    images = [image_adapter(s, base_file=(image_files or [None] * len(sensors))[k],
+                            source_kind=(source_kinds or [None] * len(sensors))[k], jitter_hz=jitter_hz)
+              if is_line_scanner(s) else image_adapter(s) for k, s in enumerate(sensors)]
     if len({im.kind for im in images}) > 1 or len({im.axes for im in images}) > 1:
-        raise InputError("the images must be all RPCs or all scenes, on one body")
+        raise InputError("the images must be all RPCs, all MPC scenes or all line scanners, on one body")
     if model not in images[0].models:
-        other = " (attitude models need a rigorous sensor: an MPC scene)" if images[0].kind == "rpc" else ""
+        other = (" (attitude models need a rigorous sensor: an MPC scene, a DIMAP/DG model or a CSM camera)"
+                 if images[0].kind == "rpc" else "")
         raise InputError(f"unknown {images[0].what} correction model {model!r} (one of "
                          f"{', '.join(images[0].models)}){other}")
     labels: list[str] = list(names) if names else [f"image{k}" for k in range(len(images))]
@@ -381,7 +396,10 @@ def refine_images(
     stacked = [n if not multi else f"{labels[k]}:{n}" for k in range(len(images)) for n in base]
     result = bundle_adjust(problem, loss=loss, loss_scale=loss_scale, outlier_probability=outlier_probability,
                            max_iterations=max_iterations, parameter_names=stacked)
-    adjusted = [im.adjust(model, p) for im, p in zip(images, result.parameters, strict=True)]
+    offs = np.concatenate([[0], np.cumsum([p.size for p in result.parameters])])
+    sigma_all = result.parameter_sigma
+    adjusted = [im.adjust(model, p, sigma_all[offs[k]:offs[k + 1]]) if isinstance(im, LineScanImage)
+                else im.adjust(model, p) for k, (im, p) in enumerate(zip(images, result.parameters, strict=True))]
 
     # check points: their surveyed ground projected by the model before and after (compiled paths)
     ck_before = np.zeros((0, 2))

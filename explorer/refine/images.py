@@ -1,4 +1,4 @@
-"""The images a refinement adjusts: one adapter per sensor kind (RPC, MPC scene), the same interface.
+"""The images a refinement adjusts: one adapter per sensor kind (RPC, MPC scene, line scanner), one interface.
 
 Each adapter knows its image size, its correction models, the differentiable projector of
 :mod:`explorer.refine.bundle`, how to localise a tie point for a start, how to project ground points
@@ -7,7 +7,10 @@ before and after the adjustment (the compiled paths), and how to write the adjus
 - :class:`RPCImage` -- image-space corrections (:mod:`explorer.refine.corrections`), the adjusted RPC
   folded and written as RPC00B text (:mod:`explorer.refine.fold`);
 - :class:`SceneImage` -- corrections of the MPC polynomial coefficients (:mod:`explorer.refine.torch_scene`),
-  the adjusted scene written as a scene JSON sidecar (``Scene.save``; ``pushbroom scene`` reads it).
+  the adjusted scene written as a scene JSON sidecar (``Scene.save``; ``pushbroom scene`` reads it);
+- :class:`LineScanImage` -- rigorous DIMAP/DG models and CSM cameras: position / attitude offsets, drifts and
+  jitter harmonics of their tables (:mod:`explorer.refine.line_corrections`), the adjusted model a JSON sidecar
+  (:func:`explorer.refine.line_adjust.load_adjusted` reads it back).
 
 Ground coordinates are geodetic (degrees, metres) on the sensor's body; an MPC scene converts them with
 its frame.
@@ -25,7 +28,7 @@ from explorer.refine.corrections import CORRECTION_PARAMETERS, apply_correction
 from explorer.rpc.model import RationalFunctionModel
 from explorer.scene import Scene
 
-__all__ = ["RPCImage", "SceneImage", "image_adapter"]
+__all__ = ["LineScanImage", "RPCImage", "SceneImage", "image_adapter"]
 
 WGS84_AXES = (6378137.0, 6356752.314245179)
 
@@ -154,15 +157,107 @@ class SceneImage:
         return path
 
 
-def image_adapter(sensor: Any) -> RPCImage | SceneImage:
-    """The adapter of an RPC model or an MPC scene; InputError for anything else."""
+class LineScanImage:
+    """A rigorous DIMAP/DG model or a USGS CSM camera refined by corrections of its position and attitude tables
+    (:mod:`explorer.refine.line_corrections`); the adjusted model is written as a JSON sidecar
+    (:func:`explorer.refine.line_adjust.sidecar_dict`: parameters, sigmas, the base file's name and SHA-256)."""
+
+    kind = "linescan"
+    suffix = ".json"
+    stem = "adjusted_model"
+
+    def __init__(self, sensor: Any, *, base_file: str | None = None, source_kind: str | None = None,
+                 jitter_hz: tuple[float, ...] | None = None) -> None:
+        from explorer.refine.line_corrections import LINE_MODELS
+
+        self.sensor = sensor
+        self.models = tuple(LINE_MODELS)
+        self.what = "CSM camera" if _is_csm(sensor) else "rigorous line-scan model"
+        self.base_file = base_file
+        self.source_kind = source_kind or ("isd" if _is_csm(sensor) else "dimap")
+        self.jitter_hz = tuple(jitter_hz) if jitter_hz else None
+        self._corrections: dict[str, Any] = {}
+        self.sidecar: dict[str, Any] | None = None
+        self.adjusted: Any = None
+
+    def correction(self, model: str) -> Any:
+        from explorer.refine.line_adjust import correction_for
+
+        if model not in self._corrections:
+            self._corrections[model] = correction_for(self.sensor, model, self.jitter_hz)
+        return self._corrections[model]
+
+    @property
+    def axes(self) -> tuple[float, float]:
+        body = self.sensor.frame.body
+        return float(body.a_m), float(body.b_m)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.sensor.n_rows), int(self.sensor.n_columns)
+
+    def ground_ok(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> np.ndarray:
+        return np.isfinite(self.project(lon, lat, h, "attitude", None)).all(axis=1)
+
+    def localise(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(lon, lat, h, ok) of image points on the sensor's own terrain."""
+        ground = self.sensor.image_to_ground(row, col)
+        ok = np.isfinite(ground).all(axis=1)
+        lon, lat, h = self.sensor.frame.enu_to_geodetic(np.where(ok[:, None], ground, 0.0))
+        return lon, lat, h, ok
+
+    def projector(self, model: str) -> Any:
+        from explorer.refine.torch_linescan import line_projector
+
+        return line_projector(self.sensor, self.correction(model))
+
+    def project(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, model: str,
+                params: np.ndarray | None) -> np.ndarray:
+        """(N, 2) pixels of the sensor (``params`` None) or of the adjusted sensor (its compiled path)."""
+        from explorer.refine.line_adjust import adjusted_sensor
+
+        sensor = self.sensor if params is None else adjusted_sensor(self.sensor, self.correction(model), params)
+        row, col = sensor.ground_to_image(self.sensor.frame.geodetic_to_enu(lon, lat, h))
+        return np.stack([row, col], axis=1)
+
+    def adjust(self, model: str, params: np.ndarray, sigmas: np.ndarray | None = None) -> dict[str, Any]:
+        from explorer.refine.line_adjust import adjusted_sensor, sidecar_dict
+
+        corr = self.correction(model)
+        self.adjusted = adjusted_sensor(self.sensor, corr, params)
+        self.sidecar = sidecar_dict(corr, params, sigmas, base_file=self.base_file, source_kind=self.source_kind)
+        out: dict[str, Any] = {"correction": corr.to_dict()}
+        if corr.frequencies_hz:
+            out["harmonics"] = corr.harmonics(np.asarray(params, dtype=np.float64))
+        return out
+
+    def write(self, path: Path) -> Path:
+        from explorer.refine.line_adjust import write_sidecar
+
+        assert self.sidecar is not None
+        return write_sidecar(path, self.sidecar)
+
+
+def _is_csm(sensor: Any) -> bool:
+    from explorer.real.csm_sensor import CsmScene
+
+    return isinstance(sensor, CsmScene)
+
+
+def image_adapter(sensor: Any, **options: Any) -> RPCImage | SceneImage | LineScanImage:
+    """The adapter of an RPC model, an MPC scene, a rigorous DIMAP/DG model or a CSM camera (``options``: the
+    :class:`LineScanImage` keywords); InputError for anything else."""
     if isinstance(sensor, RationalFunctionModel):
         return RPCImage(sensor)
     if isinstance(sensor, Scene):
+        from explorer.refine.line_adjust import is_line_scanner
         from explorer.sensor import has_polynomial_exterior
 
+        if is_line_scanner(sensor):
+            return LineScanImage(sensor, **options)
         if not has_polynomial_exterior(sensor):
-            raise InputError(f"cannot refine a {type(sensor).__name__}: its exterior is not MPC polynomials "
-                             "(rigorous DIMAP/DG and CSM models are not refined yet; fit an MPC scene to it)")
+            raise InputError(f"cannot refine a {type(sensor).__name__}: its exterior is neither MPC polynomials nor "
+                             "the tables of a rigorous DIMAP/DG model or a CSM camera")
         return SceneImage(sensor)
-    raise InputError(f"cannot refine a {type(sensor).__name__}: an RPC model or an MPC scene is needed")
+    raise InputError(f"cannot refine a {type(sensor).__name__}: an RPC model, an MPC scene, a rigorous DIMAP/DG "
+                     "model or a CSM camera is needed")

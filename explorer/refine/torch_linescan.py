@@ -1,0 +1,559 @@
+"""A differentiable (torch, float64, CPU) ground to image of rigorous DIMAP/DG models and USGS CSM cameras with
+exterior corrections (:mod:`explorer.refine.line_corrections`).
+
+:class:`TorchRigorous` (a :class:`~explorer.real.linescan.RigorousLineScanScene`: Lagrange ephemeris, Lagrange or
+slerp attitude quaternions, sensor-to-body axes, lever arm, aberration of light, refraction, radial distortion,
+curved detector line, uneven detector spacing) and :class:`TorchCsm` (a :class:`~explorer.real.csm_sensor.CsmScene`:
+usgscsm's Lagrange windows, slerp / Lagrange quaternions, constant and body rotations, J2000 positions,
+focal2pixel, summing, every distortion model of :mod:`explorer.real.csm_kernels`) restate the compiled
+formulas on torch tensors, with the correction applied to the table samples as
+:func:`explorer.refine.line_adjust.adjusted_sensor` applies it.
+
+Ground to image on a line scanner is a search for the line.  The search runs without gradients (the adjusted
+sensor's own compiled ground to image); then one Newton step of the line residual is taken in torch from that
+root, with the residual's time derivative from autograd.  At the root the step moves the value by less than
+the compiled tolerance, and its derivative is the implicit-function derivative ``d line / d theta =
+-(d r / d theta) / (d r / d line)``, so ``d (row, col) / d (params)`` and ``d (row, col) / d (ground)`` are exact
+(autograd; ``tests/refine/test_torch_linescan.py`` checks them against central differences and against the
+closed form of an along-track position offset).  Distortions solved by Newton in the compiled path (usgscsm's
+``apply`` of a model stated as a removal) are made differentiable the same way: one Newton step of the closed
+form with its autograd Jacobian from the compiled solution.
+
+Points where the compiled path finds no line (behind the sensor, outside the window, outside the ISD's tables)
+come out NaN.  torch is imported by this module only.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import torch
+
+from explorer.errors import InputError
+from explorer.refine.line_adjust import adjusted_sensor
+from explorer.refine.line_corrections import LineCorrection, quaternion_multiply
+
+__all__ = ["TorchCsm", "TorchRigorous", "line_projector"]
+
+
+def _t(a: Any) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(a, dtype=np.float64))
+
+
+def geodetic_to_ecef(lon: torch.Tensor, lat: torch.Tensor, h: torch.Tensor, a: float, e2: float) -> torch.Tensor:
+    """Body-fixed (N, 3) metres of geodetic degrees, degrees, metres on the ellipsoid (a, e^2)."""
+    lam, phi = torch.deg2rad(lon), torch.deg2rad(lat)
+    sl, cl = torch.sin(phi), torch.cos(phi)
+    n = a / torch.sqrt(1.0 - e2 * sl * sl)
+    return torch.stack([(n + h) * cl * torch.cos(lam), (n + h) * cl * torch.sin(lam), (n * (1.0 - e2) + h) * sl],
+                       dim=1)
+
+
+def _weighted_sum(w: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+    """``sum_j w[:, j] values[:, j]`` (N, K) of weights (N, m) and values (N, m, K), summed in order (as numpy's
+    einsum of the compiled path: the same rounding of planetary-size coordinates)."""
+    out = w[:, 0, None] * values[:, 0]
+    for j in range(1, w.shape[1]):
+        out = out + w[:, j, None] * values[:, j]
+    return out
+
+
+def _to_enu(d: torch.Tensor, e: np.ndarray) -> torch.Tensor:
+    """ENU (N, 3) of ECEF differences (N, 3) (``e`` columns: ENU axes in ECEF), per component as the frame's."""
+    x, y, z = d[:, 0], d[:, 1], d[:, 2]
+    return torch.stack([float(e[0, k]) * x + float(e[1, k]) * y + float(e[2, k]) * z for k in range(3)], dim=1)
+
+
+def _quat_matrix(q: torch.Tensor) -> torch.Tensor:
+    """(N, 3, 3) active rotation of unit quaternions (N, 4) (w, x, y, z)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    rows = [torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], dim=1),
+            torch.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], dim=1),
+            torch.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], dim=1)]
+    return torch.stack(rows, dim=1)
+
+
+def _normalise(q: torch.Tensor) -> torch.Tensor:
+    return q / torch.sqrt(torch.sum(q * q, dim=-1, keepdim=True))
+
+
+class _Projector:
+    """What both projectors share: parameters, the cache of the adjusted compiled sensor, the parameter rows."""
+
+    def __init__(self, sensor: Any, correction: LineCorrection) -> None:
+        self.sensor = sensor
+        self.correction = correction
+        self.parameter_names = correction.parameter_names
+        self._cache: tuple[bytes, Any] | None = None
+
+    def adjusted(self, params: np.ndarray) -> Any:
+        key = np.asarray(params, dtype=np.float64).tobytes()
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, adjusted_sensor(self.sensor, self.correction, params))
+        return self._cache[1]
+
+    def _theta(self, params: Any, n: int) -> tuple[torch.Tensor, np.ndarray]:
+        theta = params if isinstance(params, torch.Tensor) else _t(params)
+        theta = theta.expand(n, -1) if theta.ndim == 1 else theta
+        p_np = theta.detach()[0].numpy().copy() if theta.shape[0] else np.zeros(len(self.parameter_names))
+        if theta.shape[0] and not torch.equal(theta.detach(), theta.detach()[:1].expand_as(theta)):
+            raise InputError("the line-scanner projector takes one set of corrections for all points")
+        return theta, p_np
+
+    def _lagrange_weights(self, times: np.ndarray, idx: np.ndarray, t: torch.Tensor) -> torch.Tensor:
+        """Lagrange weights (N, m) of samples ``times[idx]`` (N, m) at ``t`` (N,), in the compiled order."""
+        tw = times[idx]
+        dt = t[:, None] - _t(tw)
+        m = idx.shape[1]
+        cols = []
+        for j in range(m):
+            w = torch.ones_like(t)
+            for k in range(m):
+                if k != j:
+                    w = w * (dt[:, k] / _t(tw[:, j] - tw[:, k]))
+            cols.append(w)
+        return torch.stack(cols, dim=1)
+
+
+class TorchRigorous(_Projector):
+    """Ground (lon, lat, h on the frame's body) -> corrected (row, col) of a rigorous DIMAP/DG model.
+
+    Parameters
+    ----------
+    scene : RigorousLineScanScene
+    correction : LineCorrection
+    """
+
+    def __init__(self, scene: Any, correction: LineCorrection) -> None:
+        super().__init__(scene, correction)
+        ext = scene.exterior
+        self._e = np.asarray(scene.frame.enu_to_ecef_rotation, dtype=np.float64)
+        self._origin = np.asarray(scene.frame.origin_ecef, dtype=np.float64)
+        self._b = np.asarray(ext.sensor_to_body, dtype=np.float64)
+        self._lever = np.asarray(ext.centre_offset_body_m, dtype=np.float64)
+        self.line_period = float(scene.timing.line_period_s)
+        eph, att = ext.ephemeris, ext.attitude
+        correction.check_sampling(att.time_s, "sensor's")
+        self._eph = eph
+        self._att = att
+
+    # ------------------------------------------------------------ exterior
+    def _window(self, times: np.ndarray, t: np.ndarray, order: int) -> np.ndarray:
+        n = times.size
+        m = min(order, n)
+        start = np.clip(np.searchsorted(times, t) - m // 2, 0, n - m)
+        return start[:, None] + np.arange(m)[None, :]
+
+    def exterior(self, t: torch.Tensor, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Perspective centres (N, 3) ENU, sensor -> ENU rotations (N, 3, 3), velocities (N, 3) ENU at times
+        ``t`` (N,) with corrections ``theta`` (N, P)."""
+        corr = self.correction
+        t_ref = corr.reference_time_s
+        eph, att = self._eph, self._att
+        t_np = t.detach().numpy()
+        idx = self._window(eph.time_s, t_np, eph.order)
+        w = self._lagrange_weights(eph.time_s, idx, t)
+        ref = eph.position_m[eph.position_m.shape[0] // 2]  # offsets from the middle sample, as the compiled path
+        pos = _weighted_sum(w, _t(eph.position_m[idx] - ref)) + _t(ref)
+        vel = _weighted_sum(w, _t(eph.velocity_m_s[idx]))
+        if corr.has_position:
+            tau = torch.sum(w * _t(eph.time_s[idx] - t_ref), dim=1)
+            pos = pos + corr.position_offset(tau, theta)
+            vel = vel + (corr.position_offset(tau + 1.0, theta) - corr.position_offset(tau, theta))
+        # attitude samples corrected (q_i dq(t_i)), then interpolated as the table is
+        if att.method == "lagrange":
+            aidx = self._window(att.time_s, t_np, att.order)
+            q = self._corrected_quaternions(aidx, theta)
+            wa = self._lagrange_weights(att.time_s, aidx, t)
+            qt = _normalise(torch.einsum("nm,nmk->nk", wa, q))
+        else:
+            i = np.clip(np.searchsorted(att.time_s, t_np) - 1, 0, att.time_s.size - 2)
+            q = self._corrected_quaternions(np.stack([i, i + 1], axis=1), theta)
+            s = (t - _t(att.time_s[i])) / _t(att.time_s[i + 1] - att.time_s[i])
+            qt = _slerp(q[:, 0], q[:, 1], s, flip=True)
+        rot_body = _quat_matrix(qt)  # body -> ECEF
+        if np.any(self._lever):
+            pos = pos + rot_body @ _t(self._lever)
+        e = _t(self._e)
+        centre = _to_enu(pos - _t(self._origin), self._e)
+        rotation = torch.einsum("ji,njk,kl->nil", e, rot_body, _t(self._b))
+        return centre, rotation, vel @ e
+
+    def _corrected_quaternions(self, idx: np.ndarray, theta: torch.Tensor) -> torch.Tensor:
+        corr = self.correction
+        tau = _t(self._att.time_s[idx] - corr.reference_time_s)  # (N, m)
+        dq = corr.rotation_quaternion(tau, theta[:, None, :], self._b)
+        base = _t(self._att.quaternion[idx])
+        return _normalise(quaternion_multiply(base, dq))
+
+    # ------------------------------------------------------------ collinearity
+    def focal_plane(self, ground: torch.Tensor, geodetic: tuple[torch.Tensor, ...], t: torch.Tensor,
+                    theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Distorted focal-plane (x, y) (N,) metres of ENU ``ground`` (N, 3) at times ``t`` (N,)."""
+        scene = self.sensor
+        centre, rotation, velocity = self.exterior(t, theta)
+        target = ground
+        if scene.refraction:
+            target = ground + self._refraction_shift(ground, geodetic, centre)
+        d = target - centre
+        if scene.aberration:
+            from explorer.real.linescan import C_LIGHT, OMEGA_EARTH
+
+            omega = _t(OMEGA_EARTH * self._e[2]).expand_as(centre)
+            rel = velocity + torch.linalg.cross(omega, centre - ground, dim=1)
+            d = d / torch.linalg.norm(d, dim=1, keepdim=True) + rel / C_LIGHT
+        v = torch.einsum("nji,nj->ni", rotation, d)
+        interior = scene.interior
+        scale = -interior.focal_length_m / v[:, 2]
+        x, y = v[:, 0] * scale, v[:, 1] * scale
+        if interior.radial_distortion:
+            r2 = x * x + y * y
+            factor = torch.ones_like(r2)
+            power = torch.ones_like(r2)
+            for k in interior.radial_distortion:
+                power = power * r2
+                factor = factor + k * power
+            x, y = x * factor, y * factor
+        return x, y
+
+    def _refraction_shift(self, ground: torch.Tensor, geodetic: tuple[torch.Tensor, ...],
+                          centre: torch.Tensor) -> torch.Tensor:
+        from explorer.real.linescan import REFRACTIVITY_SEA_LEVEL, SCALE_HEIGHT_M
+
+        lon, lat, h = geodetic
+        lo, la = torch.deg2rad(lon), torch.deg2rad(lat)
+        up = torch.stack([torch.cos(la) * torch.cos(lo), torch.cos(la) * torch.sin(lo), torch.sin(la)], dim=1) @ _t(self._e)
+        los = centre - ground
+        los = los / torch.linalg.norm(los, dim=1, keepdim=True)
+        cz = torch.clamp(torch.sum(los * up, dim=1), 1e-6, 1.0)
+        tz = torch.sqrt(1.0 - cz * cz) / cz
+        shift = REFRACTIVITY_SEA_LEVEL * SCALE_HEIGHT_M * torch.exp(-torch.clamp(h, min=-500.0) / SCALE_HEIGHT_M) \
+            * tz / cz**2
+        away = -(los - cz[:, None] * up)
+        norm = torch.linalg.norm(away, dim=1, keepdim=True)
+        away = torch.where(norm > 0, away / torch.where(norm > 0, norm, torch.ones_like(norm)), torch.zeros_like(away))
+        return shift[:, None] * away
+
+    def _detector_x(self, y: torch.Tensor) -> torch.Tensor:
+        interior = self.sensor.interior
+        x = torch.full_like(y, interior.along_track_offset_m)
+        power = torch.ones_like(y)
+        for c in interior.line_curvature:
+            power = power * y
+            x = x + c * power
+        return x
+
+    # ------------------------------------------------------------ ground to image
+    def project(self, lon: torch.Tensor, lat: torch.Tensor, h: torch.Tensor,
+                params: torch.Tensor | Any) -> tuple[torch.Tensor, torch.Tensor]:
+        """Corrected (row, col), each (N,), of geodetic ground points (N,) on the frame's body; ``params`` (P,) or
+        (N, P) (equal rows)."""
+        frame = self.sensor.frame
+        ecef = geodetic_to_ecef(lon, lat, h, float(frame.body.a_m), float(frame.body.e2))
+        return self.project_enu((ecef - _t(self._origin)) @ _t(self._e), params, (lon, lat, h))
+
+    def project_enu(self, ground: torch.Tensor, params: torch.Tensor | Any,
+                    geodetic: tuple[torch.Tensor, ...] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Corrected (row, col) of local ENU points (N, 3) of the scene's frame (``geodetic``: the same points'
+        lon, lat, h tensors for the refraction; default from the frame, without gradients).
+
+        (The geodetic -> ENU conversion of :meth:`project` goes through body-fixed coordinates of planetary
+        size, rounded to about 1e-9 m; this entry point avoids it.)
+        """
+        if geodetic is None:
+            geodetic = tuple(_t(v) for v in self.sensor.frame.enu_to_geodetic(ground.detach().numpy()))
+        theta, p_np = self._theta(params, ground.shape[0])
+        scene = self._cache_scene(p_np)
+        row0, col0 = scene.ground_to_image(ground.detach().numpy())
+        t0 = _t(scene.scanline_time(row0)).requires_grad_(True)
+        with torch.enable_grad():  # d r / d t by autograd, also when the caller evaluates without gradients
+            x, y = self.focal_plane(ground, geodetic, t0, theta)
+            residual = x - self._detector_x(y)
+            (slope,) = torch.autograd.grad(residual.sum(), t0, create_graph=torch.is_grad_enabled())
+        t = t0.detach() - residual / slope
+        row = _t(row0) + (t - t0.detach()) / self.line_period
+        _, y = self.focal_plane(ground, geodetic, t, theta)
+        interior = self.sensor.interior
+        target = y / interior.detector_pitch_m
+        if not interior.column_polynomial:
+            return row, target + interior.principal_column
+        u = _t(col0 - interior.principal_column)  # one Newton step of g(u) = target from the compiled root
+        g = u.clone()
+        dg = torch.ones_like(u)
+        power = u.clone()
+        for k, a in enumerate(interior.column_polynomial, start=2):
+            dg = dg + k * a * power
+            power = power * u
+            g = g + a * power
+        return row, u - (g - target) / dg + interior.principal_column
+
+    def _cache_scene(self, p_np: np.ndarray) -> Any:
+        return self.adjusted(p_np)
+
+
+def _slerp(q0: torch.Tensor, q1: torch.Tensor, s: torch.Tensor, flip: bool) -> torch.Tensor:
+    """Slerp (N, 4) between unit quaternions (N, 4) at fractions (N,): ``flip`` as
+    :func:`explorer.real.linescan.slerp` (the shorter arc), else as the CSM kernel (dot clipped at 1)."""
+    dot = torch.sum(q0 * q1, dim=1)
+    if flip:
+        q1 = torch.where((dot < 0)[:, None], -q1, q1)
+        dot = torch.abs(dot)
+        theta = torch.arccos(torch.clamp(dot, -1.0, 1.0))
+    else:
+        theta = torch.arccos(torch.clamp(dot, max=1.0))
+    st = torch.sin(theta)
+    small = st < 1e-12
+    safe = torch.where(small, torch.ones_like(st), st)
+    w0 = torch.where(small, 1.0 - s, torch.sin((1.0 - s) * theta) / safe)
+    w1 = torch.where(small, s, torch.sin(s * theta) / safe)
+    return _normalise(w0[:, None] * q0 + w1[:, None] * q1)
+
+
+# ------------------------------------------------------------------------------------------- CSM
+def _closed_form(model: int, c: np.ndarray, x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`explorer.real.csm_kernels._closed_form` on tensors."""
+    from explorer.real import csm_kernels as K
+
+    c = [float(v) for v in c]  # type: ignore[assignment]
+    if model == K.DIST_RADIAL:
+        rr = x * x + y * y
+        dr = c[0] + rr * (c[1] + rr * c[2])
+        return x * (1.0 - dr), y * (1.0 - dr)
+    if model == K.DIST_TRANSVERSE:
+        f = (x, y, x * x, x * y, y * y, x * x * x, x * x * y, x * y * y, y * y * y)
+        ox = c[0] + sum(c[1 + k] * f[k] for k in range(9))
+        oy = c[10] + sum(c[11 + k] * f[k] for k in range(9))
+        return ox, oy
+    if model == K.DIST_KAGUYALISM:
+        r2 = x * x + y * y
+        r = torch.sqrt(r2)
+        r3 = r2 * r
+        return (x + (c[1] + c[2] * r + c[3] * r2 + c[4] * r3) + c[0],
+                y + (c[6] + c[7] * r + c[8] * r2 + c[9] * r3) + c[5])
+    if model == K.DIST_DAWNFC:
+        r2 = x * x + y * y
+        return x * (1.0 + c[0] * r2), y * (1.0 + c[0] * r2)
+    if model == K.DIST_LROLROCNAC:
+        return x, y / (1.0 + c[0] * y * y)
+    if model == K.DIST_CAHVOR:
+        sx, sy = x - c[3], y - c[4]
+        rr = sx * sx + sy * sy
+        dr = c[0] + rr * (c[1] + rr * c[2])
+        return sx * (1.0 - dr) + c[3], sy * (1.0 - dr) + c[4]
+    if model == K.DIST_LUNARORBITER:
+        pf = 1.0 + c[0] * x + c[1] * y
+        pcx, pcy = x * pf, y * pf
+        sx, sy = pcx - c[2], pcy - c[3]
+        dr = c[4] + c[5] * (sx * sx + sy * sy)
+        return pcx - dr * sx, pcy - dr * sy
+    if model == K.DIST_RADTAN:
+        f = c[5]
+        u, v = x / f, y / f
+        rr = u * u + v * v
+        radial = 1.0 + rr * (c[0] + rr * (c[1] + rr * c[4]))
+        du = u * radial + 2.0 * c[2] * u * v + c[3] * (rr + 2.0 * u * u)
+        dv = v * radial + c[2] * (rr + 2.0 * v * v) + 2.0 * c[3] * u * v
+        return du * f, dv * f
+    if model == K.DIST_KPLOSHADOWCAM:
+        return x, y * (1.0 + c[0] * y * y)
+    if model == K.DIST_LEGENDRE:
+        half = c[0]
+        s = -x / half
+        s2 = s * s
+        p1, p2 = s, 0.5 * (3.0 * s2 - 1.0)
+        p3 = 0.5 * s * (5.0 * s2 - 3.0)
+        p4 = (35.0 * s2 * s2 - 30.0 * s2 + 3.0) / 8.0
+        p5 = s * (63.0 * s2 * s2 - 70.0 * s2 + 15.0) / 8.0
+        q2, q4 = -0.5, 0.375
+        d = c[2] * p1 + c[3] * q2 + c[5] * p2 + c[7] * p1 * q2 + c[9] * p3 + c[10] * q4 + c[12] * p2 * q2 \
+            + c[14] * p4 + c[16] * p1 * q4 + c[18] * p3 * q2 + c[20] * p5
+        return -(s + d) * half, y
+    if model == K.DIST_THEMISIR:
+        rad = (1.0 + c[1]) * (1.0 + c[1]) + 4.0 * c[2] * y
+        ok = rad >= 0
+        root = torch.sqrt(torch.where(ok, rad, torch.ones_like(rad)))
+        nan = torch.full_like(y, math.nan)
+        return torch.where(ok, x / c[0], nan), torch.where(ok, 2.0 * y / (1.0 + c[1] + root), nan)
+    return x, y
+
+
+class TorchCsm(_Projector):
+    """Ground (lon, lat, h on the ISD's ellipsoid) -> corrected (row, col) of a USGS CSM camera
+    (``(row, col) = (line - 0.5, sample - 0.5)``, ``docs/conventions.md``).
+
+    Parameters
+    ----------
+    scene : CsmScene
+    correction : LineCorrection
+    """
+
+    def __init__(self, scene: Any, correction: LineCorrection) -> None:
+        super().__init__(scene, correction)
+        cam = scene.camera
+        self.camera = cam
+        correction.check_sampling(cam.pointing_times, "ISD's pointing")
+        (self._pos_t, self._pos, self._pos_ref, self._pw, self._pd, self._qp_t, self._qp, self._qpw, self._qpd,
+         self._cp, self._qb_t, self._qb, self._qbw, self._qbd, self._cb, self._mode, self._rotate,
+         self._simple) = cam._exterior_args()
+        self._cam = np.asarray(cam._cam, dtype=np.float64)
+        self._look_axes = np.asarray(cam.pointing_constant, dtype=np.float64).T
+
+    def _lagrange(self, times: np.ndarray, win: np.ndarray, den: np.ndarray, t: torch.Tensor,
+                  values: Any) -> torch.Tensor:
+        """usgscsm's windowed Lagrange of ``values(idx)`` -> (N, m, k) at ``t`` (N,): (N, k)."""
+        n = times.size
+        if n == 1:
+            return values(np.zeros((t.shape[0], 1), dtype=np.int64))[:, 0]
+        t_np = t.detach().numpy()
+        i = np.clip(np.searchsorted(times, t_np, side="right") - 1, 0, n - 2)
+        i = np.where(np.isfinite(t_np), i, 0)
+        first, order = self._win(win, i)
+        out = None
+        for m in np.unique(order):
+            sel = np.flatnonzero(order == m)
+            idx = first[sel, None] + np.arange(m)[None, :]
+            dt = t[sel][:, None] - _t(times[idx])
+            cols = []
+            for a in range(m):
+                w = _t(den[i[sel], a])
+                for b in range(m):
+                    if b != a:
+                        w = w * dt[:, b]
+                cols.append(w)
+            part = torch.einsum("nm,nmk->nk", torch.stack(cols, dim=1), values(idx, sel))
+            if out is None:
+                out = torch.zeros((t.shape[0], part.shape[1]), dtype=torch.float64)
+            out = out.index_put((torch.from_numpy(sel),), part)
+        assert out is not None
+        return out
+
+    @staticmethod
+    def _win(win: np.ndarray, i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return win[i, 0], win[i, 1]
+
+    def _quaternion(self, times: np.ndarray, quats: np.ndarray, win: np.ndarray, den: np.ndarray, t: torch.Tensor,
+                    correct: torch.Tensor | None) -> torch.Tensor:
+        """Interpolated unit quaternions (N, 4); ``correct`` (N, P) corrects the samples (pointing only)."""
+        corr = self.correction
+
+        def samples(idx: np.ndarray, sel: np.ndarray | None = None) -> torch.Tensor:
+            q = _t(quats[idx])
+            if correct is None:
+                return q
+            th = correct if sel is None else correct[torch.from_numpy(sel)]
+            tau = _t(times[idx] - corr.reference_time_s)
+            dq = corr.rotation_quaternion(tau, th[:, None, :], self._look_axes, inverse=True)
+            return _normalise(quaternion_multiply(dq, q))
+
+        if times.size == 1:
+            return _normalise(samples(np.zeros((t.shape[0], 1), dtype=np.int64))[:, 0])
+        if self._mode == 1:
+            return _normalise(self._lagrange(times, win, den, t, samples))
+        t_np = t.detach().numpy()
+        i = np.clip(np.searchsorted(times, t_np, side="right") - 1, 0, times.size - 2)
+        i = np.where(np.isfinite(t_np), i, 0)
+        q = samples(np.stack([i, i + 1], axis=1))
+        s = (t - _t(times[i])) / _t(times[i + 1] - times[i])
+        return _slerp(q[:, 0], q[:, 1], s, flip=False)
+
+    def exterior(self, t: torch.Tensor, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Perspective centres (N, 3) body-fixed and camera -> body rotations (N, 3, 3) at camera times (N,)."""
+        corr = self.correction
+        pos_t = self._pos_t
+
+        def positions(idx: np.ndarray, sel: np.ndarray | None = None) -> torch.Tensor:
+            return _t(self._pos[idx])
+
+        p = self._lagrange(pos_t, self._pw, self._pd, t, positions) + _t(self._pos_ref)
+        if corr.has_position:
+            def taus(idx: np.ndarray, sel: np.ndarray | None = None) -> torch.Tensor:
+                return _t(pos_t[idx] - corr.reference_time_s)[:, :, None]
+
+            tau = self._lagrange(pos_t, self._pw, self._pd, t, taus)[:, 0] if pos_t.size > 1 \
+                else torch.full_like(t, float(pos_t[0] - corr.reference_time_s))
+            p = p + corr.position_offset(tau, theta)
+        qp = self._quaternion(self._qp_t, self._qp, self._qpw, self._qpd, t, theta)
+        if self._simple:
+            return p, _quat_matrix(qp).transpose(1, 2)
+        pm = _t(self._cp) @ _quat_matrix(qp)
+        qb = self._quaternion(self._qb_t, self._qb, self._qbw, self._qbd, t, None)
+        b = _t(self._cb) @ _quat_matrix(qb)
+        m = b @ pm.transpose(1, 2)
+        if self._rotate:
+            p = torch.einsum("nij,nj->ni", b, p)
+        return p, m
+
+    def _line_time(self, line: torch.Tensor) -> torch.Tensor:
+        cam = self.camera
+        k = np.clip(np.searchsorted(cam.rate_lines, line.detach().numpy(), side="right") - 1, 0, None)
+        return _t(cam.rate_times[k]) + _t(cam.rate_periods[k]) * (line - _t(cam.rate_lines[k]) + 0.5)
+
+    def _distort(self, xu: torch.Tensor, yu: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """usgscsm's apply_distortion on tensors (implicit Newton step where the compiled path solves it)."""
+        from explorer.real import csm_kernels as K
+
+        cam = self.camera
+        model, c = int(cam.distortion_model), np.asarray(cam.distortion_coefficients, dtype=np.float64)
+        if model == K.DIST_NONE:
+            return xu, yu
+        if not bool(K.closed_form_is_removal(model)):
+            return _closed_form(model, c, xu, yu)
+        xd0, yd0 = cam.apply_distortion(xu.detach().numpy(), yu.detach().numpy())
+        a = _t(xd0).requires_grad_(True)
+        b = _t(yd0).requires_grad_(True)
+        with torch.enable_grad():
+            fx, fy = _closed_form(model, c, a, b)
+            jxx, jxy = torch.autograd.grad(fx.sum(), (a, b), retain_graph=True)
+            jyx, jyy = torch.autograd.grad(fy.sum(), (a, b))
+        ex, ey = fx.detach() - xu, fy.detach() - yu
+        det = jxx * jyy - jxy * jyx
+        return _t(xd0) - (jyy * ex - jxy * ey) / det, _t(yd0) - (jxx * ey - jyx * ex) / det
+
+    def residual(self, xyz: torch.Tensor, line: torch.Tensor, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """usgscsm's detector-line residual (lines) and sample of body-fixed ``xyz`` (N, 3) at ``line`` (N,)."""
+        from explorer.real import csm_kernels as K
+
+        cam = self._cam
+        s, m = self.exterior(self._line_time(line), theta)
+        d = cam[K.C_LOOK] * (xyz - s)
+        v = torch.einsum("nji,nj->ni", m, d)
+        f = cam[K.C_FOCAL]
+        xd, yd = self._distort(f * v[:, 0] / v[:, 2], f * v[:, 1] / v[:, 2])
+        det_line = cam[K.C_TL0] + cam[K.C_TL1] * xd + cam[K.C_TL2] * yd + cam[K.C_LINE_ORIGIN] - cam[K.C_START_LINE]
+        det_sample = (cam[K.C_TS0] + cam[K.C_TS1] * xd + cam[K.C_TS2] * yd + cam[K.C_SAMPLE_ORIGIN]
+                      - cam[K.C_START_SAMPLE])
+        return det_line / cam[K.C_LINE_SUM], det_sample / cam[K.C_SAMPLE_SUM]
+
+    def project(self, lon: torch.Tensor, lat: torch.Tensor, h: torch.Tensor,
+                params: torch.Tensor | Any) -> tuple[torch.Tensor, torch.Tensor]:
+        """Corrected (row, col), each (N,), of geodetic ground points (N,) on the ISD's ellipsoid; ``params`` (P,)
+        or (N, P) (equal rows)."""
+        cam = self.camera
+        a, b = float(cam.semi_major_m), float(cam.semi_minor_m)
+        xyz = geodetic_to_ecef(lon, lat, h, a, 1.0 - (b * b) / (a * a))
+        return self.project_xyz(xyz, params)
+
+    def project_xyz(self, xyz: torch.Tensor, params: torch.Tensor | Any) -> tuple[torch.Tensor, torch.Tensor]:
+        """Corrected (row, col) of body-fixed points (N, 3), metres."""
+        theta, p_np = self._theta(params, xyz.shape[0])
+        camera = self.adjusted(p_np).camera
+        g = camera.ground_to_image(xyz.detach().numpy())
+        solved = g.status == 0
+        line0 = _t(np.where(solved, g.line, np.nan)).requires_grad_(True)
+        with torch.enable_grad():
+            res, _ = self.residual(xyz, line0, theta)
+            (slope,) = torch.autograd.grad(res.sum(), line0, create_graph=torch.is_grad_enabled())
+        line = line0.detach() - res / slope
+        _, sample = self.residual(xyz, line, theta)
+        return line - 0.5, sample - 0.5
+
+
+def line_projector(sensor: Any, correction: LineCorrection) -> TorchRigorous | TorchCsm:
+    """The differentiable projector of a rigorous DIMAP/DG model or a CSM camera."""
+    from explorer.real.csm_sensor import CsmScene
+
+    if isinstance(sensor, CsmScene):
+        return TorchCsm(sensor, correction)
+    return TorchRigorous(sensor, correction)
