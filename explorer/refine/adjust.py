@@ -38,8 +38,8 @@ import numpy as np
 
 from explorer.errors import InputError
 from explorer.refine.bundle import BundleProblem, BundleResult, bundle_adjust, metres_per_degree
-from explorer.refine.line_adjust import is_line_scanner
 from explorer.refine.images import LineScanImage, RPCImage, SceneImage, image_adapter
+from explorer.refine.line_adjust import is_line_scanner
 from explorer.refine.points_io import PointTable
 
 __all__ = ["Refinement", "image_size", "refine_images"]
@@ -291,8 +291,9 @@ def refine_images(
     """
     if not sensors:
         raise InputError("no image to refine")
-    images = [image_adapter(s, base_file=(image_files or [None] * len(sensors))[k],
-                            source_kind=(source_kinds or [None] * len(sensors))[k], jitter_hz=jitter_hz)
+    files: list[str | None] = list(image_files) if image_files else [None] * len(sensors)
+    kinds: list[str | None] = list(source_kinds) if source_kinds else [None] * len(sensors)
+    images = [image_adapter(s, base_file=files[k], source_kind=kinds[k], jitter_hz=jitter_hz)
               if is_line_scanner(s) else image_adapter(s) for k, s in enumerate(sensors)]
     if len({im.kind for im in images}) > 1 or len({im.axes for im in images}) > 1:
         raise InputError("the images must be all RPCs, all MPC scenes or all line scanners, on one body")

@@ -173,9 +173,27 @@ def apply_sidecar(sensor: Any, sidecar: dict[str, Any], source: str = "<sidecar>
     return adjusted_sensor(sensor, correction, params)
 
 
-def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None, *, dem: str | None = None) -> Any:
+def _load_base(kind: str, path: Path) -> Any:
+    """The sensor of a base file as :func:`explorer.sources.load_source` reads it (without a DEM)."""
+    if kind == "dimap":
+        from explorer.real.dimap import rigorous_scene_from_dimap
+
+        return rigorous_scene_from_dimap(path)[0]
+    if kind == "dg":
+        from explorer.real.worldview import rigorous_scene_from_dg
+
+        return rigorous_scene_from_dg(path)
+    if kind == "isd":
+        from explorer.real.csm_camera import read_isd
+        from explorer.real.csm_sensor import csm_scene
+
+        return csm_scene(read_isd(path))
+    raise SceneFileError(f"{path}: unknown source kind {kind!r} in the sidecar (dimap, dg or isd)")
+
+
+def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None) -> Any:
     """Load an adjusted sensor: the sidecar's base file (beside the sidecar unless ``base_path``; its SHA-256
-    checked) through :func:`explorer.sources.load_source`, then the correction.
+    checked) read as :func:`explorer.sources.load_source` reads it, then the correction.
 
     Raises
     ------
@@ -183,7 +201,6 @@ def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None,
         Not a sidecar, malformed, or a base file whose hash differs from the one the sidecar names.
     """
     from explorer.io_input import load_json_file
-    from explorer.sources import load_source
 
     path = Path(sidecar_path)
     d = load_json_file(path, "sidecar")
@@ -196,8 +213,7 @@ def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None,
         raise SceneFileError(f"{path}: its base file {str(base)!r} is not there (give its path)")
     if d.get("base_sha256") is not None and file_sha256(base) != d.get("base_sha256"):
         raise SceneFileError(f"{path}: {base} is not the file this adjustment was made on (SHA-256 differs)")
-    source = load_source(str(d.get("source_kind")), str(base), dem=dem)
-    return apply_sidecar(source.scene, d, str(path))
+    return apply_sidecar(_load_base(str(d.get("source_kind")), base), d, str(path))
 
 
 def write_sidecar(path: str | Path, sidecar: dict[str, Any]) -> Path:

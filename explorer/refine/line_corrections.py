@@ -171,8 +171,9 @@ class LineCorrection:
     def parameter_names(self) -> tuple[str, ...]:
         """Names in the order of the parameter vector."""
         names = LINE_MODELS[self.model]
-        for k, f in enumerate(self.frequencies_hz, start=1):
-            names = names + tuple(f"{axis}_{part}{k}_rad" for axis in ("roll", "pitch", "yaw") for part in ("sin", "cos"))
+        for k in range(1, len(self.frequencies_hz) + 1):
+            names = names + tuple(f"{axis}_{part}{k}_rad" for axis in ("roll", "pitch", "yaw")
+                                  for part in ("sin", "cos"))
         return names
 
     @property
@@ -219,7 +220,8 @@ class LineCorrection:
             for k, f in enumerate(self.frequencies_hz, start=1):
                 axis = ("roll", "pitch", "yaw")[i]
                 w = (2.0 * math.pi * f) * tau
-                value = value + self._get(p, f"{axis}_sin{k}_rad") * _sin(w) + self._get(p, f"{axis}_cos{k}_rad") * _cos(w)
+                value = (value + self._get(p, f"{axis}_sin{k}_rad") * _sin(w)
+                         + self._get(p, f"{axis}_cos{k}_rad") * _cos(w))
             out.append(value)
         return out
 
@@ -245,7 +247,7 @@ class LineCorrection:
             raise InputError(f"jitter frequency {high[0]:g} Hz is at or above the Nyquist frequency of the {what} "
                              f"attitude table ({nyquist:g} Hz): the corrected table cannot represent it")
 
-    def harmonics(self, p: np.ndarray) -> list[dict[str, float]]:
+    def harmonics(self, p: np.ndarray) -> list[dict[str, Any]]:
         """Amplitude (rad) and phase (rad) of each harmonic and axis: ``A sin(2 pi f tau + phase)``."""
         out = []
         for k, f in enumerate(self.frequencies_hz, start=1):

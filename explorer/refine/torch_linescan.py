@@ -224,7 +224,8 @@ class TorchRigorous(_Projector):
 
         lon, lat, h = geodetic
         lo, la = torch.deg2rad(lon), torch.deg2rad(lat)
-        up = torch.stack([torch.cos(la) * torch.cos(lo), torch.cos(la) * torch.sin(lo), torch.sin(la)], dim=1) @ _t(self._e)
+        up = torch.stack([torch.cos(la) * torch.cos(lo), torch.cos(la) * torch.sin(lo), torch.sin(la)], dim=1)
+        up = up @ _t(self._e)
         los = centre - ground
         los = los / torch.linalg.norm(los, dim=1, keepdim=True)
         cz = torch.clamp(torch.sum(los * up, dim=1), 1e-6, 1.0)
