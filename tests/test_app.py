@@ -625,29 +625,42 @@ def test_model_layer_imports_neither_viser_nor_plotly():
 
 
 def test_reset_view_frames_every_client_on_the_footprint(server):
+    """Issue 24: every browser's camera is framed for its own canvas (the aspect it reported) so the footprint
+    fills at least half of the view -- checked by projecting the footprint corners through the pose."""
+    from explorer.scene3d.camera import DEFAULT_ASPECT, VIEW_FOV_Y, footprint_share, view_ndc
+
     class Camera:
-        far = look_at = position = None
+        far = near = look_at = position = None
+
+        def __init__(self, width: int, height: int) -> None:
+            self.image_width, self.image_height, self.fov = width, height, VIEW_FOV_Y
 
     class Client:
-        def __init__(self) -> None:
-            self.camera = Camera()
+        def __init__(self, cid: int, width: int, height: int) -> None:
+            self.client_id, self.camera = cid, Camera(width, height)
 
         def atomic(self):
             return contextlib.nullcontext()
 
     app = make_app(server)
-    clients = {1: Client(), 2: Client()}
-    server.get_clients = lambda: clients  # two browsers looking elsewhere
+    clients = {1: Client(1, 512, 900), 2: Client(2, 1600, 900), 3: Client(3, 0, 0)}  # 3: not reported yet
+    server.get_clients = lambda: clients  # three browsers looking elsewhere
     app.reset_view()
+    corners = app.frame.ground(np.asarray(app.scene.footprint(), dtype=np.float64))
+    for c, aspect in ((clients[1], 512 / 900), (clients[2], 1600 / 900), (clients[3], DEFAULT_ASPECT)):
+        assert (c.camera.position, c.camera.look_at, c.camera.far, c.camera.near) == app.client_poses[c.client_id]
+        ndc, depth = view_ndc(corners, np.array(c.camera.position), np.array(c.camera.look_at), aspect=aspect)
+        assert np.all(depth > 0) and np.all(np.abs(ndc) < 0.9)  # the whole footprint, inside the view
+        assert max(np.ptp(ndc, axis=0)) / 2 >= 0.5  # and at least half of it along the binding axis
+    assert clients[1].camera.position != clients[2].camera.position  # each canvas its own pose
+    # the default pose (new browsers) is the one for the default canvas
     pos, look, far = app.camera_pose
-    for c in clients.values():
-        assert c.camera.position == pos and c.camera.look_at == look and c.camera.far == far
-    # the pose frames the footprint: it looks at a point between the ground and the displayed track,
-    # from farther than the footprint's diagonal
-    assert np.linalg.norm(np.subtract(pos, look)) > app.frame.diagonal_km
-    centre_track = app.frame.sensor(app.scene.exterior.position(app.scene.scanline_time(
-        np.array([(app.scene.n_rows - 1) / 2.0]))))[0]
-    np.testing.assert_allclose(look, 0.5 * centre_track, rtol=0.05, atol=0.05 * app.frame.diagonal_km)
+    assert (pos, look, far) == app.client_poses[3][:3]
+
+    class Pose:  # footprint_share on the default pose
+        position, look_at, fov_y, aspect = np.array(pos), np.array(look), VIEW_FOV_Y, DEFAULT_ASPECT
+
+    assert max(footprint_share(corners, Pose)) >= 0.5
 
 
 def test_controls_reach_the_app_through_its_public_methods_only(server):

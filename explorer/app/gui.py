@@ -134,7 +134,11 @@ class ExplorerApp(Views):
         self.url: str | None = None
         self.startup_s: float | None = None
         self.camera_pose: tuple | None = None
-        """(position, look_at, far) of the last framing, display km."""
+        """(position, look_at, far) of the last framing for the default canvas, display km."""
+        self.client_poses: dict[Any, tuple] = {}
+        """Per browser (client id): (position, look_at, far, near) of its last framing, for its own canvas."""
+        self._framed_clients: dict[Any, tuple] = {}
+        """Per browser: (camera key, canvas aspect) of its last framing."""
         self.exports = 0
         self._sent: dict[str, Hashable] = {}
         self._local = threading.local()
@@ -172,6 +176,8 @@ class ExplorerApp(Views):
         self.server.scene.set_up_direction("+z")
         self.server.initial_camera.near = 0.001
         self.server.initial_camera.far = 5000.0
+        with contextlib.suppress(Exception):  # frame each browser for its own canvas once it reports it
+            self.server.on_client_connect(self._client_connected)
         if background:
             # draw the scene at once; import the method modules (torch...) meanwhile
             self.fits = FitPool(self._lock, self._fit_done)
@@ -182,6 +188,9 @@ class ExplorerApp(Views):
                              daemon=True).start()
         else:
             self._discover_methods(wanted)
+
+    def _client_connected(self, client: Any) -> None:
+        client.camera.on_update(lambda cam: self._client_camera_reported(cam.client))
 
     def _discover_methods(self, wanted: list[str] | None) -> None:
         """Import the method modules, add a checkbox per registered method, then update."""

@@ -67,6 +67,9 @@ class Views:
         request_started: float | None
         last_times: dict[str, float]
         camera_pose: tuple | None
+        client_poses: dict[Any, tuple]
+        _framed_clients: dict[Any, tuple]
+        _framing: tuple[np.ndarray, np.ndarray]
         exports: int
         fits: Any
         methods_ready: threading.Event
@@ -248,7 +251,7 @@ class Views:
             node.colors = colors  # the same points: send their new colours only (not 50,000 positions again)
         else:
             self._put("/points/scps", B.add_points(self.server.scene, "/points/scps", self.frame, scps.ground[idx],
-                                                   colors, size_km=B.point_size_km(self.frame, len(idx))))
+                                                   colors, size_km=B.point_size_km(self.frame, len(idx), B.SCP_COVER)))
             self._cloud_pos_key = pos_key
         self.cloud_index, self.cloud_residual = idx, res
         if ev is not None:
@@ -404,35 +407,68 @@ class Views:
 
     # ----------------------------------------------------------------- camera
     def _camera_for(self, scene: Scene) -> tuple[tuple, tuple, float]:
-        """(position, look_at, far) framing the footprint and the (displayed) track."""
-        frame = self.frame
-        _, pos = self._B.track_positions(scene, 3)
-        track = frame.sensor(pos)
-        mid = track[1]
-        look = 0.5 * mid
-        flight = track[2] - track[0]
-        flight[2] = 0.0
-        flight /= max(np.linalg.norm(flight), 1e-12)
-        side = np.cross(flight, [0.0, 0.0, 1.0])
-        dist = max(np.linalg.norm(mid), frame.diagonal_km)
-        view = 1.0 * side - 0.35 * flight + np.array([0.0, 0.0, 0.1])
-        cam = look + 1.15 * dist * view / np.linalg.norm(view)
-        far = max(5000.0, 4.0 * float(np.linalg.norm(cam)))
-        return tuple(float(v) for v in cam), tuple(float(v) for v in look), far
+        """(position, look_at, far) framing the footprint (and as much of the displayed track as fits) for
+        the default canvas (:func:`explorer.scene3d.camera.frame_footprint`); a browser that reported its
+        canvas gets a pose for its own aspect (:meth:`_pose_for_client`)."""
+        from explorer.scene3d.camera import frame_footprint
+
+        frame, B = self.frame, self._B  # noqa: N806
+        ground = frame.ground(B.footprint_outline(scene, per_edge=16).reshape(-1, 3))
+        _, pos = B.track_positions(scene, 9)
+        self._framing = (ground, frame.sensor(pos))
+        pose = frame_footprint(*self._framing)
+        return tuple(float(v) for v in pose.position), tuple(float(v) for v in pose.look_at), pose.far
+
+    def _pose_for_client(self, client: Any) -> tuple[tuple, tuple, float, float]:
+        """(position, look_at, far, near) framing the footprint in ``client``'s canvas (its reported aspect
+        and field of view; the default canvas until it reported one)."""
+        from explorer.scene3d.camera import DEFAULT_ASPECT, VIEW_FOV_Y, frame_footprint
+
+        cam = client.camera
+        aspect, fov = DEFAULT_ASPECT, VIEW_FOV_Y
+        with contextlib.suppress(Exception):  # a camera that has not reported yet raises / has no size
+            w, h, f = float(cam.image_width), float(cam.image_height), float(cam.fov)
+            if w > 0 and h > 0 and 0 < f < np.pi:
+                aspect, fov = w / h, f
+        pose = frame_footprint(*self._framing, aspect=aspect, fov_y=fov)
+        out = (tuple(float(v) for v in pose.position), tuple(float(v) for v in pose.look_at), pose.far, pose.near)
+        self.client_poses[getattr(client, "client_id", id(client))] = out
+        return out
 
     def _apply_camera(self, clients: list[Any]) -> None:
         if self.camera_pose is None:
             return
-        pos, look, far = self.camera_pose
         for client in clients:
             with contextlib.suppress(Exception):
+                pos, look, far, near = self._pose_for_client(client)
                 with client.atomic():
                     client.camera.far = far
+                    client.camera.near = near
+                    client.camera.position = pos  # viser moves look_at with the position: set it after
                     client.camera.look_at = look
-                    client.camera.position = pos
+
+    def _client_camera_reported(self, client: Any) -> None:
+        """A browser's camera reported (its canvas size among it): frame the footprint for that canvas once
+        per scene, and again when the canvas changes shape (the panels dock after the first report) while
+        the camera is still where the framing put it -- once the user has moved it, it is left alone."""
+        with contextlib.suppress(Exception):
+            cam = client.camera
+            w, h = float(cam.image_width), float(cam.image_height)
+            if self.camera_pose is None or not (w > 0 and h > 0):
+                return
+            key = self._sent.get("camera")
+            done = self._framed_clients.get(client.client_id)
+            if done is not None and done[0] == key:
+                old = self.client_poses.get(client.client_id)
+                moved = old is None or not (np.allclose(cam.position, old[0], atol=1e-6, rtol=1e-6)
+                                            and np.allclose(cam.look_at, old[1], atol=1e-6, rtol=1e-6))
+                if moved or abs(done[1] - w / h) <= 1e-3 * done[1]:
+                    return
+            self._framed_clients[client.client_id] = (key, w / h)
+            self._apply_camera([client])
 
     def _frame_camera(self, scene: Scene, key: Hashable) -> None:
-        """Point the initial camera at the ground and track and, on a new scene, every open browser's."""
+        """Point the initial camera at the footprint and, on a new scene, every open browser's."""
         pos, look, far = self._camera_for(scene)
         self.camera_pose = (pos, look, far)
         self.server.initial_camera.far = far
@@ -440,6 +476,10 @@ class Views:
         self.server.initial_camera.position = pos
         if self._changed("camera", key):
             self._apply_camera(list(self.server.get_clients().values()))
+            for cid, client in self.server.get_clients().items():
+                with contextlib.suppress(Exception):
+                    cam = client.camera
+                    self._framed_clients[cid] = (key, float(cam.image_width) / float(cam.image_height))
 
     def reset_view(self) -> None:
         """Frame the current footprint and track again in every open browser."""

@@ -393,6 +393,13 @@ def mesh_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> bytes:
                      struct.pack("<I4s", len(bin_chunk), b"BIN\0"), bin_chunk])
 
 
+SCP_COVER = 1.5
+"""Diameter of a check point's marker in SCP spacings: round markers on a grid leave no gap from 2 ** 0.5 on.
+Smaller markers let the ground show between them wherever the camera is close enough for a spacing to span
+more than a pixel (a closer camera then *washes out* the residual colours: at 0.45 spacings they covered
+16 % of the footprint); from farther away each marker is one pixel anyway."""
+
+
 def point_size_km(frame: DisplayFrame, n_points: int, fraction: float = 0.45) -> float:
     """Marker size (km) of about ``fraction`` of the spacing of ``n_points`` spread over the footprint."""
     return float(fraction * frame.diagonal_km / np.sqrt(2.0 * max(n_points, 1)))
@@ -583,7 +590,7 @@ def add_selection(
 
 
 __all__ = [
-    "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "DisplayFrame", "add_ground", "add_orbit", "add_points",
+    "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "SCP_COVER", "DisplayFrame", "add_ground", "add_orbit", "add_points",
     "ground_mesh_nodes",
     "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
     "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
