@@ -95,17 +95,24 @@ def test_scene_refinement_draws_both_trajectories_in_3d_and_redraws_them_live(se
     assert not any(h.visible for h in view._nodes.values())
 
 
-def test_every_source_kind_has_a_refinement_target():
+def test_every_source_kind_has_a_refinement_target(monkeypatch):
     from explorer.app.refine_view import refine_target_of
+    from explorer.refine import target as target_module
+    from explorer.refine.images import image_adapter
     from explorer.sources import load_source
     from tests.refine.cases import PLEIADES
-    from tests.refine.test_target import ORBITAL
+    from tests.refine.test_target import ORBITAL, only_rpcs_and_mpc_scenes
 
     preset = refine_target_of(load_source("preset", "WSU"))
     assert not preset.is_stand_in and preset.label == "the Scene itself" and preset.model.n_rows > 0
     rpc = refine_target_of(load_source("rpc", str(PLEIADES)))
     assert not rpc.is_stand_in and "the RPC itself" in rpc.label
     isd = load_source("isd", str(ORBITAL))
+    direct = refine_target_of(isd)  # the camera itself once it is refinable, else its stand-in
+    image_adapter(direct.model)
+    assert direct.label == ("the MPC fitted to the CSM camera (a stand-in)" if direct.is_stand_in
+                            else "the CSM camera itself")
+    monkeypatch.setattr(target_module, "_refinable", only_rpcs_and_mpc_scenes)  # the stand-in path
     target = refine_target_of(isd)
     assert target.is_stand_in and target.model is isd.stand_in.sensor and target.truth is isd.scene
     assert target.label == "the MPC fitted to the CSM camera (a stand-in)"

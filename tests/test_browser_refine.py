@@ -141,9 +141,15 @@ def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
         page.screenshot(path=str(tmp_path / f"refine_{kind}.png"), full_page=True)
         text = _plot_texts(page)
         assert "residuals (measured - model)" in text and "before (vectors" in text  # the quiver
-        assert "position_e_m" in text and "kappa_rad" in text and "sigma" in text  # the parameter table
+        names = view.refinement.parameter_names  # the parameter table: every parameter with its sigma
+        assert all(name in text for name in names) and "sigma" in text, (names, text)
+        sigma = f"{view.refinement.parameter_table()[0]['sigma']:.3g}"
+        assert sigma in text
         body = page.evaluate("() => document.body.innerText")
-        assert ("(a stand-in)" in body) == (kind == "dimap")
+        # what is adjusted, stated: the scene itself; the DIMAP model itself or its MPC stand-in (with its distance)
+        assert f"Adjusting {view.target.label}." in body
+        assert view.target.is_stand_in == ("The stand-in is" in body)
+        assert (kind == "scene") <= (view.target.label == "the Scene itself")
         assert "adjusted trajectory (red) vs original (grey)" in body  # the folder states the 3D factors
         red = _near(page, ADJUSTED_RGB)
         view.draw_3d(visible=False)

@@ -46,11 +46,25 @@ def test_stand_in_error_is_the_distance_at_the_points():
     assert target.stand_in_error_px(None) is None
 
 
-def test_a_csm_camera_is_refined_through_its_mpc_stand_in():
+def only_rpcs_and_mpc_scenes(model) -> bool:
+    """What was refinable before the rigorous / CSM adapters: an RPC or an MPC scene."""
+    from explorer.rpc.model import RationalFunctionModel
+    from explorer.sensor import has_polynomial_exterior
+
+    return isinstance(model, RationalFunctionModel) or (isinstance(model, Scene) and has_polynomial_exterior(model))
+
+
+def test_a_csm_camera_is_refined_itself_or_through_its_mpc_stand_in(monkeypatch):
     from explorer.real.csm_camera import read_isd
     from explorer.real.csm_sensor import csm_scene
+    from explorer.refine import target as target_module
+    from explorer.refine.images import image_adapter
 
     camera = csm_scene(read_isd(ORBITAL))
+    direct = refine_target(camera, what="the CSM camera")  # the camera itself once it is refinable
+    image_adapter(direct.model)
+    assert (direct.model is camera) == (not direct.is_stand_in)
+    monkeypatch.setattr(target_module, "_refinable", only_rpcs_and_mpc_scenes)  # the stand-in path
     target = refine_target(camera, what="the CSM camera")
     assert target.is_stand_in and target.truth is camera and isinstance(target.model, Scene)
     assert target.label == "an MPC degree 3 fitted to the CSM camera (a stand-in)"
