@@ -122,6 +122,23 @@ def _plot_texts(page) -> str:
                          ".join('\\n')")
 
 
+def _look_at_the_trajectories(app, view) -> None:
+    """Point every browser's camera at the drawn trajectories, from the app's viewing direction, far enough back
+    to see both whole."""
+    pts = np.concatenate([np.asarray(view._nodes[f"/refine/{k}/track"].points).reshape(-1, 3)
+                          for k in ("original", "adjusted")])
+    mid = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    extent = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) + app.frame.diagonal_km
+    pos, look, _ = app.camera_pose
+    direction = (np.asarray(pos) - np.asarray(look)) / np.linalg.norm(np.asarray(pos) - np.asarray(look))
+    for client in app.server.get_clients().values():
+        with client.atomic():
+            client.camera.far = 100.0 * extent
+            client.camera.near = 1e-3 * extent
+            client.camera.position = tuple(mid + 2.5 * extent * direction)
+            client.camera.look_at = tuple(mid)
+
+
 @pytest.mark.parametrize("kind", ["scene", "dimap"])
 def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
     if kind == "scene":
@@ -138,7 +155,6 @@ def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
         assert view.error is None and view.has_trajectory
         page = _open(browser, app.url)
         page.wait_for_function("() => document.body.innerText.includes('trajectory moved by')")
-        page.screenshot(path=str(tmp_path / f"refine_{kind}.png"), full_page=True)
         text = _plot_texts(page)
         assert "residuals (measured - model)" in text and "before (vectors" in text  # the quiver
         names = view.refinement.parameter_names  # the parameter table: every parameter with its sigma
@@ -151,7 +167,10 @@ def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
         assert view.target.is_stand_in == ("The stand-in is" in body)
         assert (kind == "scene") <= (view.target.label == "the Scene itself")
         assert "adjusted trajectory (red) vs original (grey)" in body  # the folder states the 3D factors
+        _look_at_the_trajectories(app, view)  # (the app frames the footprint; the track is above it)
+        page.wait_for_timeout(2500)
         red = _near(page, ADJUSTED_RGB)
+        page.screenshot(path=str(tmp_path / f"refine_{kind}.png"))
         view.draw_3d(visible=False)
         page.wait_for_timeout(1500)
         hidden = _near(page, ADJUSTED_RGB)
