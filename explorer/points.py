@@ -19,6 +19,7 @@ from explorer.geometry.dem_intersection import OK
 from explorer.io_atomic import atomic_path
 from explorer.memory import check_allocation
 from explorer.scene import Scene
+from explorer.sensor import has_line_geometry, has_polynomial_exterior
 
 
 @dataclass
@@ -32,7 +33,7 @@ class PointSet:
     ground : ndarray, shape (N, 3)
         Local ENU metres.
     time : ndarray, shape (N,)
-        Exact scanline time, seconds.
+        Exact scanline time, seconds (NaN on a sensor without scanlines, an RPC: :func:`scanline_times`).
     grid_shape : tuple of int
         (rows, cols, layers) of the generating grid.
     """
@@ -177,11 +178,11 @@ def image_grid(
         origin, direction = _grid_rays(scene, rows, cols)
         ground, flags = scene.terrain.intersect(origin, direction)
         ok = flags == OK
-        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
+        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), (gr, gc, 1))
     if layers == 1:
         ground = scene.image_to_ground(rr, cc)
         ok = np.isfinite(ground[:, 0])
-        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), (gr, gc, 1))
+        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), (gr, gc, 1))
     return _layers(scene, rr, cc, (gr, gc, layers), layers, height_range)
 
 
@@ -195,7 +196,7 @@ def _ragged_grid(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int,
     if layers == 1:
         ground = scene.image_to_ground(rr, cc)
         ok = np.isfinite(ground[:, 0])
-        return PointSet(rr[ok], cc[ok], ground[ok], scene.scanline_time(rr[ok]), shape)
+        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), shape)
     return _layers(scene, rr, cc, shape, layers, height_range)
 
 
@@ -221,7 +222,7 @@ def _layers(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int,
     # image points the sensor flags (NaN: a ray that misses the body, a line outside a CSM camera's
     # ephemeris tables) are dropped, as on one layer
     ok = np.isfinite(ground).all(axis=1)
-    return PointSet(r3[ok], c3[ok], ground[ok], scene.scanline_time(r3[ok]), shape)
+    return PointSet(r3[ok], c3[ok], ground[ok], scanline_times(scene, r3[ok]), shape)
 
 
 def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -229,7 +230,7 @@ def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.nda
 
     Returns origins and (unnormalised) directions, each (len(rows) * len(cols), 3), row-major.
     """
-    t = scene.scanline_time(rows)
+    t = scanline_times(scene, rows)
     centres = scene.exterior.position(t)  # (gr, 3)
     rot = scene.exterior.rotation(t)  # (gr, 3, 3)
     xd, yd = scene.interior.detector_focal_plane(cols)
@@ -242,13 +243,23 @@ def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.nda
     return origin, direction.reshape(-1, 3)
 
 
-def _lines_of_sight_are_the_scenes(scene: Scene) -> bool:
-    """True where ``scene`` takes its lines of sight and their terrain intersection from :class:`Scene` (so
-    :func:`_grid_rays` is its geometry); a model that corrects them (aberration, refraction: e.g.
-    :class:`explorer.real.linescan.RigorousLineScanScene`) goes through its own ``image_to_ground``."""
-    cls = type(scene)
-    return cls.rays is Scene.rays and cls.intersect_terrain is Scene.intersect_terrain and \
-        cls.image_to_ground is Scene.image_to_ground
+def scanline_times(sensor: Any, rows: np.ndarray) -> np.ndarray:
+    """Exposure times (N,) of rows (N,), seconds, on a sensor with scanlines
+    (:func:`explorer.sensor.has_line_geometry`); NaN on one without (an RPC has no time axis)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    if has_line_geometry(sensor):
+        return np.asarray(sensor.scanline_time(rows), dtype=np.float64)
+    return np.full(rows.shape, np.nan)
+
+
+def _lines_of_sight_are_the_scenes(scene: Any) -> bool:
+    """True where ``scene`` declares MPC polynomials as its exterior orientation
+    (:func:`explorer.sensor.has_polynomial_exterior`): its lines of sight are then :class:`Scene`'s collinearity
+    of the polynomials and the interior orientation (what the compiled kernels pack too), so :func:`_grid_rays`
+    is its geometry.  A model with other exterior orientations or corrected lines of sight (ephemeris tables,
+    aberration, refraction: :class:`explorer.real.linescan.RigorousLineScanScene`, a CSM camera, an RPC) goes
+    through its own ``image_to_ground``."""
+    return has_polynomial_exterior(scene)
 
 
 def simulate_points(

@@ -1,21 +1,24 @@
 """The image a command works on: one source, resolved and validated before any work (or server) starts.
 
 ``pushbroom explore`` and ``pushbroom bench`` take exactly one of ``--preset ID``, ``--scene scene.json``,
-``--rpc FILE [--dem DEM]``, ``--dimap FILE [--dem DEM]``, ``--dg FILE [--dem DEM]`` or
-``--isd FILE``.  :func:`load_source` turns it into a :class:`Source` -- a preset id, or a
-:class:`~explorer.scene.Scene` built by the same library functions as the ``scene``
-commands:
+``--rpc FILE [--dem DEM] [--as-mpc]``, ``--dimap FILE [--dem DEM]``, ``--dg FILE [--dem DEM]`` or
+``--isd FILE``; ``stereo`` and ``explore --pair`` read each image's file the same way (:func:`load_sensor`).
+:func:`load_source` turns it into a :class:`Source` whose ``scene`` is the sensor itself, the truth every number
+is measured against (docs/dev/architecture.md, the one Sensor path):
 
 * ``--scene``: :func:`explorer.real.linescan.load_scene` (MPC or rigorous line-scan JSON);
-* ``--rpc``: :func:`explorer.real.from_rpc.scene_from_rpc` (MPC space resection, the papers'
-  pipeline, degree 3 -- agile Pleiades / SPOT need it for sub-pixel agreement, see
-  ``docs/real_images.md``; with ``--dem`` the GCP heights and the terrain come from the DEM);
+* ``--rpc``: the RPC itself (:class:`explorer.rpc.sensor.RPCSensor`, localising on a plane at the RPC's height
+  offset or on ``--dem``).  An RPC has no scanlines: the search methods are unavailable on it
+  (:func:`explorer.methods.unavailable_reason`), the learned ones run on it.  ``as_mpc`` (``--as-mpc``) asks for
+  the MPC of its space resection instead (:func:`explorer.real.from_rpc.scene_from_rpc`, the papers' pipeline,
+  degree 3 -- agile Pleiades / SPOT need it for sub-pixel agreement, see ``docs/real_images.md``; with ``--dem``
+  the GCP heights and the terrain come from the DEM): every method runs on it, and it is labelled a stand-in
+  everywhere (the label, ``truth``), with the RPC against it as the stand-in map;
 * ``--dimap`` / ``--dg``: the rigorous line-scan model of the metadata
-  (:func:`explorer.real.dimap.rigorous_scene_from_dimap`,
-  :func:`explorer.real.worldview.rigorous_scene_from_dg`) converted to an MPC scene
-  (``to_mpc_scene``, degree 3) as ``scene from-dimap --out`` writes it; ``--dem`` resamples
-  the DEM onto the scene's local frame as its terrain;
-* ``--isd``: :func:`explorer.real.csm.scene_from_isd` (USGS CSM line-scan ISD).
+  (:func:`explorer.real.dimap.rigorous_scene_from_dimap`, :func:`explorer.real.worldview.rigorous_scene_from_dg`),
+  its vendor RPC the stand-in; ``--dem`` resamples the DEM onto the scene's local frame as its terrain;
+* ``--isd``: the USGS CSM line-scan camera (:func:`explorer.real.csm_sensor.csm_scene`), an MPC fitted to it the
+  stand-in.
 
 Every problem is an :mod:`explorer.errors` error naming the input -- an unknown or wrongly
 cased preset (with the right spelling suggested), a missing or unreadable file, a DEM that
@@ -35,10 +38,12 @@ from typing import Any
 import numpy as np
 
 from explorer.errors import InputError, SceneFileError
-from explorer.sensor import StandIn
+from explorer.sensor import StandIn, has_line_geometry
 
 SOURCE_KINDS = ("preset", "scene", "rpc", "dimap", "dg", "isd")
 """The source options of ``pushbroom explore`` (``--<kind>``)."""
+SENSOR_KINDS = ("auto", "rpc", "scene", "dimap", "dg", "isd")
+"""What :func:`load_sensor` reads a file as (``stereo --left-kind``); ``auto``: :func:`sensor_kind`."""
 DEM_KINDS = ("rpc", "dimap", "dg")
 """Sources that take ``--dem``."""
 MPC_DEGREE = 3
@@ -82,15 +87,48 @@ class Source:
     info: dict = field(default_factory=dict)
     report: Any = None
     stand_in: StandIn | None = None
+    _display: Any = field(default=None, repr=False, compare=False)
 
     @property
     def preset(self) -> str | None:
         """The preset id of a preset source, else None."""
         return self.label if self.kind == "preset" else None
 
+    def display_scene(self) -> Any:
+        """The scene the 3D view draws (orbit, scanline planes, lines of sight): the sensor itself where it has
+        line geometry; for one without (an RPC) an MPC fitted to it by :func:`display_scene_of` (built on first
+        use), a drawing aid only -- every number stays the sensor's own."""
+        if self.scene is None or has_line_geometry(self.scene):
+            return self.scene
+        if self._display is None:
+            self._display = display_scene_of(self.scene)
+        return self._display
+
     def to_dict(self) -> dict:
         """JSON-ready: kind, label, files and info."""
         return {"kind": self.kind, "label": self.label, "path": self.path, "dem": self.dem, **self.info}
+
+
+DISPLAY_LINE_PERIOD_S = 1e-4
+"""Line period given to the MPC drawn for a sensor without scanlines (an RPC has no time; the drawing needs one)."""
+
+
+def display_scene_of(sensor: Any) -> Any:
+    """An MPC scene fitted to a sensor without line geometry (an RPC), in the sensor's own frame and on its terrain,
+    for the 3D view only: its orbit, scanline planes and lines of sight are those of the MPC that best reproduces
+    the sensor's lines of sight (:func:`explorer.real.mpc_fit.mpc_scene_from_sensor`, degree 3, over the terrain's
+    heights +-250 m; on the Pleiades RPC of the tests 0.0008 px RMS from the RPC).  Its ``metadata["display_only"]``
+    says so."""
+    from explorer.geometry.exterior import LineTiming
+    from explorer.real.mpc_fit import mpc_scene_from_sensor
+
+    lo, hi = float(sensor.terrain.min_height) - 250.0, float(sensor.terrain.max_height) + 250.0
+    scene, _ = mpc_scene_from_sensor(sensor, height_range=(lo, hi), degree=MPC_DEGREE, n=100, layers=2, n_check=0,
+                                     timing=LineTiming(DISPLAY_LINE_PERIOD_S, (sensor.n_rows - 1) / 2.0),
+                                     terrain=sensor.terrain,
+                                     metadata={"display_only": "drawn for a sensor without scanlines; every number "
+                                                               "is the sensor's own"})
+    return scene
 
 
 # ------------------------------------------------------------------ validation
@@ -194,7 +232,7 @@ def _dimap_sensor(path: Path) -> str:
 # ---------------------------------------------------------------------- loading
 def load_source(
     kind: str, value: str, *, dem: str | None = None, dem_datum: str | None = None, degree: int = MPC_DEGREE,
-    n_gcps: int = 100,
+    n_gcps: int = 100, as_mpc: bool = False, stand_in: bool = True,
 ) -> Source:
     """Resolve and load one explorer source (see the module docstring).
 
@@ -214,6 +252,12 @@ def load_source(
         Degree of the MPC polynomials fitted to an RPC or a rigorous model (default 3).
     n_gcps : int
         About this many GCPs per height layer for the resection of an RPC (default 100).
+    as_mpc : bool
+        ``rpc`` only (``--as-mpc``): the MPC resected from the RPC instead of the RPC itself (a stand-in, labelled
+        so; every method runs on it).
+    stand_in : bool
+        Also build the stand-in model of the sensor (the MPC fit of a CSM camera, the vendor RPC of a rigorous
+        model); False: the sensor alone (:func:`load_sensor`).
 
     Raises
     ------
@@ -227,6 +271,8 @@ def load_source(
         raise InputError(f"unknown source kind {kind!r}; one of {', '.join(SOURCE_KINDS)}")
     if dem is not None and kind not in DEM_KINDS:
         raise InputError(f"--dem goes with --rpc, --dimap or --dg, not --{kind}")
+    if as_mpc and kind != "rpc":
+        raise InputError(f"--as-mpc goes with --rpc (the MPC resected from an RPC), not --{kind}")
     if kind == "preset":
         return Source("preset", resolve_preset(value))
     path = readable_file(value, {"scene": "scene file", "rpc": "RPC file", "dimap": "DIMAP file",
@@ -235,7 +281,8 @@ def load_source(
         readable_file(dem, "DEM")
     info: dict[str, Any] = {}
     report: Any = None
-    stand_in: StandIn | None = None
+    scene: Any  # the Sensor: a Scene, a rigorous or CSM line-scan model, an RPC
+    stand_in_model: StandIn | None = None
     if kind == "scene":
         from explorer.real.linescan import load_scene
 
@@ -247,7 +294,7 @@ def load_source(
             raise SceneFileError(f"scene file {str(path)!r}: {exc}") from exc
         sensor = str(scene.metadata.get("source", "scene")) if isinstance(scene.metadata, dict) else "scene"
         info.update(sensor=sensor, model=type(scene).__name__)
-    elif kind == "rpc":
+    elif kind == "rpc" and as_mpc:
         from explorer.real.from_rpc import scene_from_rpc
 
         try:
@@ -258,14 +305,25 @@ def load_source(
                 raise
             raise InputError(f"--rpc {str(path)!r} with DEM {dem!r}: {exc}") from exc
         sensor = f"RPC {report.info.get('rpc_format', '')}".strip()
-        info.update(sensor=sensor, model="MPC by space resection of the RPC (a stand-in: an RPC has no scanlines)",
+        info.update(sensor=sensor,
+                    model=f"STAND-IN: the MPC (degree {degree}) resected from the RPC (--as-mpc; a stand-in: every "
+                          "method runs on it and is measured against it, not against the RPC)",
                     stand_in_model=True, resection=report.to_dict())
         from explorer.rpc import read_rpc
         from explorer.rpc.sensor import RPCSensor
 
         # what the stand-in costs, as a map: the RPC itself against the MPC the methods run on
-        stand_in = StandIn("the RPC itself, against the MPC resected from it (on which the methods run)",
-                           RPCSensor(read_rpc(path), frame=scene.frame, name="RPC"), scene.frame)
+        stand_in_model = StandIn("the RPC itself, against the MPC resected from it (on which the methods run)",
+                                 RPCSensor(read_rpc(path), frame=scene.frame, name="RPC"), scene.frame)
+    elif kind == "rpc":
+        from explorer.rpc import read_rpc
+        from explorer.rpc.sensor import RPCSensor
+
+        rpc = read_rpc(path)
+        scene = RPCSensor(rpc, name=path.name)  # the truth: the RPC itself (no scanlines)
+        info.update(sensor=f"RPC {rpc.source_format}",
+                    model="the RPC itself (rational function model; it has no scanlines: the search methods are "
+                          "unavailable, --as-mpc runs them on its resected MPC, a stand-in)")
     elif kind in ("dimap", "dg"):
         if kind == "dimap":
             from explorer.real.dimap import rigorous_scene_from_dimap
@@ -279,10 +337,10 @@ def load_source(
             sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
         scene = rigorous  # the truth: the rigorous model itself (its line geometry runs every search method)
         info.update(sensor=sensor, model=f"rigorous line-scan model of the {kind.upper()} metadata")
-        if rigorous.rpc is not None:
+        if rigorous.rpc is not None and stand_in:
             from explorer.rpc.sensor import RPCSensor
 
-            stand_in = StandIn("vendor RPC of the same image", RPCSensor(rigorous.rpc, frame=rigorous.frame,
+            stand_in_model = StandIn("vendor RPC of the same image", RPCSensor(rigorous.rpc, frame=rigorous.frame,
                                                                         name="vendor RPC"), rigorous.frame)
     else:  # isd
         from explorer.real.csm_camera import read_isd
@@ -296,20 +354,51 @@ def load_source(
         if camera.covered_fraction() < 1.0:  # lines outside the ephemeris tables: flagged, measured nowhere
             info.update(table_coverage={"fraction": camera.covered_fraction(),
                                         "lines": camera.covered_line_ranges()})
-        mpc = scene_from_camera(camera, degree=degree, n_check=0)
-        stand_in = StandIn(f"MPC degree {degree} fitted to the CSM camera", mpc, scene.frame)
-    if dem is not None and kind in ("dimap", "dg"):
+        if stand_in:
+            mpc = scene_from_camera(camera, degree=degree, n_check=0)
+            stand_in_model = StandIn(f"MPC degree {degree} fitted to the CSM camera", mpc, scene.frame)
+    if dem is not None and (kind in ("dimap", "dg") or (kind == "rpc" and not as_mpc)):
         scene, coverage = _dem_terrain(scene, dem, dem_datum)
         info.update(dem_coverage=coverage, dem_datum=coverage["datum"])
     elif dem is not None:
         check_dem_covers(scene, dem)
         if report is not None and "dem_datum" in report.info:
             info.update(dem_datum=report.info["dem_datum"])
-    label = f"{path.name} ({info['sensor']})"
+    label = f"{path.name} ({info['sensor']}" + (", resected MPC: a stand-in)" if as_mpc else ")")
     info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns), truth=info["model"])
-    if stand_in is not None:
-        info.update(stand_in=stand_in.label)
-    return Source(kind, label, scene, str(path), dem, info, report, stand_in)
+    if stand_in_model is not None:
+        info.update(stand_in=stand_in_model.label)
+    return Source(kind, label, scene, str(path), dem, info, report, stand_in_model)
+
+
+def sensor_kind(path: str | os.PathLike, kind: str = "auto") -> str:
+    """What :func:`load_sensor` reads ``path`` as: ``kind`` itself, or for ``"auto"`` an ISD (a ``.json`` holding
+    ``instrument_pointing``), a scene (any other ``.json``) or an RPC (anything else).
+
+    Raises
+    ------
+    InputError
+        A kind not in :data:`SENSOR_KINDS`.
+    """
+    if kind not in SENSOR_KINDS:
+        raise InputError(f"unknown sensor kind {kind!r}; one of {', '.join(SENSOR_KINDS)}")
+    if kind != "auto":
+        return kind
+    if Path(path).suffix.lower() != ".json":
+        return "rpc"
+    from explorer.io_input import load_json_file
+
+    data = load_json_file(path, "JSON file")
+    return "isd" if isinstance(data, dict) and "instrument_pointing" in data else "scene"
+
+
+def load_sensor(path: str | os.PathLike, kind: str = "auto") -> Any:
+    """The sensor of one image geometry file, the model itself and nothing else (``stereo``, ``explore --pair``):
+    :func:`load_source` of :func:`sensor_kind` without its stand-in -- an RPC file is the RPC
+    (:class:`~explorer.rpc.sensor.RPCSensor`), a DIMAP / DG file given as such the rigorous model, an ISD the
+    CSM camera, a scene JSON the scene."""
+    resolved = sensor_kind(path, kind)
+    return load_source(resolved, str(path), stand_in=False).scene
 
 
 def source_from_args(args: Any, **options: Any) -> Source:
@@ -326,6 +415,9 @@ def source_from_args(args: Any, **options: Any) -> Source:
         raise InputError("give one source: " + " and ".join(f"--{k}" for k, _ in given) + " were both given")
     dem = getattr(args, "dem", None)
     dem_datum = getattr(args, "dem_datum", None)
+    as_mpc = bool(getattr(args, "as_mpc", False))
+    if as_mpc and (not given or given[0][0] != "rpc"):
+        raise InputError("--as-mpc goes with --rpc (the MPC resected from an RPC)")
     if not given:
         if dem is not None:
             raise InputError("--dem goes with --rpc, --dimap or --dg")
@@ -337,8 +429,11 @@ def source_from_args(args: Any, **options: Any) -> Source:
     kind, value = given[0]
     if dem_datum is not None and dem is None:
         raise InputError("--dem-datum goes with --dem")
+    if as_mpc:
+        options = {**options, "as_mpc": True}
     return load_source(kind, value, dem=dem, dem_datum=dem_datum, **options)
 
 
-__all__ = ["DEM_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers", "load_source", "readable_file",
-           "resolve_preset", "source_from_args"]
+__all__ = ["DEM_KINDS", "DISPLAY_LINE_PERIOD_S", "SENSOR_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers",
+           "display_scene_of", "load_sensor", "load_source", "readable_file", "resolve_preset", "sensor_kind",
+           "source_from_args"]

@@ -234,11 +234,11 @@ def test_paper_tables_are_self_consistent():
 
 
 def test_bench_cli_on_a_real_rpc(tmp_path, capsys):
-    """``bench --rpc``: resection of a real Pleiades RPC, then the methods on that scene."""
+    """``bench --rpc --as-mpc``: resection of a real Pleiades RPC, then the methods on that scene."""
     from explorer.cli import main
 
     out = tmp_path / "rpc.json"
-    code = main(["bench", "--rpc", "tests/data/rpc/rpc_PLEIADES.xml", "--degree", "3", "--gcps", "49",
+    code = main(["bench", "--rpc", "tests/data/rpc/rpc_PLEIADES.xml", "--as-mpc", "--degree", "3", "--gcps", "49",
                  "--methods", "nr,lrm", "--scops", "30", "--scps", "2000", "--no-progress", "--json", str(out)])
     assert code == 0
     text = capsys.readouterr().out
@@ -247,6 +247,28 @@ def test_bench_cli_on_a_real_rpc(tmp_path, capsys):
     assert {r["method"] for r in runs} == {"nr", "lrm"}
     nr = next(r for r in runs if r["method"] == "nr")
     assert nr["preset"].startswith("rpc_PLEIADES.xml") and nr["rmse_px"] < 1e-8
+    assert "stand-in" in nr["preset"] and "STAND-IN" in text
+    doc = json.loads(out.read_text())
+    assert doc["truth"].startswith("STAND-IN") and doc["stand_in"]["model"].startswith("the RPC itself")
+
+
+def test_bench_cli_on_the_rpc_itself(tmp_path, capsys):
+    """``bench --rpc``: the learned methods on the RPC itself (row and column against the RPC's own projection),
+    the search methods skipped with the reason; the exit status stays 0."""
+    from explorer.cli import main
+
+    out = tmp_path / "rpc.json"
+    code = main(["bench", "--rpc", "tests/data/rpc/rpc_PLEIADES.xml", "--methods", "nr,ogp,rfm", "--scops", "50",
+                 "--scps", "2000", "--no-progress", "--json", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "truth: the RPC itself" in text and "SKIPPED method 'nr' searches the scanlines" in text
+    doc = json.loads(out.read_text())
+    runs = {r["method"]: r for r in doc["runs"]}
+    assert "--as-mpc" in runs["nr"]["skipped"] and runs["nr"]["error"] is None
+    for name in ("ogp", "rfm"):
+        assert runs[name]["error"] is None and runs[name]["skipped"] is None
+        assert runs[name]["rmse_px"] < 0.01 and runs[name]["col_rmse_px"] < 0.01, runs[name]
 
 
 def test_a_method_the_sensor_cannot_serve_is_skipped_with_the_reason():

@@ -114,8 +114,11 @@ def test_dimap_with_dem_exports_byte_identical_residuals(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_rpc_exports_byte_identical_residuals(tmp_path, capsys):
-    a = _export_twice_identical(tmp_path, ["--rpc", str(RPC_PHR)], capsys)
+    a = _export_twice_identical(tmp_path, ["--rpc", str(RPC_PHR), "--as-mpc"], capsys)
     _check_offline_page(a["panels.html"])
+    summary = json.loads(a["summary.json"])  # the resected MPC is labelled a stand-in wherever it appears
+    assert "stand-in" in summary["source"]["label"] and summary["truth"]["model"].startswith("STAND-IN")
+    assert summary["stand_in"]["model"].startswith("the RPC itself") and summary["stand_in"]["max_row_px"] < 0.01
 
 
 def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):
@@ -228,3 +231,31 @@ def test_2018_dimap_with_its_partial_dem_exports_against_the_rigorous_model(tmp_
     rows = list(csv.DictReader((out / "residuals.csv").read_text().splitlines()))
     assert {r["method"] for r in rows} == {"exact", "lrm", "stand-in"}
     assert "DEM covers" in (out / "panels.html").read_text()
+
+
+def test_rpc_export_measures_the_learned_methods_against_the_rpc_and_says_why_searches_are_unavailable(
+        tmp_path, capsys):
+    """``explore --rpc`` without ``--as-mpc``: the truth is the RPC itself.  Recomputed here from the exported
+    body-fixed coordinates (pyproj's ECEF -> WGS84 geodetic, then the RPC's own projection): the exported (row, col)
+    is the RPC's, and each method's residual is its estimate minus that.  ``nr`` is unavailable with the reason."""
+    from pyproj import Transformer
+
+    from explorer.rpc import read_rpc
+
+    files = _export(tmp_path, "rpc", ["--rpc", str(RPC_PHR)], capsys)
+    summary = json.loads(files["summary.json"])
+    assert summary["truth"]["model"].startswith("the RPC itself") and summary["stand_in"] is None
+    nr = summary["methods"]["nr"]
+    assert "searches the scanlines" in nr["unavailable"] and "--as-mpc" in nr["unavailable"]
+    assert nr["error"] is None and nr["n_valid"] == 0
+    rows = list(csv.DictReader(files["residuals.csv"].decode().splitlines()))
+    assert {r["method"] for r in rows} == {"lrm", "prm"}
+    xyz = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
+    lon, lat, h = Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True).transform(*xyz.T)
+    row, col = read_rpc(RPC_PHR).projection(lon, lat, h)
+    np.testing.assert_allclose([float(r["row_px"]) for r in rows], row, atol=1e-6)
+    np.testing.assert_allclose([float(r["col_px"]) for r in rows], col, atol=1e-6)
+    for name in ("lrm", "prm"):
+        m = summary["methods"][name]
+        assert m["n_valid"] == summary["settings"]["scps_used"] and m["ce_per_point"] == 0.0
+        assert m["max_col_px"] < 0.01  # the column from the pairs (cubic in X, Y: 50 SCOPs), 0 CE

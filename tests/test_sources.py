@@ -121,9 +121,29 @@ def test_dem_not_covering_the_footprint_is_rejected():
         load_source("rpc", str(RPC_PHR), dem=str(DEM_2017))
 
 
-def test_rpc_without_dem_is_an_mpc_scene_on_the_rpc_grid():
+def test_rpc_is_the_rpc_itself_without_scanlines():
+    """``--rpc``: the truth is the RPC (no resection, no stand-in); its points are the RPC's own localisations."""
+    from explorer.rpc.sensor import RPCSensor
+    from explorer.sensor import has_line_geometry
+
     src = load_source("rpc", str(RPC_PHR))
-    assert src.kind == "rpc" and RPC_PHR.name in src.label and "RPC" in src.label
+    assert isinstance(src.scene, RPCSensor) and not has_line_geometry(src.scene) and src.stand_in is None
+    assert src.info["truth"].startswith("the RPC itself") and "stand-in" not in src.label
+    g = src.scene.image_to_ground(np.array([10.0, 20000.0]), np.array([30.0, 35000.0]))
+    r, c = src.scene.rpc.projection(*src.scene.frame.enu_to_geodetic(g))
+    assert np.max(np.abs(r - [10.0, 20000.0])) < 1e-6 and np.max(np.abs(c - [30.0, 35000.0])) < 1e-6
+    # the 3D view draws an MPC fitted to it (drawing only), in the same frame, within 0.01 px of the RPC
+    drawn = src.display_scene()
+    assert drawn is src.display_scene() and has_line_geometry(drawn) and drawn.frame == src.scene.frame
+    dr, dc = drawn.ground_to_image(g)
+    assert np.max(np.abs(dr - [10.0, 20000.0])) < 0.01 and np.max(np.abs(dc - [30.0, 35000.0])) < 0.01
+    with pytest.raises(InputError, match="--as-mpc goes with --rpc"):
+        load_source("dimap", str(PHR_2018), as_mpc=True)
+
+
+def test_rpc_as_mpc_is_the_resected_mpc_labelled_a_stand_in():
+    src = load_source("rpc", str(RPC_PHR), as_mpc=True)
+    assert src.kind == "rpc" and RPC_PHR.name in src.label and "RPC" in src.label and "stand-in" in src.label
     # docs/real_images.md: degree 3 on this file, 400 check points: 0.0008 px
     assert src.info["resection"]["check_rmse_px"] < 0.01 and src.info["resection"]["degree"] == 3
     assert src.scene.n_rows > 10_000 and src.scene.n_columns > 10_000

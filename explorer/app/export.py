@@ -12,7 +12,8 @@ then writes
   "stand_in": {"model", "against", "rmse_row_px", ...} or null, "run_dependent": {file: why}}``: ``truth``
   names the sensor every residual is measured against (its own ground to image), ``stand_in`` the
   model-vs-model map of a file source (the MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
-  model) against it, ``accuracy_vs_scops`` the GUI's accuracy-vs-SCOPs sweep (each method refitted at every
+  model, the RPC against its resected MPC with ``--as-mpc``) against it; a method the sensor cannot serve (a search
+  method on an RPC, which has no scanlines) has ``"unavailable": reason`` and no numbers; ``accuracy_vs_scops`` the GUI's accuracy-vs-SCOPs sweep (each method refitted at every
   density of :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs);
 * ``residuals.csv`` -- one row per check point per method (and per stand-in, method ``stand-in``):
   ``method, scp_index, row_px, col_px, row_residual_px, col_residual_px, status, x_m, y_m, z_m`` (the
@@ -106,6 +107,8 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
     """The JSON entry of one method (see the module docstring); no timing (that is :func:`method_timing`)."""
+    if fit.unavailable:  # the sensor lacks what the method needs (a search method on an RPC): the reason
+        return {"unavailable": fit.unavailable, "error": None, "n_valid": 0, "n_invalid": 0}
     if ev is None:
         return {"error": error or fit.error, "n_valid": 0, "n_invalid": 0}
     r, c = np.asarray(ev.residual_row), np.asarray(ev.residual_col)

@@ -35,7 +35,7 @@ import numpy as np
 
 from explorer import _log
 from explorer.evaluate import Evaluation, evaluate_method
-from explorer.methods import available, create, registry
+from explorer.methods import available, create, registry, unavailable_reason
 from explorer.methods.base import BestScanlineMethod
 from explorer.panels import count_text
 from explorer.points import PointSet, simulate_points
@@ -120,6 +120,9 @@ class FitRecord:
     params: dict
     error: str | None = None
     warnings: list[str] = field(default_factory=list)
+    unavailable: str | None = None
+    """Why the method cannot run on this sensor (:func:`explorer.methods.unavailable_reason`: a search method on
+    an RPC, which has no scanlines), or None; not a failure."""
 
 
 @dataclass
@@ -142,6 +145,11 @@ class MethodRun:
     @property
     def ok(self) -> bool:
         return self.evaluation is not None
+
+    @property
+    def unavailable(self) -> str | None:
+        """Why the method cannot run on this sensor (its fit's :attr:`FitRecord.unavailable`), or None."""
+        return self.fit.unavailable
 
     def status_counts(self) -> dict[str, int]:
         """Points per status name (only the non-zero ones)."""
@@ -368,6 +376,9 @@ class ExplorerModel:
         def make() -> FitRecord:
             self.counters["fit"] += 1
             scene = self.scene(s)
+            reason = unavailable_reason(name, scene)
+            if reason is not None:  # the sensor lacks what the method needs: said, never run on a hidden model
+                return FitRecord(None, 0.0, 0, params, unavailable=reason)
             scops = self.scops(s, density) if cls.needs_fit else None
             # (warnings are not captured: catch_warnings is not thread-safe and fits run on two
             # threads; learned methods report a failed training in fit_info["converged"])
@@ -603,6 +614,10 @@ def summary_markdown(runs: dict[str, MethodRun], n_scps: int) -> str:
              "|---|---|---|---|---|"]
     notes = []
     for n, r in runs.items():
+        if r.unavailable:
+            lines.append(f"| {n} | - | - | - | unavailable |")
+            notes.append(f"**{n}** unavailable: {r.unavailable}")
+            continue
         if not r.ok:
             lines.append(f"| {n} | - | - | - | failed |")
             notes.append(f"**{n}** failed: {r.error}")

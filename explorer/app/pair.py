@@ -36,19 +36,22 @@ def load_pair(left_path: str, right_path: str, dem_path: str | None = None,
               kinds: tuple[str, str] = ("auto", "auto"), dem_datum: str | None = None) -> Any:
     """The :class:`~explorer.stereo.pairview.PairView` of two files.
 
-    ``kinds`` says what each file is (:data:`explorer.stereo.files.SENSOR_KINDS`); ``"auto"``: a scene JSON or
+    ``kinds`` says what each file is (:data:`explorer.sources.SENSOR_KINDS`); ``"auto"``: a scene JSON or
     ISD by content, any other file an RPC -- so a DIMAP or DigitalGlobe file is its vendor RPC unless its kind
     is ``"dimap"`` / ``"dg"``, which takes the rigorous line-scan model of the metadata."""
-    from explorer.sources import load_source
-    from explorer.stereo.files import json_kind, load_sensor
+    from explorer.sensor import has_line_geometry
+    from explorer.sources import load_source, sensor_kind
     from explorer.stereo.pairview import pair_view
 
     sensors, scenes = [], []
     for path, given in zip((left_path, right_path), kinds, strict=True):
-        kind = given if given != "auto" else (json_kind(path) if path.lower().endswith(".json") else "rpc")
-        sensors.append(load_sensor(path, kind))
-        scenes.append(load_source(kind, path).scene)
-    return pair_view(sensors[0], sensors[1], left_scene=scenes[0], right_scene=scenes[1], dem=_dem(dem_path, dem_datum))
+        kind = sensor_kind(path, given)
+        sensor = load_source(kind, path, stand_in=False).scene  # the one loader: the model itself
+        sensors.append(sensor)
+        # the trajectory drawn: the sensor's own line geometry, else (an RPC) its resected MPC's orbit
+        scenes.append(sensor if has_line_geometry(sensor) else load_source(kind, path, as_mpc=True).scene)
+    return pair_view(sensors[0], sensors[1], left_scene=scenes[0], right_scene=scenes[1],
+                     dem=_dem(dem_path, dem_datum))
 
 
 def pair_panels(view: Any, selection: Any) -> tuple[Any, Any, Any]:

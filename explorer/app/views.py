@@ -161,11 +161,12 @@ class Views:
         self.scene = scene
         frame_key = self._frame_key(s)
         if self._changed("frame", frame_key):
+            drawn = self._drawn_scene(s)  # the sensor, or for one without scanlines (an RPC) an MPC fitted to it
             auto, relief = B.auto_height_exaggeration(scene)
             factor = auto if s.auto_exaggeration else s.height_exaggeration
-            self.frame = B.DisplayFrame.for_scene(scene, sensor_distance=s.sensor_distance,
+            self.frame = B.DisplayFrame.for_scene(drawn, sensor_distance=s.sensor_distance,
                                                   height_exaggeration=factor)
-            n, dem_cells = B.ground_mesh_nodes(scene)
+            n, dem_cells = B.ground_mesh_nodes(drawn)
             self.ground_text = (f"Ground: the DEM sampled on a {n} x {n} image grid"
                                 + (f" (decimated from ~{dem_cells} DEM cells across)" if dem_cells and dem_cells > n - 1
                                    else "") if dem_cells is not None else f"Ground: {n} x {n} image grid")
@@ -173,16 +174,19 @@ class Views:
                 how = (f"automatic: the terrain's {relief:.0f} m relief drawn at about "
                        f"{100 * B.RELIEF_SHARE:g} % of the footprint" if s.auto_exaggeration else "set by hand")
                 self.ground_text += f"; heights exaggerated x{factor:g} ({how})"
+            if drawn is not scene:
+                self.ground_text += ("; the sensor has no scanlines (an RPC): the orbit, scanline planes and rays "
+                                     "drawn are an MPC fitted to its lines of sight, every number is its own")
             if s.auto_exaggeration:
                 with self.quiet():
                     self.handles["exaggeration"].value = factor
             with self.server.atomic():
-                self._put("/ground", B.add_ground(self.server.scene, scene, self.frame, n=n))
-                self._put("/orbit", B.add_orbit(self.server.scene, scene, self.frame))
+                self._put("/ground", B.add_ground(self.server.scene, drawn, self.frame, n=n))
+                self._put("/orbit", B.add_orbit(self.server.scene, drawn, self.frame))
             refine_view = getattr(self, "refine_view", None)  # explore --gcps: its trajectories, in the new frame
             if refine_view is not None:
                 refine_view.draw_3d(visible=s.preset == getattr(self, "refine_label", None))
-            self._frame_camera(scene, (s.preset, s.sensor_distance))
+            self._frame_camera(drawn, (s.preset, s.sensor_distance))
             fixed = s.preset in m.fixed_scenes
             with self.quiet():
                 self.handles["sel_row"].max = float(scene.n_rows - 1)
@@ -332,10 +336,11 @@ class Views:
         h_mean = scene.terrain.mean_height
         heights = np.array([h_mean, h_mean, h_mean, sel.ground[2]])
         names = ["first scanline (row 0)", "middle scanline", f"last scanline (row {scene.n_rows - 1})", ""]
+        drawn = self._drawn_scene(s)
         with self.server.atomic():
-            self._put("/scanlines", B.add_scanline_planes(self.server.scene, scene, self.frame, rows, heights, names))
+            self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights, names))
             self._put("/selected", B.add_selection(
-                self.server.scene, scene, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
+                self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
                 label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))
         self._selection_text(sel)
         with self.quiet():
@@ -373,7 +378,8 @@ class Views:
         return "no method checked" if self.methods_ready.is_set() else "loading the methods..."
 
     def _done_text(self, runs: dict[str, MethodRun], pending: dict[str, str], scps: PointSet) -> str:
-        failed = [n for n, r in runs.items() if not r.ok]
+        failed = [n for n, r in runs.items() if not r.ok and not r.unavailable]
+        unavailable = [n for n, r in runs.items() if r.unavailable]
         sub = [n for n, r in runs.items() if r.preview]
         name = self.handles["preset"].value if self.scene is not None else ""
         whole = self.last_times.get("since_request", self.last_update_s)
@@ -384,6 +390,8 @@ class Views:
             txt += f"; training: {', '.join(pending)}"
         if failed:
             txt += f"; failed: {', '.join(failed)}"
+        if unavailable:
+            txt += f"; unavailable on this sensor (no scanlines; see the summary): {', '.join(unavailable)}"
         return txt
 
     def _set_figure(self, key: str, fig: Any) -> None:
@@ -503,6 +511,13 @@ class Views:
             for name, data in files.items():
                 zf.writestr(zipfile.ZipInfo(name, date_time=(2000, 1, 1, 0, 0, 0)), data)
         return buf.getvalue()
+
+    def _drawn_scene(self, s: Settings) -> Any:
+        """The scene the 3D view draws: the sensor itself, or for a loaded sensor without line geometry (an RPC)
+        its :meth:`explorer.sources.Source.display_scene` (an MPC fitted to it, drawing only)."""
+        scene = self.model.scene(s)
+        src = self._source(s)
+        return src.display_scene() if src is not None and src.scene is scene else scene
 
     def _source(self, s: Settings) -> Any:
         """The loaded file source shown by ``s`` (an :class:`explorer.sources.Source`), or None for a preset."""

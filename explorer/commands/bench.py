@@ -61,7 +61,8 @@ def parse_params(items: list[str] | None) -> dict[str, dict]:
 #: The file sources of ``bench`` (as ``explore``'s, :data:`explorer.sources.SOURCE_KINDS` minus the preset): the
 #: option ``--<kind>`` of each and what it benchmarks on, in the order ``--help`` lists them.
 FILE_SOURCE_HELP = {
-    "rpc": "the scene resected from this RPC file instead of a preset",
+    "rpc": "this RPC file itself (learned methods; the search methods are skipped with the reason, an RPC has no "
+           "scanlines; --as-mpc: its resected MPC, a stand-in)",
     "scene": "a scene JSON (any `pushbroom scene` output) instead of a preset",
     "dimap": "a Pleiades DIMAP rigorous model (the truth; its vendor RPC is measured as the stand-in)",
     "dg": "a DigitalGlobe/Maxar XML rigorous model (the truth; its vendor RPC is measured as the stand-in)",
@@ -81,10 +82,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
     params = parse_params(args.param)  # checked before the bench runs
     check_allocation(float(args.scps) * 2 * BYTES_PER_POINT, f"--scps {args.scps}", "lower --scps")
     file_kinds = [k for k in FILE_SOURCES if getattr(args, k, None)]
-    if args.dem and not file_kinds:
+    if (args.dem or args.as_mpc) and not file_kinds:
         from explorer.errors import InputError
 
-        raise InputError("--dem goes with --rpc, --dimap or --dg")
+        raise InputError("--dem goes with --rpc, --dimap or --dg" if args.dem else "--as-mpc goes with --rpc")
     if file_kinds:
         from explorer.bench import bench_scene, parse_counts, resolve_methods
         from explorer.sources import source_from_args
@@ -184,7 +185,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dem", default=None, type=raster_file,
                    help="with --rpc/--dimap/--dg: DEM for the GCP heights and the terrain (GeoTIFF or .hgt)")
     add_dem_datum_argument(p)
-    p.add_argument("--gcps", type=positive_int, default=100, help="with --rpc: about this many GCPs per height layer")
+    p.add_argument("--as-mpc", action="store_true",
+                   help="with --rpc: benchmark on the MPC resected from the RPC (a stand-in: every method runs on it "
+                        "and is measured against it; the RPC against it is reported as the stand-in)")
+    p.add_argument("--gcps", type=positive_int, default=100,
+                   help="with --rpc --as-mpc: about this many GCPs per height layer")
     p.add_argument("--degree", type=non_negative_int, default=3,
                    help="with --rpc/--dimap/--dg: degree of the MPC polynomials (default 3, as explore; the papers: 2)")
     p.set_defaults(func=with_compile_progress("bench", cmd_bench))  # a progress line while kernels compile

@@ -61,7 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--preset", default=None, type=name_text,
                      help="a synthetic preset (default: the presets file's default, WSU)")
     src.add_argument("--scene", default=None, metavar="FILE", help="a scene JSON written by the `scene` commands")
-    src.add_argument("--rpc", default=None, metavar="FILE", help="an RPC file: MPC scene by space resection")
+    src.add_argument("--rpc", default=None, metavar="FILE",
+                     help="an RPC file: the RPC itself (no scanlines: the learned methods run on it, the search "
+                          "methods are shown unavailable; --as-mpc for its resected MPC)")
     src.add_argument("--dimap", default=None, metavar="FILE", help="a Pleiades DIMAP v1.4 PHRDIMAP_*.XML")
     src.add_argument("--dg", default=None, metavar="FILE", help="a DigitalGlobe / Maxar XML (EPH, ATT, GEO, IMD)")
     src.add_argument("--isd", default=None, metavar="FILE", help="a USGS CSM line-scan ISD (JSON)")
@@ -72,6 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(f"--{side}-kind", choices=("auto", "rpc", "scene", "dimap", "dg", "isd"), default="auto",
                        help=f"with --pair: what the {side} file is (default auto: scene/ISD JSON by content, else an "
                             "RPC; dimap / dg: the rigorous model of the metadata rather than its vendor RPC)")
+    p.add_argument("--as-mpc", action="store_true",
+                   help="with --rpc: the MPC resected from the RPC instead of the RPC (a stand-in, labelled so; every "
+                        "method runs on it, and the RPC against it is the stand-in map)")
     p.add_argument("--dem", default=None, metavar="DEM",
                    help="DEM for --rpc / --dimap / --dg / --pair (GeoTIFF or SRTM .hgt; vertical datum: "
                         "--dem-datum); must cover the image footprint")

@@ -30,7 +30,7 @@ POINT_COLUMNS = ("lon", "lat", "height", "x", "y", "z", "ray_distance_m", "left_
 
 
 def _pair(args: argparse.Namespace) -> tuple[Any, Any]:
-    from explorer.stereo.files import load_sensor
+    from explorer.sources import load_sensor
 
     return load_sensor(args.left, args.left_kind), load_sensor(args.right, args.right_kind)
 
@@ -96,7 +96,7 @@ def cmd_triangulate(args: argparse.Namespace) -> int:
     return 0
 
 
-#: The ``--left-kind`` / ``--right-kind`` choices (explorer.stereo.files.SENSOR_KINDS; argparse only here).
+#: The ``--left-kind`` / ``--right-kind`` choices (explorer.sources.SENSOR_KINDS; argparse only here).
 SENSOR_KINDS = ("auto", "rpc", "scene", "dimap", "dg", "isd")
 
 

@@ -16,9 +16,10 @@ from explorer.methods.base import (
     discover,
     register,
     registry,
+    unavailable_reason,
 )
 
 __all__ = [
     "DISCOVERY_ERRORS", "BestScanlineMethod", "ScanlineResult", "available", "create", "discover", "register",
-    "registry",
+    "registry", "unavailable_reason",
 ]

@@ -30,7 +30,7 @@ from explorer.methods._lm import FeatureScaler, GroundFeatures, fit_network, tak
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.methods.mlp import network_verdict
 from explorer.methods.regression import qr_least_squares
-from explorer.points import PointSet
+from explorer.points import PointSet, scanline_times
 from explorer.scene import Scene
 
 REFERENCE_2021 = "Ahooei Nezhad, Valadan Zoej, Ghorbanian (2021) Adv. Space Res. 68:3584-3593"
@@ -57,6 +57,7 @@ class ThreeStageMethod(BestScanlineMethod):
     """
 
     family = "learned"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
     exactness = "approximate"
     COMMON = {
@@ -98,7 +99,7 @@ class ThreeStageMethod(BestScanlineMethod):
         r_a, c_a = a @ self.affine_row, a @ self.affine_col
         self.uv_scaler = FeatureScaler.fit(np.column_stack([r_a, c_a]), ["row", "column"])
         u = self.uv_scaler.transform(np.column_stack([r_a, c_a]))
-        t_a = self.scene.scanline_time(r_a)  # stage 2: approximate exposure time
+        t_a = scanline_times(self.scene, r_a)  # stage 2: approximate exposure time (NaN without scanlines)
         dr = control.row - r_a
         self.fit_info = {
             "n_control": len(control),
@@ -107,7 +108,7 @@ class ThreeStageMethod(BestScanlineMethod):
             "affine_condition_number": cond,
             "affine_rmse_px": float(np.sqrt(np.mean(dr**2))),
             "affine_max_px": float(np.max(np.abs(dr))),
-            "approx_time_span_s": [float(t_a.min()), float(t_a.max())],
+            "approx_time_span_s": [float(np.min(t_a)), float(np.max(t_a))] if np.isfinite(t_a).all() else None,
             **self.features.info(),
         }
         t0 = time.perf_counter()

@@ -1,10 +1,18 @@
 """The best-scanline method interface and registry.
 
-Every method is a class registered by name (``@register``), constructed on a
-:class:`~explorer.scene.Scene`, optionally ``fit`` on SCOPs, then asked
-``ground_to_image(ground)`` for the scanline (fractional row), the column, a
-validity mask and the number of collinearity evaluations spent.  The bench, CLI,
-explorer and notebooks only use :func:`available` / :func:`create`.
+Every method is a class registered by name (``@register``), constructed on a sensor
+(:class:`explorer.sensor.Sensor`: a :class:`~explorer.scene.Scene`, a rigorous or CSM line-scan model, an
+RPC), optionally ``fit`` on SCOPs, then asked ``ground_to_image(ground)`` for the scanline (fractional row),
+the column, a validity mask and the number of collinearity evaluations spent.  The bench, CLI, explorer and
+notebooks only use :func:`available` / :func:`create` / :func:`unavailable_reason`.
+
+What a method needs from the sensor is declared on its class, never discovered by trying:
+``needs_line_geometry`` (the search methods: the sensor's scanlines, :class:`explorer.sensor.LineGeometrySensor`;
+on a sensor without them -- an RPC -- :func:`unavailable_reason` says why and :func:`create` refuses with
+:class:`~explorer.errors.MethodUnavailableError`).  The learned and generalized methods need only ground / image
+pairs; one that predicts only the row (``column_source = "collinearity"``) takes its column from the collinearity
+at that row where the sensor has line geometry, else from a polynomial column model fitted on the same SCOPs
+(:class:`explorer.methods._polynomial.PairColumnModel`; ``fit_info["column_model"]`` describes it).
 Conventions: ``docs/conventions.md``.
 """
 
@@ -23,6 +31,7 @@ from explorer import _log
 from explorer.errors import MethodUnavailableError, NotFittedError, UnknownNameError, as_points
 from explorer.geometry.kernels import CollinearityParams, collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
+from explorer.methods._polynomial import PairColumnModel
 from explorer.points import PointSet
 from explorer.scene import Scene
 from explorer.sensor import has_line_geometry
@@ -93,25 +102,49 @@ class BestScanlineMethod(ABC):
     # where the column comes from: "collinearity" (the rigorous model at the returned row) or "model"
     # (the method's own image model, e.g. a fitted RFM or network that predicts both coordinates)
     column_source: ClassVar[str] = "collinearity"
+    # the method searches the sensor's scanlines (line time, perspective centre, attitude, look direction):
+    # unavailable on a sensor without line geometry (an RPC; :func:`unavailable_reason`).  The learned and
+    # generalized methods, which need only ground / image pairs, declare False.
+    needs_line_geometry: ClassVar[bool] = True
     # points per _locate call when the method's working arrays grow with N (numpy active-set loops keep
     # several (N,) and (N, 3) arrays per iteration); None: all at once.  Results do not depend on it.
     chunk_points: int | None = None
 
     def __init__(self, scene: Scene, **params) -> None:
+        reason = type(self).unavailable_reason(scene)
+        if reason is not None:
+            raise MethodUnavailableError(reason)
         self.scene = scene
         self.params = params
         self._fitted = not self.needs_fit
         self.fit_info: dict = {}
+        self._column_model: PairColumnModel | None = None
         self._kernel_params: CollinearityParams | None = None
         self._kernel_params_known = False  # packed on first use
 
+    @classmethod
+    def unavailable_reason(cls, sensor: object) -> str | None:
+        """Why this method cannot run on ``sensor`` (from the declared needs and capabilities), or None."""
+        if cls.needs_line_geometry and not has_line_geometry(sensor):
+            return (f"method {cls.name!r} searches the scanlines of a line-scan sensor; "
+                    f"{getattr(sensor, 'name', type(sensor).__name__)!r} has none (an RPC has no physical lines: "
+                    "ask for its resected MPC, --as-mpc, a stand-in)")
+        return None
+
     # ------------------------------------------------------------------ API
     def fit(self, control: PointSet) -> BestScanlineMethod:
-        """Train on SCOPs (no-op for search methods).  Returns self."""
+        """Train on SCOPs (no-op for search methods).  Returns self.
+
+        A row-only method (``column_source == "collinearity"``) on a sensor without line geometry also fits
+        its column model on the SCOPs (:class:`~explorer.methods._polynomial.PairColumnModel`), described in
+        ``fit_info["column_model"]``."""
         if self.needs_fit:
             if len(control) == 0:
                 raise ValueError(f"{self.name}: no control points to fit")
             self._fit(control)
+            if self.column_source == "collinearity" and not has_line_geometry(self.scene):
+                self._column_model = PairColumnModel(control, self.name)
+                self.fit_info["column_model"] = self._column_model.info()
         self._fitted = True
         return self
 
@@ -159,11 +192,14 @@ class BestScanlineMethod(ABC):
         mask: np.ndarray | None = None,
     ) -> ScanlineResult:
         """Assemble a result; the column comes from the collinearity at ``row`` unless given
-        (that costs one more collinearity evaluation per point, counted here).  ``inside`` is
+        (that costs one more collinearity evaluation per point, counted here), or from the column model
+        fitted on the SCOPs on a sensor without line geometry (no collinearity evaluation).  ``inside`` is
         (row, col) on the image (:func:`explorer.methods._compiled.inside_flags`; NaN is outside)
         and ``mask`` where given (e.g. a learned model's training domain)."""
         ce = np.asarray(ce_evaluations, dtype=np.int64)
-        if col is None:
+        if col is None and self._column_model is not None:
+            col = np.where(np.isfinite(row), self._column_model(ground), np.nan)
+        elif col is None:
             col = self._column_at_row(ground, row)
             ce = ce + np.isfinite(row)  # a new array: the caller's is left as it was
         inside = inside_flags(row, col, self.scene.n_rows, self.scene.n_columns, mask)
@@ -181,16 +217,6 @@ class BestScanlineMethod(ABC):
         ok = np.isfinite(row)
         col[ok] = self.scene.column_at_row(ground[ok], row[ok])
         return col
-
-
-def require_line_geometry(name: str, sensor: object) -> None:
-    """Raise :class:`~explorer.errors.MethodUnavailableError` (a ``ValueError``) naming the method and the sensor
-    unless the sensor declares line geometry (:class:`explorer.sensor.LineGeometrySensor`): a search method needs
-    physical scanlines."""
-    if not has_line_geometry(sensor):
-        raise MethodUnavailableError(f"method {name!r} searches the scanlines of a line-scan sensor; "
-                         f"{getattr(sensor, 'name', type(sensor).__name__)!r} has none (an RPC: use its resected "
-                         "MPC, --as-mpc, a stand-in)")
 
 
 def concatenate_results(parts: list[ScanlineResult]) -> ScanlineResult:
@@ -255,9 +281,24 @@ def available(family: str | None = None) -> list[str]:
     return [n for n, c in registry().items() if family is None or c.family == family]
 
 
-def create(name: str, scene: Scene, **params) -> BestScanlineMethod:
-    """Instantiate a registered method by name."""
+def unavailable_reason(name: str, sensor: object) -> str | None:
+    """Why the registered method ``name`` cannot run on ``sensor`` (its declared needs against the sensor's
+    declared capabilities, e.g. a search method on an RPC), or None when it can."""
     reg = registry()
     if name not in reg:
         raise UnknownNameError("method", name, sorted(reg))
-    return reg[name](scene, **params)
+    return reg[name].unavailable_reason(sensor)
+
+
+def create(name: str, scene: Scene, **params) -> BestScanlineMethod:
+    """Instantiate a registered method by name.
+
+    Raises
+    ------
+    MethodUnavailableError
+        The sensor lacks what the method needs (:func:`unavailable_reason`), before any work.
+    """
+    reason = unavailable_reason(name, scene)
+    if reason is not None:
+        raise MethodUnavailableError(reason)
+    return registry()[name](scene, **params)

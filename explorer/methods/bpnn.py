@@ -554,6 +554,7 @@ class BPNNMethod(BestScanlineMethod):
     label = "BP neural network IGM"
     reference = "Yue, Sun & Xie, The remote sensing image geometrical model of BP neural network, ISPRS Archives"
     family = "generalized"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too

@@ -43,7 +43,7 @@ import numpy as np
 
 from explorer.geometry.kernels import CollinearityParams, solve_secant
 from explorer.methods._line_geometry import solve_usgscsm_secant
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.methods.exact import check_device
 from explorer.scene import Scene
 from explorer.sensor import has_polynomial_exterior
@@ -130,7 +130,6 @@ class CsmSecant(BestScanlineMethod):
         self.max_count = int(max_count)
         self.first_step = float(first_step)
         self.backend = backend
-        require_line_geometry(self.name, scene)
         # MPC polynomials: the compiled kernel; interpolated tables (rigorous, CSM): the same iteration
         # vectorised over points on the sensor's own residual (explorer.methods._line_geometry)
         self.kernel_params = CollinearityParams.from_scene(scene) if has_polynomial_exterior(scene) else None

@@ -81,7 +81,7 @@ from explorer.geometry.kernels import (
     solve_exact,
 )
 from explorer.methods._line_geometry import residual_slope, solve_bracketed_secant
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import image_grid
 from explorer.scene import Scene
 from explorer.sensor import has_polynomial_exterior
@@ -180,7 +180,6 @@ class Exact(BestScanlineMethod):
         self.margin_rows = float(margin_rows)
         self.backend = backend
         self.host_backend = "auto" if backend == "torch" else backend  # setup, traces, safeguarded points
-        require_line_geometry(self.name, scene)
         self.window = (-0.5 - self.margin_rows, scene.n_rows - 0.5 + self.margin_rows)
         self.setup_ce = 0
         gx, gy, gz = (int(v) for v in seed_grid)

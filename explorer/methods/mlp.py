@@ -115,6 +115,7 @@ class MLPMethod(BestScanlineMethod):
         "(2024) Remote Sensing 16:2787"
     )
     family = "learned"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
     exactness = "approximate"
 

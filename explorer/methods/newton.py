@@ -45,7 +45,7 @@ import numpy as np
 
 from explorer.geometry.collinearity import sensor_vectors
 from explorer.geometry.rotations import rotation_from_opk
-from explorer.methods.base import BestScanlineMethod, ScanlineResult, register, require_line_geometry
+from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.scene import CHUNK, Scene
 from explorer.sensor import has_polynomial_exterior
 
@@ -217,7 +217,6 @@ class NewtonRaphson(BestScanlineMethod):
             self.kernel_params = _kernel_params(scene, required=evaluator == "compiled")
         if self.kernel_params is None:
             self.chunk_points = 1_000_000  # the numpy active-set loop keeps several (N,) arrays per iteration
-        require_line_geometry(self.name, scene)
         if derivative == "analytic" and not has_polynomial_exterior(scene):
             # the analytic chain rule is that of the MPC collinearity; a sensor with interpolated tables and its
             # own lines of sight (aberration, refraction; a CSM camera) has its own residual, which the central

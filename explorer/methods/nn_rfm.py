@@ -54,7 +54,7 @@ from explorer.methods._lm import dense_forward, layer_shapes, n_parameters, take
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.methods.bpnn import BPNetworkGeometryModel, MLPRegressor
 from explorer.methods.rfm import rfm_domain_mask, rfm_ground_errors
-from explorer.points import PointSet
+from explorer.points import PointSet, scanline_times
 from explorer.rpc.fit import fit_rfm_from_gcps
 from explorer.rpc.model import RationalFunctionModel
 from explorer.scene import Scene
@@ -144,7 +144,7 @@ def irregular_gcps(
     ground = scene.image_to_ground(row, col)
     ok = np.isfinite(ground[:, 0])
     row, col, ground = row[ok], col[ok], ground[ok]
-    exact = PointSet(row, col, ground, scene.scanline_time(row), (0, 0, 1))
+    exact = PointSet(row, col, ground, scanline_times(scene, row), (0, 0, 1))
     noisy = PointSet(row + rng.normal(0.0, noise_px, row.shape) if noise_px else row.copy(),
                      col + rng.normal(0.0, noise_px, col.shape) if noise_px else col.copy(),
                      ground + rng.normal(0.0, noise_m, ground.shape) if noise_m else ground.copy(),
@@ -405,6 +405,7 @@ class NNRFMMethod(BestScanlineMethod):
     reference = ("Habib, Weshahy, El-Ghazaly, El-Shehaby 2018, Geometric correction of high resolution "
                  "satellite imagery using hybrid non-parametric model")
     family = "generalized"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too

@@ -22,76 +22,17 @@ removes.  Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
-from itertools import product
-
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from explorer.geometry.kernels import NUMBA_AVAILABLE
 from explorer.methods._compiled import polynomial_predict
 from explorer.methods._lm import GroundFeatures, take_params
+from explorer.methods._polynomial import CHUNK, design_matrix, monomial_exponents, qr_least_squares
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 
-CHUNK = 1 << 17  # points per block of design-matrix evaluation
-
-
-def monomial_exponents(n_vars: int, degree: int) -> np.ndarray:
-    """Exponents (P, n_vars) of all monomials of total degree <= ``degree``.
-
-    Ordered by total degree, then lexicographically descending (1, x, y, z, x^2, xy, ...).
-    """
-    if degree < 0:
-        raise ValueError(f"degree must be >= 0, got {degree}")
-    terms = [e for e in product(range(degree + 1), repeat=n_vars) if sum(e) <= degree]
-    terms.sort(key=lambda e: (sum(e), tuple(-v for v in e)))
-    return np.array(terms, dtype=np.int64).reshape(-1, n_vars)
-
-
-def design_matrix(features: np.ndarray, exponents: np.ndarray) -> np.ndarray:
-    """Monomials of normalised features.
-
-    Parameters
-    ----------
-    features : ndarray, shape (N, D)
-    exponents : ndarray, shape (P, D)
-
-    Returns
-    -------
-    ndarray, shape (N, P)
-    """
-    n, d = features.shape
-    max_deg = int(exponents.max()) if exponents.size else 0
-    cols = np.ascontiguousarray(features.T)  # (D, N): each variable contiguous
-    powers = [np.ones((d, n)), cols]
-    for _ in range(2, max_deg + 1):
-        powers.append(powers[-1] * cols)
-    out = np.empty((exponents.shape[0], n))  # built term by term, returned transposed
-    for j, e in enumerate(exponents):
-        nz = np.flatnonzero(e)
-        if nz.size == 0:
-            out[j] = 1.0
-            continue
-        np.copyto(out[j], powers[e[nz[0]]][nz[0]])
-        for v in nz[1:]:
-            out[j] *= powers[e[v]][v]
-    return out.T
-
-
-def qr_least_squares(design: np.ndarray, target: np.ndarray, name: str) -> tuple[np.ndarray, float]:
-    """Least-squares coefficients by Householder QR, and the design's 2-norm condition number.
-
-    Raises ``ValueError`` when the design is rank deficient (degenerate SCOP layout).
-    """
-    q, r = np.linalg.qr(design, mode="reduced")
-    diag = np.abs(np.diag(r))
-    if diag.min() <= 1e-12 * diag.max():
-        raise ValueError(
-            f"{name}: the control points do not determine the {design.shape[1]} coefficients "
-            "(rank-deficient design: points collinear or clustered)"
-        )
-    coef = solve_triangular(r, q.T @ target)
-    return coef, float(np.linalg.cond(r))
+__all__ = ["CHUNK", "LinearRegressionMethod", "PolynomialRegressionMethod", "design_matrix", "monomial_exponents",
+           "qr_least_squares"]
 
 
 class _RegressionBase(BestScanlineMethod):
@@ -117,6 +58,7 @@ class _RegressionBase(BestScanlineMethod):
     """
 
     family = "learned"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
     exactness = "approximate"
     _fixed_degree: int | None = None

@@ -42,6 +42,7 @@ from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.rpc.fit import RFMFit, fit_rfm_from_gcps, fit_rfm_terrain_independent
 from explorer.rpc.model import RationalFunctionModel
 from explorer.scene import Scene
+from explorer.sensor import has_line_geometry
 
 __all__ = [
     "RFMMethod",
@@ -108,8 +109,11 @@ def image_space_grid(
         heights = np.linspace(lo, hi, nz) if nz > 1 else np.array([0.5 * (lo + hi)])
     rr = np.repeat(rows, nc)
     cc = np.tile(cols, nr)
-    origin, direction = scene.rays(rr, cc)
-    parts = [origin + ((h - origin[:, 2]) / direction[:, 2])[:, None] * direction for h in heights]
+    if has_line_geometry(scene):  # one line of sight per image node, cut by every plane
+        origin, direction = scene.rays(rr, cc)
+        parts = [origin + ((h - origin[:, 2]) / direction[:, 2])[:, None] * direction for h in heights]
+    else:  # no lines of sight (an RPC): the sensor's own localisation on each plane
+        parts = [scene.image_to_ground(rr, cc, height=float(h)) for h in heights]
     ground = np.concatenate(parts)
     hit = np.isfinite(ground[:, 0])  # image points a sensor flags (e.g. past a CSM camera's tables): left out
     return np.tile(rr, nz)[hit], np.tile(cc, nz)[hit], ground[hit]
@@ -214,8 +218,12 @@ def fit_scene_rfm(
 
         def g2i(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             pts = np.column_stack([np.ravel(x), np.ravel(y), np.ravel(z)])
-            r, c, ok, ce = rigorous_ground_to_image(scene, pts)
-            spent[0] += int(ce.sum())
+            if has_line_geometry(scene):
+                r, c, ok, ce = rigorous_ground_to_image(scene, pts)
+                spent[0] += int(ce.sum())
+            else:  # no scanlines to search (an RPC): the sensor's own projection, no collinearity evaluation
+                r, c, ok = scene.project(pts)
+                ok = ok | (np.isfinite(r) & np.isfinite(c))  # nodes off the image still train the model
             if not ok.all():
                 raise RuntimeError(f"rigorous ground->image failed for {int((~ok).sum())} grid node(s)")
             return r, c
@@ -296,8 +304,10 @@ class RFMMethod(BestScanlineMethod):
     reference = ("Tao & Hu 2001 (terrain-independent RFM); Yue, Sun & Xie, ISPRS Archives "
                  "(RFM vs BP network, Eq. 2, Table 6)")
     family = "generalized"
+    needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = False
     exactness = "approximate"
+    column_source = "model"  # the RFM gives the column too
 
     def __init__(
         self,

@@ -5,7 +5,14 @@ ellipsoidal height) with a :class:`~explorer.geometry.frames.LocalFrame`, so tha
 (projection, localisation, footprints, MPC fitting by resection) runs on an RPC unchanged.  Heights
 given to :meth:`RPCSensor.image_to_ground` are local ``Z`` planes, as for a scene: the ellipsoidal
 height of each point is found by a few fixed-point steps (``dZ/dh`` is the cosine of the angle between
-the local and the ellipsoid normals, 1 to 1e-5 over an image).
+the local and the ellipsoid normals, 1 to 1e-5 over an image).  Without a height, points are localised on the
+sensor's ``terrain`` (a plane at the RPC's height offset unless given, or a DEM resampled on the frame): the
+RPC's line of sight between the terrain's lowest and highest heights is cut with the terrain (its first hit from
+above), and the point is the RPC's exact localisation at the height of that hit, so ``(ground, row, col)`` is a
+pair of the RPC itself.
+
+An RPC has no scanlines (no line geometry): the learned and generalized methods, which need only ground / image
+pairs, run on it; the search methods refuse it (:func:`explorer.methods.unavailable_reason`).
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import numpy as np
 
 from explorer.errors import InputError, check_finite
 from explorer.geometry.frames import Ellipsoid, LocalFrame
+from explorer.geometry.terrain import FlatTerrain, Terrain
 from explorer.rpc.model import RationalFunctionModel
 from explorer.sensor import FLAG_NO_HIT, FLAG_OK, Localization, Projection, inside_image
 
@@ -37,12 +45,16 @@ class RPCSensor:
     line_period_s : float, optional
         Scanline period, seconds; an RPC has no time, so :meth:`time_range` needs it.
     name : str
+    terrain : Terrain, optional
+        Where :meth:`image_to_ground` localises points without a height; default a plane at the RPC's
+        height offset (:attr:`mean_height`).
     """
 
     rpc: RationalFunctionModel
     frame: LocalFrame = field(default=None)  # type: ignore[assignment]  # set in __post_init__
     line_period_s: float | None = None
     name: str = "rpc"
+    terrain: Terrain = field(default=None)  # type: ignore[assignment]  # set in __post_init__
 
     #: An RPC has no physical scanlines (:class:`explorer.sensor.LineGeometrySensor` is not offered):
     #: the search methods need line geometry and are unavailable on it.
@@ -57,6 +69,24 @@ class RPCSensor:
     def __post_init__(self) -> None:
         if self.frame is None:
             self.frame = LocalFrame(float(self.rpc.lat_offset), float(self.rpc.lon_offset), 0.0)
+        if self.terrain is None:
+            self.terrain = FlatTerrain(self.mean_height)
+
+    def with_terrain(self, terrain: Terrain) -> RPCSensor:
+        """The same RPC and frame localising on ``terrain`` (local ENU metres of :attr:`frame`)."""
+        return RPCSensor(self.rpc, self.frame, self.line_period_s, self.name, terrain)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, columns)."""
+        return (self.n_rows, self.n_columns)
+
+    def ground_sample_distance(self) -> tuple[float, float]:
+        """(row, column) pixel spacing on the ground at the image centre on the terrain's mean height, metres."""
+        rc, cc = (self.n_rows - 1) / 2.0, (self.n_columns - 1) / 2.0
+        g = self.image_to_ground(np.array([rc - 0.5, rc + 0.5, rc, rc]), np.array([cc, cc, cc - 0.5, cc + 0.5]),
+                                 height=self.terrain.mean_height)
+        return float(np.linalg.norm(g[1] - g[0])), float(np.linalg.norm(g[3] - g[2]))
 
     @property
     def n_rows(self) -> int:
@@ -101,9 +131,35 @@ class RPCSensor:
     def localize(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
     ) -> Localization:
-        """:meth:`image_to_ground` with flags (0 found, 3 the RPC does not localise the point)."""
+        """:meth:`image_to_ground` with flags: 0 found; on the terrain the DEM's flags (1 outside the DEM,
+        2 no-data, 3 no intersection); 3 where the RPC does not localise the point."""
+        if height is None:
+            return self._on_terrain(row, col)
         ground = self.image_to_ground(row, col, height=height)
         return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
+
+    def _on_terrain(self, row: np.ndarray, col: np.ndarray) -> Localization:
+        """First hit of the RPC's lines of sight with :attr:`terrain` (see the module docstring)."""
+        lo, hi = float(self.terrain.min_height), float(self.terrain.max_height)
+        if not hi > lo:  # a plane: the exact localisation at its height
+            ground = self.image_to_ground(row, col, height=lo)
+            return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
+        pad = max(1.0, 0.01 * (hi - lo))
+        top = self.image_to_ground(row, col, height=hi + pad)
+        bottom = self.image_to_ground(row, col, height=lo - pad)
+        ok = np.isfinite(top[:, 0]) & np.isfinite(bottom[:, 0])
+        ground = np.full(top.shape, np.nan)
+        flags = np.full(top.shape[0], FLAG_NO_HIT, dtype=np.int8)
+        hit, hit_flags = self.terrain.intersect(top[ok], bottom[ok] - top[ok])
+        flags[ok] = hit_flags
+        found = np.flatnonzero(ok)[hit_flags == FLAG_OK]
+        if found.size:  # on the RPC's own line of sight at the height of the hit (the chord is within mm of it)
+            row_b, col_b = np.broadcast_arrays(np.asarray(row, dtype=np.float64), np.asarray(col, dtype=np.float64))
+            exact = self.image_to_ground(np.atleast_1d(row_b)[found], np.atleast_1d(col_b)[found],
+                                         height=hit[hit_flags == FLAG_OK, 2])
+            ground[found] = exact
+            flags[found[~np.isfinite(exact[:, 0])]] = FLAG_NO_HIT
+        return Localization(ground, flags)
 
     def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lon, lat) degrees and ellipsoidal heights (N,) metres -> (row, col) (N,), the RPC's projection."""
@@ -129,11 +185,14 @@ class RPCSensor:
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
     ) -> np.ndarray:
-        """Image points (N,) -> ground (N, 3), local ENU metres, on the plane(s) ``Z = height``
-        (default :attr:`mean_height`); NaN rows where the RPC does not localise."""
+        """Image points (N,) -> ground (N, 3), local ENU metres, on the plane(s) ``Z = height``, or on
+        :attr:`terrain` without a height (first hit); NaN rows where the RPC does not localise (or misses
+        the terrain)."""
+        if height is None:
+            return self._on_terrain(row, col).ground
         row = check_finite(np.atleast_1d(np.asarray(row, dtype=np.float64)), "row")
         col = check_finite(np.atleast_1d(np.asarray(col, dtype=np.float64)), "col")
-        z = self.mean_height if height is None else check_finite(np.asarray(height, dtype=np.float64), "height")
+        z = check_finite(np.asarray(height, dtype=np.float64), "height")
         row, col, z = np.broadcast_arrays(row, col, np.asarray(z, dtype=np.float64))
         h = z + self.frame.h0_m
         out = np.full(row.shape + (3,), np.nan)
@@ -151,9 +210,11 @@ class RPCSensor:
         return out
 
     def footprint(self, height: float | None = None) -> np.ndarray:
-        """Ground corners (4, 3) of the image (pixel edges) on the plane ``Z = height``."""
+        """Ground corners (4, 3) of the image (pixel edges) on the plane ``Z = height`` (default the terrain's
+        mean height)."""
         r1, c1 = self.n_rows - 0.5, self.n_columns - 0.5
-        return self.image_to_ground(np.array([-0.5, -0.5, r1, r1]), np.array([-0.5, c1, c1, -0.5]), height=height)
+        h = self.terrain.mean_height if height is None else height
+        return self.image_to_ground(np.array([-0.5, -0.5, r1, r1]), np.array([-0.5, c1, c1, -0.5]), height=h)
 
     def time_range(self) -> tuple[float, float]:
         """(0.5 line period before row 0, 0.5 after the last row), seconds; needs ``line_period_s``."""

@@ -53,3 +53,51 @@ def test_time_range_needs_a_line_period(sensor):
 def test_bad_ground_is_refused(sensor):
     with pytest.raises(InputError):
         sensor.ground_to_image(np.array([[0.0, np.nan, 0.0]]))
+
+
+def test_default_terrain_is_the_plane_of_the_height_offset(sensor):
+    row, col = np.array([10.0, 5000.0]), np.array([20.0, 3000.0])
+    on_terrain = sensor.image_to_ground(row, col)
+    assert np.array_equal(on_terrain, sensor.image_to_ground(row, col, height=sensor.mean_height))
+    assert sensor.terrain.mean_height == sensor.mean_height
+
+
+def test_localisation_on_a_dem_is_the_rpc_at_the_first_hit():
+    """On a DEM: every point is a pair of the RPC itself (projects back to its pixel to 1e-6 px) and lies on the
+    DEM (its height is the DEM's there, to the mm of the straight chord against the RPC's line of sight); a
+    pixel whose line of sight leaves the DEM is flagged, never given a height."""
+    from explorer.geometry.terrain import GridDEM
+
+    rpc = read_rpc(RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML")
+    flat = RPCSensor(rpc)
+    corners = np.vstack([flat.footprint(flat.mean_height - 300), flat.footprint(flat.mean_height + 300)])
+    x = np.linspace(corners[:, 0].min() - 500, corners[:, 0].max() + 500, 300)
+    y = np.linspace(corners[:, 1].min() - 500, corners[:, 1].max() + 500, 200)
+    heights = flat.mean_height + 250.0 * np.sin(x[None, :] / 1500.0) * np.cos(y[:, None] / 900.0)
+    heights[:40, :40] = np.nan  # a void in one corner
+    dem = GridDEM(float(x[0]), float(y[0]), float(x[1] - x[0]), float(y[1] - y[0]), heights)
+    s = flat.with_terrain(dem)
+    rng = np.random.default_rng(3)
+    row, col = rng.uniform(0, s.n_rows - 1, 2000), rng.uniform(0, s.n_columns - 1, 2000)
+    loc = s.localize(row, col)
+    ok = loc.valid
+    assert 0.9 < ok.mean() < 1.0 and set(np.unique(loc.flags[~ok])) <= {1, 2, 3}
+    assert np.isnan(loc.ground[~ok]).all()
+    r, c = rpc.projection(*s.frame.enu_to_geodetic(loc.ground[ok]))
+    assert np.max(np.abs(r - row[ok])) < 1e-6 and np.max(np.abs(c - col[ok])) < 1e-6
+    assert np.max(np.abs(dem.height(loc.ground[ok, 0], loc.ground[ok, 1]) - loc.ground[ok, 2])) < 0.01
+    # the first hit: no point of the line of sight above it is under the DEM (brute force along the line)
+    i = np.flatnonzero(ok)[:50]
+    for dz in np.linspace(1.0, 260.0, 40):
+        above = s.image_to_ground(row[i], col[i], height=loc.ground[i, 2] + dz)
+        h_dem = dem.height(above[:, 0], above[:, 1])
+        assert np.all(~np.isfinite(h_dem) | (above[:, 2] >= h_dem - 0.01))
+    assert np.array_equal(s.image_to_ground(row, col), loc.ground, equal_nan=True)
+
+
+def test_shape_and_ground_sample_distance(sensor):
+    assert sensor.shape == (sensor.n_rows, sensor.n_columns)
+    gsd = sensor.ground_sample_distance()
+    rc, cc = (sensor.n_rows - 1) / 2, (sensor.n_columns - 1) / 2
+    g = sensor.image_to_ground(np.array([rc, rc + 1, rc]), np.array([cc, cc, cc + 1]), height=sensor.mean_height)
+    assert gsd == pytest.approx((np.linalg.norm(g[1] - g[0]), np.linalg.norm(g[2] - g[0])), rel=1e-3)
