@@ -326,6 +326,12 @@ class Scene:
         row, col = self.ground_to_image(ground)
         return Projection(row, col, self.inside_image(row, col))
 
+    def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
+        """:meth:`project` of geodetic points on the frame's body: longitude, latitude (N,) degrees, height (N,)
+        metres above its ellipsoid (the geodetic entry point every sensor of the package offers; here converted
+        to the local frame once)."""
+        return self.project(self.frame.geodetic_to_enu(lon, lat, h))
+
     def time_range(self) -> tuple[float, float]:
         """(earliest, latest) exposure time of the image, seconds: the first and last scanline's outer edges."""
         t = self.scanline_time(np.array([-0.5, self.n_rows - 0.5]))

@@ -186,3 +186,15 @@ def test_points_outside_flat_plane_direction():
     scene = build_scene("WSU").with_terrain(FlatTerrain(1e7))  # plane above the satellite
     g = scene.image_to_ground(np.array([10.0]), np.array([10.0]))
     assert np.all(np.isnan(g))
+
+
+def test_geodetic_entry_point_is_project_through_the_frame():
+    from explorer.presets import build_scene
+
+    scene = build_scene("WSU")
+    ground = scene.image_to_ground(np.array([0.0, 500.0, 3000.0]), np.array([10.0, 400.0, 5000.0]))
+    lon, lat, h = scene.frame.enu_to_geodetic(ground)
+    geo, enu = scene.project_geodetic(lon, lat, h), scene.project(ground)
+    np.testing.assert_allclose(geo.row, enu.row, atol=1e-8)
+    np.testing.assert_allclose(geo.col, enu.col, atol=1e-8)
+    assert np.array_equal(geo.valid, enu.valid)

@@ -111,3 +111,27 @@ def project(
     kernel = _project_parallel if parallel else _project_serial
     counts = kernel(lon, lat, h, *tuples, tuple(float(v) for v in norm), row, col)
     return row, col, (int(counts[0]), int(counts[1]), int(counts[2]))
+
+
+def _and_inside_image_py(row, col, valid, n_rows, n_columns):
+    """``valid &= (row, col) on an n_rows x n_columns image, pixel edges included`` in one pass (NaN: outside)."""
+    r1 = n_rows - 0.5
+    c1 = n_columns - 0.5
+    for i in range(row.shape[0]):
+        r = row[i]
+        c = col[i]
+        valid[i] = valid[i] & (r >= -0.5) & (r <= r1) & (c >= -0.5) & (c <= c1)  # branch-free: vectorised
+
+
+if NUMBA_AVAILABLE:
+    _and_inside_image = njit(cache=True, fastmath=False, error_model="numpy")(_and_inside_image_py)
+
+
+def and_inside_image(row: np.ndarray, col: np.ndarray, valid: np.ndarray, n_rows: int, n_columns: int) -> None:
+    """``valid &= explorer.sensor.inside_image(row, col, n_rows, n_columns)`` in place: one compiled pass over 1-D
+    float64 ``row``, ``col`` and bool ``valid`` of one length (numpy without numba)."""
+    if NUMBA_AVAILABLE and row.ndim == col.ndim == valid.ndim == 1 and row.dtype == col.dtype == np.float64 \
+            and valid.dtype == np.bool_ and row.flags.c_contiguous and col.flags.c_contiguous:
+        _and_inside_image(row, col, valid, float(n_rows), float(n_columns))
+        return
+    valid &= (row >= -0.5) & (row <= n_rows - 0.5) & (col >= -0.5) & (col <= n_columns - 0.5)

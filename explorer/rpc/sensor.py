@@ -25,6 +25,7 @@ import numpy as np
 from explorer.errors import InputError, check_finite
 from explorer.geometry.frames import Ellipsoid, LocalFrame
 from explorer.geometry.terrain import FlatTerrain, Terrain
+from explorer.rpc._kernels import and_inside_image
 from explorer.rpc.model import RationalFunctionModel
 from explorer.sensor import FLAG_NO_HIT, FLAG_OK, Localization, Projection, inside_image
 
@@ -127,6 +128,14 @@ class RPCSensor:
         lon, lat, h = self.frame.enu_to_geodetic(ground)
         row, col, ok = self.rpc.projection(lon, lat, h, return_valid=True)
         return Projection(row, col, ok & inside_image(row, col, self.n_rows, self.n_columns))
+
+    def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
+        """:meth:`project` of geodetic points -- longitude, latitude (N,) degrees, ellipsoidal height (N,) metres --
+        without the local frame: the RPC's own projection and validity, and the point on the image (the geodetic
+        entry point of every sensor; for an RPC the wrapper only, ``benchmarks/sensor_path.py``)."""
+        row, col, ok = self.rpc.projection(lon, lat, h, return_valid=True)
+        and_inside_image(row, col, ok, self.n_rows, self.n_columns)  # one pass, in place
+        return Projection(row, col, ok)
 
     def localize(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None

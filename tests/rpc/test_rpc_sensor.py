@@ -101,3 +101,34 @@ def test_shape_and_ground_sample_distance(sensor):
     rc, cc = (sensor.n_rows - 1) / 2, (sensor.n_columns - 1) / 2
     g = sensor.image_to_ground(np.array([rc, rc + 1, rc]), np.array([cc, cc, cc + 1]), height=sensor.mean_height)
     assert gsd == pytest.approx((np.linalg.norm(g[1] - g[0]), np.linalg.norm(g[2] - g[0])), rel=1e-3)
+
+
+def test_geodetic_entry_is_the_rpc_with_its_flags(sensor):
+    """``project_geodetic``: the RPC's own projection of (lon, lat, h) and the flags ``project`` gives for the same
+    points through the local frame (RPC validity and on the image), points off the image flagged."""
+    rng = np.random.default_rng(4)
+    row = rng.uniform(-300, sensor.n_rows + 300, 3000)
+    col = rng.uniform(-300, sensor.n_columns + 300, 3000)
+    ground = sensor.image_to_ground(row, col, height=rng.uniform(0.0, 300.0, 3000))
+    ground = ground[np.isfinite(ground[:, 0])]
+    lon, lat, h = sensor.frame.enu_to_geodetic(ground)
+    geo = sensor.project_geodetic(lon, lat, h)
+    r_rpc, c_rpc = sensor.rpc.projection(lon, lat, h)
+    assert np.array_equal(geo.row, r_rpc) and np.array_equal(geo.col, c_rpc)
+    enu = sensor.project(ground)
+    assert np.array_equal(geo.valid, enu.valid) and 0.5 < geo.valid.mean() < 1.0
+    on_image = (r_rpc >= -0.5) & (r_rpc <= sensor.n_rows - 0.5) & (c_rpc >= -0.5) & (c_rpc <= sensor.n_columns - 0.5)
+    assert not np.any(geo.valid & ~on_image)
+
+
+def test_and_inside_image_matches_the_definition():
+    from explorer.rpc._kernels import and_inside_image
+    from explorer.sensor import inside_image
+
+    rng = np.random.default_rng(1)
+    row, col = rng.uniform(-2, 12, 5000), rng.uniform(-2, 22, 5000)
+    row[[0, 1, 2, 3]] = [-0.5, 9.5, np.nan, -0.5000001]
+    valid = rng.uniform(size=5000) < 0.8
+    expected = valid & inside_image(row, col, 10, 20)
+    and_inside_image(row, col, valid, 10, 20)
+    assert np.array_equal(valid, expected) and valid[0] == expected[0] and not valid[2] and not valid[3]
