@@ -13,8 +13,9 @@ then writes
   names the sensor every residual is measured against (its own ground to image), ``stand_in`` the
   model-vs-model map of a file source (the MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
   model, the RPC against its resected MPC with ``--as-mpc``) against it; a method the sensor cannot serve (a search
-  method on an RPC, which has no scanlines) has ``"unavailable": reason`` and no numbers; ``accuracy_vs_scops`` the GUI's accuracy-vs-SCOPs sweep (each method refitted at every
-  density of :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs);
+  method on an RPC, which has no scanlines) has ``"unavailable": reason`` and no numbers; ``accuracy_vs_scops``
+  the GUI's accuracy-vs-SCOPs sweep (each method refitted at every density of
+  :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs);
 * ``residuals.csv`` -- one row per check point per method (and per stand-in, method ``stand-in``):
   ``method, scp_index, row_px, col_px, row_residual_px, col_residual_px, status, x_m, y_m, z_m`` (the
   sensor's own image position of the SCP, estimated minus exact, empty where the method gave no answer;
