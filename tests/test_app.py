@@ -752,3 +752,23 @@ def test_log_lines_of_background_work_name_it(caplog, monkeypatch):
     msgs = [r.getMessage() for r in caplog.records if r.name == "explorer"]
     assert msgs == ["[accuracy-vs-SCOPs sweep, 30 SCOPs] toy_logs: training did not reach its accuracy goal",
                     "[maps, 50 SCOPs] toy_logs: training did not reach its accuracy goal"]
+
+
+def test_an_rpc_source_runs_the_learned_methods_and_says_why_a_search_is_unavailable(server):
+    """Issue 23: ``explore --rpc`` measures against the RPC itself; a search method (no scanlines on an RPC) is
+    listed unavailable with the reason in the summary panel and the status line, never run on a hidden MPC; the 3D
+    view draws an MPC fitted to the RPC and says so."""
+    from explorer.sources import load_source
+    from tests.rpc.conftest import RPC_DIR
+
+    src = load_source("rpc", str(RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"))
+    app = make_app(server, sources=[src], methods=("lrm", "toy_bisect"), scp_count=2000)
+    assert app.errors == [] and app.scene is src.scene
+    summary = app.handles["summary"].content
+    assert "| toy_bisect | - | - | - | unavailable |" in summary and "searches the scanlines" in summary
+    assert "--as-mpc" in summary and "| lrm |" in summary
+    assert "unavailable on this sensor" in app.handles["status"].content and "failed" not in app.handles[
+        "status"].content
+    run = app.runs["lrm"]
+    assert run.ok and run.evaluation.n_evaluated == len(app.model.scps(app.settings()))
+    assert "/orbit/track" in app.nodes and "an MPC fitted to its lines of sight" in app.handles["cloud_text"].content
