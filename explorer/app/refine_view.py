@@ -6,8 +6,8 @@ control points (:func:`explorer.refine.adjust.refine_images`) and redraws the re
 the parameter table with sigmas and, for a sensor with scanlines, the original and adjusted trajectory --
 as a panel and in the 3D scene (:mod:`explorer.scene3d.refine`, the displacement exaggerated with the factor
 stated).  What is adjusted is :func:`refine_target_of` the source: the RPC itself for ``--rpc``, the MPC scene
-of ``--scene`` / a preset, and for a sensor that is not refinable yet (rigorous DIMAP / DG, CSM camera) the MPC
-that stands in for it, labelled so with its distance from the sensor at the points.
+of ``--scene`` / a preset, the rigorous DIMAP / DG model or the CSM camera itself, and for a sensor no adapter
+refines the MPC that stands in for it, labelled so with its distance from the sensor at the points.
 A bad configuration (too few points left, a degenerate one) shows its one-line message in the folder.
 """
 

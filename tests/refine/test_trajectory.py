@@ -4,6 +4,8 @@ the rotation of the corrected angles; the exaggeration multiplies both; an RPC h
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,63 @@ def test_an_rpc_has_no_trajectory():
     ref = refine_images([rpc], model="shift", control=simulate_points(rpc, 8, seed=1), sigma_px=0.3)
     with pytest.raises(ValueError, match="no trajectory"):
         refinement_trajectory(ref)
+
+
+# ------------------------------------------------- rigorous (DIMAP) and CSM line scanners (explorer.refine.line_adjust)
+PHR_2017 = Path(__file__).resolve().parents[1] / "data" / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
+ORBITAL = Path(__file__).resolve().parents[1] / "data" / "usgscsm" / "orbitalLineScan.json"
+
+
+@pytest.fixture(scope="module")
+def line_scanners():
+    from explorer.real.csm_camera import read_isd
+    from explorer.real.csm_sensor import csm_scene
+    from explorer.sources import load_source
+
+    return {"dimap": load_source("dimap", str(PHR_2017)).scene, "csm": csm_scene(read_isd(ORBITAL))}
+
+
+@pytest.mark.parametrize("which", ["dimap", "csm"])
+def test_line_scanner_offsets_move_and_turn_by_their_closed_form(line_scanners, which):
+    """A constant position offset (orbital axes at the middle time) moves every perspective centre by its length
+    (the tables' interpolation reproduces a constant); a constant roll turns the camera by exactly that angle,
+    whatever frames it is composed with."""
+    from explorer.refine.line_adjust import adjusted_sensor, correction_for
+
+    sensor = line_scanners[which]
+    corr = correction_for(sensor, "position-attitude")
+    moved = trajectory_comparison(sensor, adjusted_sensor(sensor, corr, np.array([30.0, -40.0, 0, 0, 0, 0])), n=9)
+    np.testing.assert_allclose(np.linalg.norm(moved.displacement_m, axis=1), 50.0, rtol=1e-9)
+    np.testing.assert_allclose(moved.attitude_change_rad, 0.0, atol=1e-12)
+    if which == "dimap":  # ECEF tables: the ENU displacement is the orbital axes' combination, rotated to ENU
+        want = sensor.frame.enu_to_ecef_rotation.T @ (corr.axes @ np.array([30.0, -40.0, 0.0]))
+        np.testing.assert_allclose(moved.displacement_m, np.tile(want, (9, 1)), atol=1e-6)
+    turned = trajectory_comparison(sensor, adjusted_sensor(sensor, corr, np.array([0, 0, 0, 2e-5, 0, 0])), n=9)
+    np.testing.assert_allclose(turned.attitude_change_rad, 2e-5, rtol=1e-6)
+    np.testing.assert_allclose(turned.displacement_m, 0.0, atol=1e-6)
+
+
+def test_rigorous_refinement_trajectory_is_the_reports_parameters(line_scanners):
+    """The trajectory the view draws for an adjusted DIMAP model: the displacement is the report's along / cross /
+    radial offsets on the orbital axes (in ENU), the attitude change the angle of the report's roll, pitch, yaw."""
+    from explorer.refine.line_adjust import adjusted_sensor, correction_for
+
+    sensor = line_scanners["dimap"]
+    corr = correction_for(sensor, "position-attitude")
+    truth = adjusted_sensor(sensor, corr, np.array([60.0, -40.0, 20.0, 3e-5, -2e-5, 2e-5]))
+    rng = np.random.default_rng(3)
+    n = 30
+    g = truth.image_to_ground(rng.uniform(0.05, 0.95, n) * sensor.n_rows, rng.uniform(0.05, 0.95, n) * sensor.n_columns,
+                              height=rng.uniform(-300, 300, n))
+    row, col = truth.ground_to_image(g)
+    lon, lat, h = sensor.frame.enu_to_geodetic(g)
+    ref = refine_images([sensor], model="position-attitude", sigma_px=0.3,
+                        control=PointTable([f"g{i}" for i in range(n)], row + rng.normal(0, 0.3, n),
+                                           col + rng.normal(0, 0.3, n), lon, lat, h))
+    p = {q["name"]: q["value"] for q in ref.report()["parameters"]}
+    comp = refinement_trajectory(ref, n=7)
+    offset = np.array([p["along_m"], p["cross_m"], p["radial_m"]])
+    want = sensor.frame.enu_to_ecef_rotation.T @ (corr.axes @ offset)
+    np.testing.assert_allclose(comp.displacement_m, np.tile(want, (7, 1)), atol=1e-6)
+    delta = rotation_from_opk(np.array([p["roll_rad"]]), np.array([p["pitch_rad"]]), np.array([p["yaw_rad"]]))
+    np.testing.assert_allclose(comp.attitude_change_rad, rotation_angle(delta)[0], rtol=1e-6)
