@@ -772,3 +772,8 @@ def test_an_rpc_source_runs_the_learned_methods_and_says_why_a_search_is_unavail
     run = app.runs["lrm"]
     assert run.ok and run.evaluation.n_evaluated == len(app.model.scps(app.settings()))
     assert "/orbit/track" in app.nodes and "an MPC fitted to its lines of sight" in app.handles["cloud_text"].content
+    box = app.handles["method_boxes"]["toy_bisect"]  # the method list says it too, with the reason as the hint
+    assert box.label == "toy_bisect (unavailable here)" and "searches the scanlines" in box.hint
+    assert app.handles["method_boxes"]["lrm"].label == "lrm"
+    app.handles["preset"].value = "WSU"  # a scene with scanlines: the label and hint come back
+    assert box.label == "toy_bisect" and "searches the scanlines" not in box.hint

@@ -260,6 +260,17 @@ class Controls:
                 box.on_update(self._methods_changed)
                 h["method_boxes"][name] = box
 
+    def mark_unavailable(self, reasons: dict[str, str | None]) -> None:
+        """Label the method checkboxes the current sensor cannot serve ``"name (unavailable here)"`` with the reason
+        as their hint (a search method on an RPC); the others get their name and first hint back."""
+        hints = self.__dict__.setdefault("_method_hints", {})
+        for name, box in self.handles["method_boxes"].items():
+            hints.setdefault(name, box.hint)
+            reason = reasons.get(name)
+            label, hint = (name, hints[name]) if reason is None else (f"{name} (unavailable here)", reason[:300])
+            if box.label != label:
+                box.label, box.hint = label, hint
+
     def checked_methods(self) -> list[str]:
         return [n for n, b in self.handles["method_boxes"].items() if b.value]
 

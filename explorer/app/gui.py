@@ -213,6 +213,8 @@ class ExplorerApp(Views):
             return f"{cls.label} -- {cls.reference}"
 
         self.controls.add_method_boxes(names, wanted, hint)
+        if self.scene is not None:
+            self.mark_unavailable_methods(self.scene)
         order = wanted + [n for n in names if n not in wanted]
         with self.quiet():
             self.controls.set_method_options(wanted)

@@ -74,6 +74,7 @@ class Views:
         fits: Any
         methods_ready: threading.Event
         method_names: list[str]
+        controls: Any
         max_cloud_points: int
         max_map_cells: int
         fit_wait_s: float
@@ -174,6 +175,7 @@ class Views:
                 how = (f"automatic: the terrain's {relief:.0f} m relief drawn at about "
                        f"{100 * B.RELIEF_SHARE:g} % of the footprint" if s.auto_exaggeration else "set by hand")
                 self.ground_text += f"; heights exaggerated x{factor:g} ({how})"
+            self.mark_unavailable_methods(scene)
             if drawn is not scene:
                 self.ground_text += ("; the sensor has no scanlines (an RPC): the orbit, scanline planes and rays "
                                      "drawn are an MPC fitted to its lines of sight, every number is its own")
@@ -511,6 +513,13 @@ class Views:
             for name, data in files.items():
                 zf.writestr(zipfile.ZipInfo(name, date_time=(2000, 1, 1, 0, 0, 0)), data)
         return buf.getvalue()
+
+    def mark_unavailable_methods(self, scene: Any) -> None:
+        """Mark in the method list the methods ``scene`` cannot serve, with the reason
+        (:func:`explorer.methods.unavailable_reason`: a search method on an RPC, which has no scanlines)."""
+        boxes = self.handles.get("method_boxes") or {}
+        reg = registry()
+        self.controls.mark_unavailable({n: reg[n].unavailable_reason(scene) if n in reg else None for n in boxes})
 
     def _drawn_scene(self, s: Settings) -> Any:
         """The scene the 3D view draws: the sensor itself, or for a loaded sensor without line geometry (an RPC)
