@@ -17,9 +17,15 @@ Times are wall-clock medians of ``--repeat`` runs in one process (torch imported
 known affines) with N tie points and 6 GCPs measured in both images (2 N + 12 image measurements of a row and
 a column each; 50,000 ties are 100,012 measurements and 150,030 unknowns), once.
 
+``--line-sensors`` also times one LM iteration over the same number of GCPs on the rigorous Pleiades DIMAP
+model (tests/data/rpc PHRDIMAP 2018) and the MRO CTX CSM camera (tests/data/usgscsm), model
+``position-attitude`` (6 parameters), the GCPs simulated by the sensor with known offsets + 0.3 px noise, ground
+known to 0.5 m as above (:mod:`explorer.refine.torch_linescan`: the compiled line search, then torch).
+
 Usage::
 
-    .venv/bin/python benchmarks/refine_bench.py [--gcps 10000] [--repeat 3] [--pair-ties 50000] [--json out.json]
+    .venv/bin/python benchmarks/refine_bench.py [--gcps 10000] [--repeat 3] [--pair-ties 50000] [--line-sensors]
+        [--json out.json]
 """
 
 from __future__ import annotations
@@ -107,12 +113,47 @@ def _pair(n_ties: int, seed: int) -> dict:
             "pair_max_error_vs_truth_in_sigmas": float(np.max(np.abs(z)))}
 
 
+LINE_SENSORS = {"dimap": ("dimap", "tests/data/rpc/PHRDIMAP_P1BP--2018122638935449CP.XML"),
+                "ctx": ("isd", "tests/data/usgscsm/ctxLineScan.json")}
+
+
+def _line_problem(which: str, n: int, seed: int):
+    from explorer.refine.bundle import BundleProblem, metres_per_degree
+    from explorer.refine.line_adjust import adjusted_sensor, correction_for
+    from explorer.refine.torch_linescan import line_projector
+    from explorer.sources import load_source
+
+    kind, path = LINE_SENSORS[which]
+    sensor = load_source(kind, str(ROOT / path)).scene
+    corr = correction_for(sensor, "position-attitude")
+    truth = np.array([60.0, -40.0, 20.0, 3e-5, -2e-5, 4e-5])
+    biased = adjusted_sensor(sensor, corr, truth)
+    rng = np.random.default_rng(seed)
+    rows, cols = sensor.n_rows - 1, sensor.n_columns - 1
+    g = biased.image_to_ground(rng.uniform(0.05 * rows, 0.95 * rows, n), rng.uniform(0.05 * cols, 0.95 * cols, n),
+                               height=rng.uniform(-300.0, 300.0, n))
+    row, col = biased.ground_to_image(g)
+    ok = np.isfinite(row)
+    lon, lat, h = sensor.frame.enu_to_geodetic(g[ok])
+    m = int(ok.sum())
+    axes = (float(sensor.frame.body.a_m), float(sensor.frame.body.b_m))
+    m_lon, m_lat = metres_per_degree(lat, h, axes)
+    ground = np.stack([lon, lat, h], axis=1)
+    surveyed = ground + rng.normal(0.0, 0.5, ground.shape) / np.stack([m_lon, m_lat, np.ones(m)], axis=1)
+    measured = np.stack([row[ok], col[ok]], axis=1) + rng.normal(0.0, 0.3, (m, 2))
+    return BundleProblem(projectors=[line_projector(sensor, corr)], initial_parameters=[np.zeros(6)], ground=surveyed,
+                         ground_sigma_m=np.full((m, 3), 0.5), image_index=np.zeros(m, int), point_index=np.arange(m),
+                         measured=measured, sigma_px=np.full(m, 0.3), axes=axes)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--gcps", type=int, default=10_000)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pair-ties", type=int, default=0, help="also time a stereo-pair bundle adjustment")
+    ap.add_argument("--line-sensors", action="store_true",
+                    help="also time one LM iteration on the rigorous DIMAP model and the CTX CSM camera")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
 
@@ -146,6 +187,17 @@ def main() -> None:
     }
     if args.pair_ties:
         doc.update(_pair(args.pair_ties, args.seed))
+    if args.line_sensors:
+        for which in LINE_SENSORS:
+            line_problem = _line_problem(which, args.gcps, args.seed)
+            lm_iteration(line_problem, loss="linear")  # warm-up
+            times = []
+            for _ in range(args.repeat):
+                t0 = time.perf_counter()
+                lm_iteration(line_problem, loss="linear")
+                times.append(time.perf_counter() - t0)
+            doc[f"{which}_gcps"] = int(line_problem.measured.shape[0])
+            doc[f"{which}_lm_iteration_s"] = statistics.median(times)
     for key, value in doc.items():
         print(f"{key:>38}: {value:.4g}" if isinstance(value, float) else f"{key:>38}: {value}")
     if args.json:

@@ -102,8 +102,9 @@ class _Projector:
             raise InputError("the line-scanner projector takes one set of corrections for all points")
         return theta, p_np
 
-    def _lagrange_weights(self, times: np.ndarray, idx: np.ndarray, t: torch.Tensor) -> torch.Tensor:
-        """Lagrange weights (N, m) of samples ``times[idx]`` (N, m) at ``t`` (N,), in the compiled order."""
+    def _lagrange_weights_compiled_order(self, times: np.ndarray, idx: np.ndarray, t: torch.Tensor) -> torch.Tensor:
+        """Lagrange weights (N, m) with the operations of :func:`explorer.real.linescan.lagrange_interpolate` in its
+        order (``w_j *= dt_k / (t_j - t_k)``): the ephemeris' positions (7e6 m) round as the compiled path's."""
         tw = times[idx]
         dt = t[:, None] - _t(tw)
         m = idx.shape[1]
@@ -115,6 +116,38 @@ class _Projector:
                     w = w * (dt[:, k] / _t(tw[:, j] - tw[:, k]))
             cols.append(w)
         return torch.stack(cols, dim=1)
+
+    def _lagrange_weights(self, times: np.ndarray, idx: np.ndarray, t: torch.Tensor) -> torch.Tensor:
+        """Lagrange weights (N, m) of samples ``times[idx]`` (N, m) at ``t`` (N,)."""
+        tw = times[idx]
+        m = idx.shape[1]
+        den = np.ones(tw.shape)
+        for j in range(m):
+            for k in range(m):
+                if k != j:
+                    den[:, j] *= tw[:, j] - tw[:, k]
+        return _weights(t[:, None] - _t(tw), _t(1.0 / den))
+
+
+def _weights(dt: torch.Tensor, inv_den: torch.Tensor) -> torch.Tensor:
+    """Lagrange weights ``inv_den[:, a] prod_{b != a} dt[:, b]`` (N, m) by prefix and suffix products (2m products
+    instead of m^2)."""
+    m = dt.shape[1]
+    if m == 1:
+        return inv_den
+    prefix = [torch.ones_like(dt[:, 0])]
+    for b in range(m - 1):
+        prefix.append(prefix[-1] * dt[:, b])
+    suffix = [torch.ones_like(dt[:, 0])]
+    for b in range(m - 1, 0, -1):
+        suffix.append(suffix[-1] * dt[:, b])
+    return torch.stack([prefix[a] * suffix[m - 1 - a] for a in range(m)], dim=1) * inv_den
+
+
+def _constant_attitude(correction: LineCorrection) -> bool:
+    """True when the attitude correction does not vary along the line time (no drifts, no harmonics): it then
+    commutes with the tables' interpolation (Lagrange is linear, slerp isometric) and is applied once per point."""
+    return not any(n.endswith("rad_per_s") for n in correction.parameter_names) and not correction.frequencies_hz
 
 
 class TorchRigorous(_Projector):
@@ -154,7 +187,7 @@ class TorchRigorous(_Projector):
         eph, att = self._eph, self._att
         t_np = t.detach().numpy()
         idx = self._window(eph.time_s, t_np, eph.order)
-        w = self._lagrange_weights(eph.time_s, idx, t)
+        w = self._lagrange_weights_compiled_order(eph.time_s, idx, t)
         ref = eph.position_m[eph.position_m.shape[0] // 2]  # offsets from the middle sample, as the compiled path
         pos = _weighted_sum(w, _t(eph.position_m[idx] - ref)) + _t(ref)
         vel = _weighted_sum(w, _t(eph.velocity_m_s[idx]))
@@ -162,17 +195,21 @@ class TorchRigorous(_Projector):
             tau = torch.sum(w * _t(eph.time_s[idx] - t_ref), dim=1)
             pos = pos + corr.position_offset(tau, theta)
             vel = vel + (corr.position_offset(tau + 1.0, theta) - corr.position_offset(tau, theta))
-        # attitude samples corrected (q_i dq(t_i)), then interpolated as the table is
+        # attitude samples corrected (q_i dq(t_i)), then interpolated as the table is (a constant dq after)
+        constant = _constant_attitude(corr)
         if att.method == "lagrange":
             aidx = self._window(att.time_s, t_np, att.order)
-            q = self._corrected_quaternions(aidx, theta)
-            wa = self._lagrange_weights(att.time_s, aidx, t)
+            q = _t(att.quaternion[aidx]) if constant else self._corrected_quaternions(aidx, theta)
+            wa = self._lagrange_weights_compiled_order(att.time_s, aidx, t)
             qt = _normalise(torch.einsum("nm,nmk->nk", wa, q))
         else:
             i = np.clip(np.searchsorted(att.time_s, t_np) - 1, 0, att.time_s.size - 2)
-            q = self._corrected_quaternions(np.stack([i, i + 1], axis=1), theta)
+            pair = np.stack([i, i + 1], axis=1)
+            q = _t(att.quaternion[pair]) if constant else self._corrected_quaternions(pair, theta)
             s = (t - _t(att.time_s[i])) / _t(att.time_s[i + 1] - att.time_s[i])
             qt = _slerp(q[:, 0], q[:, 1], s, flip=True)
+        if constant:
+            qt = _normalise(quaternion_multiply(qt, corr.rotation_quaternion(torch.zeros_like(t), theta, self._b)))
         rot_body = _quat_matrix(qt)  # body -> ECEF
         if np.any(self._lever):
             pos = pos + rot_body @ _t(self._lever)
@@ -269,13 +306,17 @@ class TorchRigorous(_Projector):
         scene = self._cache_scene(p_np)
         row0, col0 = scene.ground_to_image(ground.detach().numpy())
         t0 = _t(scene.scanline_time(row0)).requires_grad_(True)
-        with torch.enable_grad():  # d r / d t by autograd, also when the caller evaluates without gradients
+        keep = torch.is_grad_enabled()
+        with torch.enable_grad():  # d r / d t and d y / d t by autograd, also when the caller needs no gradients
             x, y = self.focal_plane(ground, geodetic, t0, theta)
             residual = x - self._detector_x(y)
-            (slope,) = torch.autograd.grad(residual.sum(), t0, create_graph=torch.is_grad_enabled())
-        t = t0.detach() - residual / slope
-        row = _t(row0) + (t - t0.detach()) / self.line_period
-        _, y = self.focal_plane(ground, geodetic, t, theta)
+            (slope,) = torch.autograd.grad(residual.sum(), t0, retain_graph=True)
+            (y_rate,) = torch.autograd.grad(y.sum(), t0, retain_graph=keep)
+        # the Newton step (slopes as constants: at the root the implicit-function derivative is exact), and y
+        # carried to the new time to first order (the step is below the compiled tolerance)
+        dt = -residual / slope
+        row = _t(row0) + dt / self.line_period
+        y = y + y_rate * dt
         interior = self.sensor.interior
         target = y / interior.detector_pitch_m
         if not interior.column_polynomial:
@@ -415,15 +456,8 @@ class TorchCsm(_Projector):
         for m in np.unique(order):
             sel = np.flatnonzero(order == m)
             idx = first[sel, None] + np.arange(m)[None, :]
-            dt = t[sel][:, None] - _t(times[idx])
-            cols = []
-            for a in range(m):
-                w = _t(den[i[sel], a])
-                for b in range(m):
-                    if b != a:
-                        w = w * dt[:, b]
-                cols.append(w)
-            part = torch.einsum("nm,nmk->nk", torch.stack(cols, dim=1), values(idx, sel))
+            w = _weights(t[sel][:, None] - _t(times[idx]), _t(den[i[sel], :m]))
+            part = _weighted_sum(w, values(idx, sel))
             if out is None:
                 out = torch.zeros((t.shape[0], part.shape[1]), dtype=torch.float64)
             out = out.index_put((torch.from_numpy(sel),), part)
@@ -464,18 +498,20 @@ class TorchCsm(_Projector):
         corr = self.correction
         pos_t = self._pos_t
 
+        table = np.concatenate([self._pos, (pos_t - corr.reference_time_s)[:, None]], axis=1)
+
         def positions(idx: np.ndarray, sel: np.ndarray | None = None) -> torch.Tensor:
-            return _t(self._pos[idx])
+            return _t(table[idx])
 
-        p = self._lagrange(pos_t, self._pw, self._pd, t, positions) + _t(self._pos_ref)
+        pt = self._lagrange(pos_t, self._pw, self._pd, t, positions)  # positions and tau = t_i - t_ref together
+        p = pt[:, :3] + _t(self._pos_ref)
         if corr.has_position:
-            def taus(idx: np.ndarray, sel: np.ndarray | None = None) -> torch.Tensor:
-                return _t(pos_t[idx] - corr.reference_time_s)[:, :, None]
-
-            tau = self._lagrange(pos_t, self._pw, self._pd, t, taus)[:, 0] if pos_t.size > 1 \
-                else torch.full_like(t, float(pos_t[0] - corr.reference_time_s))
-            p = p + corr.position_offset(tau, theta)
-        qp = self._quaternion(self._qp_t, self._qp, self._qpw, self._qpd, t, theta)
+            p = p + corr.position_offset(pt[:, 3], theta)
+        constant = _constant_attitude(corr)
+        qp = self._quaternion(self._qp_t, self._qp, self._qpw, self._qpd, t, None if constant else theta)
+        if constant:
+            dq = corr.rotation_quaternion(torch.zeros_like(t), theta, self._look_axes, inverse=True)
+            qp = _normalise(quaternion_multiply(dq, qp))
         if self._simple:
             return p, _quat_matrix(qp).transpose(1, 2)
         pm = _t(self._cp) @ _quat_matrix(qp)
@@ -543,12 +579,13 @@ class TorchCsm(_Projector):
         g = camera.ground_to_image(xyz.detach().numpy())
         solved = g.status == 0
         line0 = _t(np.where(solved, g.line, np.nan)).requires_grad_(True)
+        keep = torch.is_grad_enabled()
         with torch.enable_grad():
-            res, _ = self.residual(xyz, line0, theta)
-            (slope,) = torch.autograd.grad(res.sum(), line0, create_graph=torch.is_grad_enabled())
-        line = line0.detach() - res / slope
-        _, sample = self.residual(xyz, line, theta)
-        return line - 0.5, sample - 0.5
+            res, sample = self.residual(xyz, line0, theta)
+            (slope,) = torch.autograd.grad(res.sum(), line0, retain_graph=True)
+            (sample_rate,) = torch.autograd.grad(sample.sum(), line0, retain_graph=keep)
+        step = -res / slope  # the Newton step with the slopes as constants (exact implicit derivatives at the root)
+        return line0.detach() + step - 0.5, sample + sample_rate * step - 0.5
 
 
 def line_projector(sensor: Any, correction: LineCorrection) -> TorchRigorous | TorchCsm:
