@@ -8,11 +8,12 @@
 # 2. adjust a shift, an affine or a second-order correction to ground control points (GCPs) by least squares,
 #    and read the a posteriori $\sigma_0$, the parameter sigmas and their correlations;
 # 3. use **check points** to tell a model that fits the noise (over-fitting) from one that fits the bias, and
-#    let a robust loss flag a wrong control point.
+#    let a robust loss flag a wrong control point;
+# 4. correct a rigorous sensor's position and attitude, and explain why one image cannot tell them apart.
 #
 # **Prerequisites.** Notebook 08 (RPC models of real images); the least-squares normal equations.
 #
-# **Estimated time.** 45 minutes (the small version runs in under a minute).
+# **Estimated time.** 60 minutes (the small version runs in under a minute).
 #
 # Conventions (0-based pixel centre, rows down): `docs/conventions.md`; the adjustment, its files and the command
 # `pushbroom refine`: `docs/refine.md`.
@@ -193,6 +194,82 @@ assert robust.check_rmse_px < plain_check
 # not tens).
 
 # %% [markdown]
+# ## A physical model: the position and attitude of a rigorous sensor
+# The bias of a vendor RPC comes from the orbit and attitude measured on board. With the image's rigorous model
+# (here the Pleiades DIMAP metadata of the same image, `explorer.sources.load_source("dimap", ...)`) the
+# adjustment can correct those directly: offsets of the perspective centre along / across the orbit and radially
+# (metres, the orbital axes at the image's middle time) and of the attitude (roll, pitch, yaw, radians), applied
+# to every sample of the position and attitude tables (`explorer.refine.line_adjust`; the model stays the same
+# kind of model, so the adjusted one is written as a small sidecar JSON by `pushbroom refine --dimap`).
+#
+# A pushbroom camera's field of view is narrow (Pleiades: about 1.7 degrees), so moving the perspective centre
+# by $\Delta s$ across the line of sight moves the image almost exactly like turning the camera by
+#
+# $$ \delta \approx \frac{\Delta s}{H}, $$
+#
+# $H$ the distance to the ground (about 700 km here: 40 m is about 57 microradians). Over one flat-ish image,
+# position and attitude offsets are therefore nearly **the same correction**: the attitude alone absorbs a
+# position error, and an adjustment of both finds a combination, with correlations close to $\pm 1$ and large
+# sigmas. Below, the rigorous model is biased by known position and attitude offsets and GCPs are measured in it.
+
+# %%
+from explorer.panels.refine import trajectory_figure
+from explorer.refine.line_adjust import adjusted_sensor, correction_for
+from explorer.refine.trajectory import refinement_trajectory
+from explorer.sources import load_source
+
+sensor = load_source("dimap", RPC_FILE).scene  # the rigorous model of the DIMAP file (it also holds the RPC)
+TRUE_LINE = np.array([40.0, -25.0, 10.0, 2e-5, -1.5e-5, 1e-5])  # along, cross, radial m; roll, pitch, yaw rad
+truth = adjusted_sensor(sensor, correction_for(sensor, "position-attitude"), TRUE_LINE)
+centre = sensor.perspective_centre(sensor.line_time(np.array([ROWS / 2])))[0]
+ground = sensor.image_to_ground(np.array([ROWS / 2]), np.array([COLS / 2]))[0]
+H = float(np.linalg.norm(centre - ground))
+print(f"distance to the ground H = {H / 1e3:.0f} km: 40 m is {40.0 / H * 1e6:.0f} microradians")
+assert 600e3 < H < 900e3
+
+
+def simulate_rigorous(n, rng, prefix):
+    """n GCPs: ground seen by the biased model at random pixels and heights, its pixels plus noise."""
+    r, c = rng.uniform(0.03, 0.97, n) * ROWS, rng.uniform(0.03, 0.97, n) * COLS
+    g = truth.image_to_ground(r, c, height=rng.uniform(-200, 400, n))
+    row, col = truth.ground_to_image(g)
+    lon, lat, h = sensor.frame.enu_to_geodetic(g)
+    return PointTable([f"{prefix}{i}" for i in range(n)], row + rng.normal(0, NOISE_PX, n),
+                      col + rng.normal(0, NOISE_PX, n), lon, lat, h)
+
+
+rng_line = np.random.default_rng(SEED + 3)
+gcps_line, check_line = simulate_rigorous(N_GCP, rng_line, "gcp"), simulate_rigorous(N_CHECK // 2, rng_line, "chk")
+fits = {}
+for model in ("attitude", "position-attitude"):
+    fits[model] = refine_images([sensor], model=model, control=gcps_line, check=check_line, sigma_px=NOISE_PX)
+    r = fits[model].report()
+    print(f"{model:>17}: control RMSE {r['control_rmse_px_before']:.1f} -> {r['control_rmse_px']:.3f} px, "
+          f"check RMSE {r['check_rmse_px']:.3f} px, sigma0 {r['sigma0']:.2f}")
+    assert r["check_rmse_px"] < 1.25 * NOISE_PX  # both remove the whole bias of the check points
+both = fits["position-attitude"]
+z = (both.parameters - TRUE_LINE) / both.result.parameter_sigma
+corr = both.result.parameter_correlation
+print("error / sigma:", np.round(z, 2))
+print("largest |correlation| between a position and an attitude parameter:", round(np.abs(corr[:3, 3:]).max(), 4))
+assert np.all(np.abs(z) < 3.0) and np.abs(corr[:3, 3:]).max() > 0.99
+parameter_table_figure(both)
+
+# %% [markdown]
+# The trajectory the adjustment found (`explorer.refine.trajectory`; the explorer draws it in its 3D scene with
+# `pushbroom explore --dimap FILE --gcps gcps.csv`, the displacement exaggerated by a stated factor): the
+# perspective centre moved by the length of the fitted offset at every line, the camera turned by the angle of the
+# fitted roll, pitch and yaw.
+
+# %%
+track = refinement_trajectory(both)
+p = {q["name"]: q["value"] for q in both.report()["parameters"]}
+moved = np.linalg.norm([p["along_m"], p["cross_m"], p["radial_m"]])
+print(track.summary(), f"fitted offset {moved:.2f} m")
+assert np.allclose(np.linalg.norm(track.displacement_m, axis=1), moved, rtol=1e-9)
+trajectory_figure(both)
+
+# %% [markdown]
 # ## Exercises
 # 1. With only 8 GCPs, fit `affine` and `poly2` for 20 different seeds. In how many of them is the check RMSE of
 #    `poly2` larger than that of `affine`? Explain with the redundancy $n - u$.
@@ -200,3 +277,6 @@ assert robust.check_rmse_px < plain_check
 #    and do the parameter sigmas change? Why is $\sigma_0$ the first number to look at?
 # 3. Put every GCP on one image column (same `col`, different rows). Which parameter can the adjustment no
 #    longer determine, what does `refine_images` say, and which model still works?
+# 4. Bias the rigorous model by a position offset only (60 m across the orbit, no attitude error). Adjust the
+#    `attitude` model: how close to the noise is the check RMSE, and which attitude angle took the offset? Compare
+#    the angle with $\Delta s / H$.

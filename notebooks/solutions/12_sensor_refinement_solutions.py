@@ -89,3 +89,50 @@ print(message)
 assert message.startswith("degenerate configuration") and ("_per_col" in message or "_shift" in message)
 shift = refine_images([rpc], model="shift", control=line, sigma_px=NOISE_PX)
 assert np.all(np.isfinite(shift.result.parameter_sigma))
+
+# %% [markdown]
+# ## Exercise 4: a position error absorbed by the attitude
+# A cross-orbit offset $\Delta s$ of the perspective centre shifts every line of sight's ground point by about
+# $\Delta s$, which a rotation of the camera by $\delta \approx \Delta s / H$ does too (narrow field of view,
+# $H$ the distance to the ground). The `attitude` model (no position parameters) therefore removes the whole
+# bias: the check RMSE comes back to the noise, and the one angle that turns the lines of sight across the orbit
+# takes $\Delta s / H$. On this image that angle is the **pitch** (about the sensor's $y$ axis): the agile Pleiades
+# scanned it across its orbit, so its rows advance (sensor $x$) nearly perpendicular to the velocity -- checked
+# below.
+
+# %%
+from explorer.refine.line_adjust import adjusted_sensor, correction_for
+from explorer.sources import load_source
+
+sensor = load_source("dimap", str(files("explorer.assets") / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML")).scene
+OFFSET = 60.0  # metres across the orbit
+truth = adjusted_sensor(sensor, correction_for(sensor, "position-attitude"), np.array([0.0, OFFSET, 0, 0, 0, 0]))
+centre = sensor.perspective_centre(sensor.line_time(np.array([ROWS / 2])))[0]
+H = float(np.linalg.norm(centre - sensor.image_to_ground(np.array([ROWS / 2]), np.array([COLS / 2]))[0]))
+t_mid = sensor.line_time(np.array([ROWS / 2]))
+velocity = (sensor.perspective_centre(t_mid + 0.01) - sensor.perspective_centre(t_mid))[0]
+x_axis = sensor.attitude(t_mid)[0][:, 0]  # the sensor's x (rows) in local ENU
+cos_x = float(x_axis @ velocity / np.linalg.norm(velocity))
+print(f"angle between the rows' direction and the velocity: {np.degrees(np.arccos(cos_x)):.1f} degrees")
+assert abs(cos_x) < 0.1
+rng = np.random.default_rng(11)
+
+
+def simulate_rigorous(n, prefix):
+    r, c = rng.uniform(0.03, 0.97, n) * ROWS, rng.uniform(0.03, 0.97, n) * COLS
+    g = truth.image_to_ground(r, c, height=rng.uniform(-200, 400, n))
+    row, col = truth.ground_to_image(g)
+    lon, lat, h = sensor.frame.enu_to_geodetic(g)
+    return PointTable([f"{prefix}{i}" for i in range(n)], row + rng.normal(0, NOISE_PX, n),
+                      col + rng.normal(0, NOISE_PX, n), lon, lat, h)
+
+
+att = refine_images([sensor], model="attitude", control=simulate_rigorous(30, "g"),
+                    check=simulate_rigorous(N_CHECK // 2, "c"), sigma_px=NOISE_PX)
+rep = att.report()
+angles = {q["name"]: q["value"] for q in rep["parameters"]}
+largest = max(angles, key=lambda k: abs(angles[k]))
+print(f"check RMSE {rep['check_rmse_px_before']:.1f} -> {rep['check_rmse_px']:.3f} px; {largest} = "
+      f"{angles[largest] * 1e6:.2f} urad against Delta s / H = {OFFSET / H * 1e6:.2f} urad")
+assert rep["check_rmse_px"] < 1.15 * NOISE_PX
+assert largest == "pitch_rad" and abs(abs(angles[largest]) - OFFSET / H) < 0.03 * OFFSET / H
