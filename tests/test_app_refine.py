@@ -116,3 +116,45 @@ def test_every_source_kind_has_a_refinement_target(monkeypatch):
     target = refine_target_of(isd)
     assert target.is_stand_in and target.model is isd.stand_in.sensor and target.truth is isd.scene
     assert target.label == "the MPC fitted to the CSM camera (a stand-in)"
+
+
+def test_the_apps_3d_view_redraws_the_trajectories_in_its_frame_and_hides_them_on_another_scene(server, tmp_path):
+    """``explore --preset WSU --gcps``: the trajectories are drawn in the app's display frame (the original on the
+    satellite track), redrawn when the frame changes (true sensor distance), hidden on another preset."""
+    from argparse import Namespace
+
+    import numpy as np
+
+    from explorer.app.server import _refine_folder
+    from explorer.presets import build_scene
+    from explorer.refine.trajectory import refinement_trajectory
+    from explorer.sources import load_source
+    from tests.refine.cases import write_points_csv
+    from tests.test_app import make_app, toy_registry
+
+    scene = build_scene("WSU")
+    gcps = write_points_csv(tmp_path / "g.csv", _scene_control(scene, np.array([30.0, -20.0, 10.0, 2e-5, -1e-5, 1e-5]),
+                                                                noise_px=0.3))
+    ready = _refine_folder(Namespace(gcps=str(gcps), check=None, sigma_px=0.3), load_source("preset", "WSU"))
+    with toy_registry():
+        app = make_app(server)
+        ready(app)
+        view = app.refine_view
+        comp = refinement_trajectory(view.refinement)
+
+        def drawn(frame):
+            np.testing.assert_allclose(view._nodes["/refine/original/track"].points[:, 0],
+                                       frame.sensor(comp.original_centre_m)[:-1], rtol=1e-6, atol=1e-6)
+
+        drawn(app.frame)
+        np.testing.assert_allclose(view._nodes["/refine/original/track"].points[0, 0],
+                                   app.nodes["/orbit/track"].points[0], atol=1e-3)  # starts where the orbit does
+        compressed = app.frame
+        app.handles["distance"].value = "true"
+        assert not app.frame.compressed and compressed.compressed
+        drawn(app.frame)
+        app.handles["preset"].value = "ISB"
+        assert app.scene.name == "ISB" and not any(h.visible for h in view._nodes.values())
+        app.handles["preset"].value = "WSU"
+        assert all(h.visible for h in view._nodes.values())
+        drawn(app.frame)
