@@ -8,7 +8,10 @@ On the Pleiades DIMAP scene with its DEM (``--dimap PHRDIMAP_...XML --dem MNT_..
 2. **SCOP change**: the SCOP count is changed (30, 100, 50, 300, 100 by default) and we time from the
    change until the browser shows the new SCOP overlay count and every method's map on all SCPs (drawing
    included); the app's own update time and the resident memory (``VmRSS``) after each change are kept;
-3. **Export**: ``export_files`` of the same settings in the process (the scene loaded), and the whole
+3. **Memory**: a warm-up pass over the offered SCOP counts (up to 300), then ``--rss-changes`` (20) more changes
+   cycling them; the resident memory once each change settled (the app idle and, where it trims freed memory
+   after an update, trimmed): flat when nothing ratchets (``rss.slope_mib_per_change``);
+4. **Export**: ``export_files`` of the same settings in the process (the scene loaded), and the whole
    ``pushbroom explore --dimap ... --dem ... --export DIR --methods ...`` command in a fresh process.
 
 The machine's load average is recorded with every figure (the machine may be shared: say so when
@@ -34,6 +37,8 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 DIMAP = ROOT / "tests" / "data" / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
@@ -74,6 +79,52 @@ def _wait_maps(page, names: list[str], not_scops: int | None, timeout_s: float) 
         if time.perf_counter() - t0 > timeout_s:
             raise TimeoutError(f"maps not complete after {timeout_s} s")
         time.sleep(0.02)
+
+
+def _settled_rss(app, trims_before: int, timeout_s: float) -> tuple[float, bool]:
+    """Resident memory once the app is idle and, where it trims after an update, after that trim."""
+    app.wait_idle(timeout_s)
+    trimmer = getattr(app, "trimmer", None)
+    end = time.perf_counter() + timeout_s
+    trimmed = False
+    while trimmer is not None and time.perf_counter() < end:
+        if trimmer.trims > trims_before:
+            trimmed = True
+            break
+        time.sleep(0.05)
+    return _rss_mib(), trimmed
+
+
+def _rss_over_changes(app, page, methods: list[str], scops: int, args: argparse.Namespace) -> dict:
+    """RSS after each of ``args.rss_changes`` SCOP changes cycling the offered counts, after a warm-up pass over
+    them (every state computed once, so the caches hold what they will hold): flat if nothing ratchets."""
+    from explorer.app.model import SCOP_DENSITIES
+    from explorer.app.server import TRIM_DELAY_S
+
+    cycle = [d for d in SCOP_DENSITIES if d <= 300]
+    wait = TRIM_DELAY_S + 5.0
+    for d in cycle:  # warm-up
+        if d != scops:
+            app.handles["density"].value = str(d)
+            _, scops = _wait_maps(page, methods, scops, args.timeout)
+    trimmer = getattr(app, "trimmer", None)
+    rss0, _ = _settled_rss(app, trimmer.trims - 1 if trimmer is not None else 0, wait)
+    values, trimmed = [], []
+    for k in range(args.rss_changes):
+        d = cycle[(k + 1) % len(cycle)]
+        if d == scops:
+            d = cycle[(k + 2) % len(cycle)]
+        before = trimmer.trims if trimmer is not None else 0
+        app.handles["density"].value = str(d)
+        _, scops = _wait_maps(page, methods, scops, args.timeout)
+        rss, ok = _settled_rss(app, before, wait)
+        values.append(rss)
+        trimmed.append(ok)
+    slope = float(np.polyfit(np.arange(len(values)), values, 1)[0]) if len(values) > 1 else float("nan")
+    print(f"  RSS over {len(values)} SCOP changes after warm-up: {rss0:.1f} -> {values[-1]:.1f} MiB "
+          f"(slope {slope:+.3f} MiB per change)", flush=True)
+    return {"after_warmup_mib": rss0, "after_each_change_mib": values, "slope_mib_per_change": slope,
+            "growth_mib": values[-1] - rss0, "trimmed_after_each": trimmed, "cycle": cycle}
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -132,6 +183,8 @@ def run(args: argparse.Namespace) -> dict:
                 print(f"  SCOPs {d:>4} (shown {scops}): {dt:.2f} s in the browser, app {app.last_update_s:.2f} s, "
                       f"load {load}, RSS {changes[-1]['rss_mib']:.0f} MiB, all points {changes[-1]['all_points']}",
                       flush=True)
+            if args.rss_changes:
+                out["rss"] = _rss_over_changes(app, page, methods, scops, args)
             browser.close()
         out["scop_changes"] = changes
         from explorer.app.export import export_files
@@ -170,6 +223,8 @@ def main() -> None:
     p.add_argument("--scps", type=int, default=50_000)
     p.add_argument("--methods", default="lrm,prm,nr,exact")
     p.add_argument("--densities", type=lambda t: [int(v) for v in t.split(",")], default=[30, 100, 50, 300, 100])
+    p.add_argument("--rss-changes", type=int, default=20,
+                   help="SCOP changes (after a warm-up pass) over which the resident memory is followed (0: skip)")
     p.add_argument("--sweep", action="store_true", help="also run the accuracy-vs-SCOPs sweep (off by default)")
     p.add_argument("--port", type=int, default=8140)
     p.add_argument("--timeout", type=float, default=300.0)

@@ -386,6 +386,11 @@ class ExplorerApp(Views):
                 self._busy = False
                 self._done_gen = max(self._done_gen, gen)
                 self._lock.notify_all()
+            if self.trimmer is not None and not self._closing:
+                # an update frees the arrays of the state it replaced (figures, evaluations dropped from the
+                # caches); glibc keeps those pages: hand them back once the controls are still (server._Trimmer,
+                # TRIM_DELAY_S after the last update), or the resident memory grows ~0.5 MiB per change for good
+                self.trimmer()
 
     # ------------------------------------------------------------ compiling
     def _expect_compiles(self, s: Settings) -> None:

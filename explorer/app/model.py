@@ -174,11 +174,17 @@ class Selection:
 
 class _LRU:
     """A small least-recently-used cache, safe to share between the GUI worker and the fit thread
-    (the lock guards the dict only; values are computed outside it)."""
+    (the lock guards the dict only; values are computed outside it).
 
-    def __init__(self, size: int) -> None:
+    ``size`` bounds the entries; ``max_bytes`` (with ``weigh``, the bytes of a value) also bounds the memory
+    they hold: the least recently used entries go first (the newest always stays)."""
+
+    def __init__(self, size: int, max_bytes: int | None = None, weigh: Callable[[Any], int] | None = None) -> None:
         self.size = size
+        self.max_bytes = max_bytes
+        self._weigh = weigh
         self._d: OrderedDict = OrderedDict()
+        self._bytes: dict = {}
         self._lock = threading.Lock()
 
     def peek(self, key: Hashable) -> Any:
@@ -193,14 +199,41 @@ class _LRU:
         if hit is not None:
             return hit
         value = make()
+        weight = self._weigh(value) if self._weigh is not None and self.max_bytes is not None else 0
         with self._lock:
             self._d[key] = value
-            while len(self._d) > self.size:
-                self._d.popitem(last=False)
+            self._d.move_to_end(key)
+            self._bytes[key] = weight
+            while len(self._d) > self.size or (self.max_bytes is not None and len(self._d) > 1
+                                               and sum(self._bytes.values()) > self.max_bytes):
+                old, _ = self._d.popitem(last=False)
+                self._bytes.pop(old, None)
         return value
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the entries (as ``weigh`` counts them; 0 without it)."""
+        with self._lock:
+            return int(sum(self._bytes.values()))
 
     def __len__(self) -> int:
         return len(self._d)
+
+
+def run_nbytes(run: Any) -> int:
+    """Bytes of the arrays a :class:`MethodRun` holds (its evaluation's residuals and indices, its status)."""
+    total = 0
+    ev = getattr(run, "evaluation", None)
+    for a in (getattr(ev, "residual_row", None), getattr(ev, "residual_col", None),
+              getattr(ev, "evaluated_index", None), getattr(run, "status", None)):
+        if isinstance(a, np.ndarray):
+            total += a.nbytes
+    return total
+
+
+EVAL_CACHE_BYTES = 256 * 2**20
+"""Memory the cached evaluations may hold (about 200 full evaluations of 50,000 SCPs, 40 of 250,000): beyond it the
+least recently used are dropped and recomputed when asked again."""
 
 
 def _docstring_params(cls: type) -> set[str]:
@@ -306,7 +339,7 @@ class ExplorerModel:
         self._scops = _LRU(32)
         self._scps = _LRU(4)
         self._fits = _LRU(128)
-        self._evals = _LRU(64)
+        self._evals = _LRU(64, max_bytes=EVAL_CACHE_BYTES, weigh=run_nbytes)
         self._probes = _LRU(128)
         self.counters: dict[str, int] = {"scene": 0, "scops": 0, "scps": 0, "fit": 0, "evaluate": 0}
         self.per_point_s: dict[tuple, float] = {}
