@@ -73,3 +73,22 @@ def kernel(**options: Any) -> Any:
 
 
 __all__ += ["kernel"]
+
+
+def kernel_array(a: Any, dtype: Any = None) -> Any:
+    """``a`` as the one array type the kernels are compiled and cached for: C-contiguous, aligned, writable, of
+    ``dtype`` (default float64); a copy only when ``a`` is not already that.
+
+    numba compiles one machine-code variant per argument type, and a read-only array (a ``np.broadcast_to`` view,
+    a read-only memory map) or a non-contiguous one is another type than the writable C array the warm-up
+    compiled: passing it would compile (and cache) the kernel again on a user's first run.
+    """
+    import numpy as np
+
+    arr = np.asarray(a, dtype=np.float64 if dtype is None else dtype)
+    if arr.flags.c_contiguous and arr.flags.aligned and arr.flags.writeable:
+        return arr
+    return np.array(arr, order="C", copy=True)
+
+
+__all__ += ["kernel_array"]

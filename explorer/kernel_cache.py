@@ -260,7 +260,8 @@ def unrecorded_uncached() -> list[str]:
     for m, n, disp in found:
         if (m, n) in recorded or disp.targetoptions.get("inline") == "always":
             continue
-        called = re.compile(rf"\b{re.escape(disp.py_func.__name__)}\s*\(|\b{re.escape(n)}\s*\(")
+        # a call, not a definition: a serial twin (``_numba.serial_twin``) has its parallel variant's source
+        called = re.compile(rf"(?<!def )\b(?:{re.escape(disp.py_func.__name__)}|{re.escape(n)})\s*\(")
         if any(called.search(src) for key, src in sources.items() if key != (m, n)):
             continue  # called from another kernel: compiled (and cached) with it, never on its own
         if not _has_cache_entry(disp):

@@ -37,6 +37,8 @@ Optional capabilities are declared explicitly as class attributes, never discove
   pack;
 * :class:`GeodeticSensor` (``has_geodetic_projection = True``): the model is defined on longitude, latitude
   and ellipsoidal height (an RPC), so orthorectification asks it without the local-frame round trip.
+* :class:`LineCoverageSensor` (``has_line_coverage = True``): its tables may cover only some lines (a CSM
+  camera); ``rows_covered(row)`` says which, and every best-scanline method flags a row outside them.
 
 Code that only needs to project, localise or outline an image (building an MPC scene from any model
 by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in the explorer) takes a
@@ -46,7 +48,7 @@ by resection, :func:`explorer.real.mpc_fit.mpc_scene_from_sensor`; footprints in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol, cast, runtime_checkable
 
 import numpy as np
 
@@ -203,6 +205,23 @@ class PolynomialExteriorSensor(Sensor, Protocol):
     has_polynomial_exterior: ClassVar[bool]
 
 
+@runtime_checkable
+class LineCoverageSensor(LineGeometrySensor, Protocol):
+    """Capability: the line geometry is defined on some of the image's lines only -- interpolated ephemeris tables
+    (a USGS CSM ISD's position / pointing / body-rotation tables) that stop before the last line or start after
+    the first.  Lines outside them are flagged, never extrapolated: a best-scanline method whose row falls there
+    has no answer (``explorer.methods.base``: status "outside tables").
+
+    Declared by the class attribute ``has_line_coverage = True`` (:class:`explorer.real.csm_sensor.CsmScene`).
+    """
+
+    has_line_coverage: ClassVar[bool]
+
+    def rows_covered(self, row: np.ndarray) -> np.ndarray:
+        """True (N,) where the time of (fractional) rows (N,) lies inside the sensor's tables (False for NaN)."""
+        ...
+
+
 @dataclass
 class StandIn:
     """A model that stands in for a sensor (an MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
@@ -274,6 +293,21 @@ def has_line_geometry(sensor: object) -> bool:
     return bool(getattr(type(sensor), "has_line_geometry", False))
 
 
+def has_line_coverage(sensor: object) -> bool:
+    """True where ``sensor`` declares the :class:`LineCoverageSensor` capability (tables that may not cover
+    every line)."""
+    return bool(getattr(type(sensor), "has_line_coverage", False))
+
+
+def rows_covered(sensor: object, row: np.ndarray) -> np.ndarray:
+    """True (N,) where rows (N,) are on lines the sensor's tables cover: :meth:`LineCoverageSensor.rows_covered`,
+    or every row of a sensor that does not declare the capability (its geometry holds on every line)."""
+    row = np.asarray(row, dtype=np.float64)
+    if not has_line_coverage(sensor):
+        return np.ones(row.shape, bool)
+    return np.asarray(cast("LineCoverageSensor", sensor).rows_covered(row), bool)
+
+
 __all__ = [
     "FLAG_NAMES",
     "FLAG_NO_DATA",
@@ -281,6 +315,7 @@ __all__ = [
     "FLAG_OK",
     "FLAG_OUTSIDE_DEM",
     "GeodeticSensor",
+    "LineCoverageSensor",
     "LineGeometrySensor",
     "Localization",
     "PolynomialExteriorSensor",
@@ -288,7 +323,9 @@ __all__ = [
     "Sensor",
     "StandIn",
     "has_geodetic_projection",
+    "has_line_coverage",
     "has_line_geometry",
     "has_polynomial_exterior",
     "inside_image",
+    "rows_covered",
 ]

@@ -115,10 +115,20 @@ def _warm_one_method(name: str, scene: Any, **options: Any) -> None:
 
 
 def _warm_ortho() -> None:
-    from explorer.ortho import EllipsoidHeight, OrthoGeometry, OrthoGrid, SourceImage, render_block
+    """An orthoimage block at a height and on a lon/lat DEM (its compiled bilinear height lookup)."""
+    from explorer.geometry.dem_intersection import HeightGrid
+    from explorer.ortho import DEMHeights, EllipsoidHeight, OrthoGeometry
     from explorer.rpc.sensor import RPCSensor
 
-    geometry = OrthoGeometry(RPCSensor(_rpc_for_warmup()), EllipsoidHeight(500.0))
+    lons, lats = np.linspace(4.98, 5.02, 41), np.linspace(45.012, 44.988, 25)
+    dem = HeightGrid.from_array(np.full((lats.size, lons.size), 500.0), lons[0], lats[0], lons[1] - lons[0],
+                                lats[1] - lats[0])
+    for surface in (EllipsoidHeight(500.0), DEMHeights(dem)):
+        _warm_ortho_block(OrthoGeometry(RPCSensor(_rpc_for_warmup()), surface))
+
+
+def _warm_ortho_block(geometry: Any) -> None:
+    from explorer.ortho import OrthoGrid, SourceImage, render_block
 
     class _Flat:
         shape = (1000, 1000)
@@ -168,6 +178,7 @@ def _warm_stereo() -> None:
     from explorer._resources import asset_path
     from explorer.rpc import read_rpc
     from explorer.stereo import epipolar_curve, triangulate
+    from explorer.stereo.triangulation import compile_parallel_twins
 
     left = read_rpc(asset_path("rpc", "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"))
     right = read_rpc(asset_path("rpc", "RPC_PHR1B_P_201709281038393_SEN_PRG_FC_178609-001.XML"))
@@ -180,14 +191,77 @@ def _warm_stereo() -> None:
         rr, rc = right.projection(lon, lat, h)
         triangulate(left, right, lr, lc, rr, rc)
     epipolar_curve(left, right, float(lr[0]), float(lc[0]), np.linspace(0.0, 1000.0, 5))
+    _warm_generic_pair()
+    compile_parallel_twins()  # the variants for a million matches, from the serial ones' argument types
+
+
+def _warm_generic_pair() -> None:
+    """Triangulate on two sensors that are not RPCs (scenes, rigorous models, CSM cameras: the generic path):
+    the ``linear`` preset and itself turned 90 degrees about the vertical."""
+    from dataclasses import replace
+
+    from explorer.geometry.exterior import ExteriorOrientation
+    from explorer.geometry.rotations import axis_angle_matrix, opk_from_rotation
+    from explorer.presets import build_scene
+    from explorer.stereo import triangulate
+
+    left = build_scene("linear")
+    q = axis_angle_matrix(np.array([0.0, 0.0, 1.0]), np.radians(90.0))
+    omega, phi, kappa = opk_from_rotation(q @ left.exterior.rotation(np.array([0.0]))[0])
+    right = replace(left, name="warmup-right", exterior=ExteriorOrientation(
+        q @ left.exterior.position_coeffs, np.array([[float(omega)], [float(phi)], [float(kappa)]])))
+    g = np.linspace(0.2, 0.8, 8)
+    rows, cols = np.meshgrid(g * (left.n_rows - 1), g * (left.n_columns - 1))
+    ground = left.image_to_ground(rows.ravel(), cols.ravel())
+    rr, rc = right.ground_to_image(ground)
+    ok = np.isfinite(rr) & np.isfinite(rc)
+    triangulate(left, right, rows.ravel()[ok], cols.ravel()[ok], rr[ok], rc[ok])
+
+
+def _warm_exact(scene: Any, **options: Any) -> None:
+    """``exact`` as a command runs it, and its safeguarded iteration (the compiled general solver): that one runs
+    only on the points the fast Newton passes leave -- a data-dependent path a first run may take on any image --
+    so it is run here on every point, with the fast evaluator's tables and without them."""
+    from explorer.geometry.kernels import solve_exact
+    from explorer.methods import create
+    from explorer.points import simulate_points
+
+    _warm_one_method("exact", scene, **options)
+    method = cast(Any, create("exact", scene))
+    if method.kernel_params is None:  # line geometry only: no compiled MPC solver
+        return
+    ground = simulate_points(scene, 200, kind="scp").ground
+    kw = {"window": method.window, "orient": method.orient, "tol": method.tol, "accept_step": method.accept_step,
+          "max_iter": method.max_iter, "first_evaluations": method.first_evaluations}
+    solve_exact(method.kernel_params, ground, method.seed, backend=method.host_backend, max_fast_passes=0, **kw)
+    solve_exact(method.kernel_params, ground, method.seed, backend=method.host_backend, fast=False, **kw)
+
+
+def _warm_api() -> None:
+    """Kernels no command calls but the Python API does: the branch-free residual evaluator
+    (``residual_and_rate(..., evaluator="fixed")``) and the Lagrange interpolation of usgscsm's own state
+    (``read_isd(..., interpolation="usgscsm")`` on an ISD without velocities)."""
+    from explorer.geometry.kernels import residual_and_rate
+    from explorer.points import simulate_points
+    from explorer.presets import build_scene
+    from explorer.real import csm_kernels
+
+    scene = build_scene("WSU")
+    checks = simulate_points(scene, 64, kind="scp")
+    residual_and_rate(scene, checks.ground, checks.time, evaluator="fixed")
+    times = np.linspace(0.0, 1.0, 9)
+    csm_kernels.lagrange_eval(times, np.stack([times, times**2, times**3], axis=1), 0.3, 8, np.empty(3))
 
 
 def _warm_scene(scene) -> None:
-    """What showing a scene computes besides the methods: its check points and an image-to-ground."""
+    """What showing a scene computes besides the methods: its check points, the sensor's own ground to image of
+    them (the truth every residual is measured against, ``app.model.sensor_truth``) and an image-to-ground."""
     from explorer.points import simulate_points
 
     simulate_points(scene, 30, kind="scop")
-    simulate_points(scene, 25_000, kind="scp")  # above the parallel thresholds
+    checks = simulate_points(scene, 25_000, kind="scp")  # above the parallel thresholds
+    scene.project(checks.ground)
+    scene.project(checks.ground[:16])
     centre = np.array([(scene.n_rows - 1) / 2.0]), np.array([(scene.n_columns - 1) / 2.0])
     scene.image_to_ground(*centre)
 
@@ -253,8 +327,10 @@ def kernel_units() -> dict[str, Callable[[], None]]:
     ``scene`` / ``scene:relief``: every preset flat / ``agile`` with 500 m relief, its points and an
     image-to-ground; ``method:NAME``: the method fitted and run on every preset (compiled search methods;
     a kernel's argument types can differ between presets) or on the paper preset (the others);
-    ``method:NAME:relief``: the same on ``agile`` with relief; ``rpc``; ``ortho``; ``isd`` (a USGS CSM ISD:
-    the camera's kernels; only in a checkout, which has the test ISDs).  A command needs the union of some
+    ``method:NAME:relief``: the same on ``agile`` with relief (``exact`` with its safeguarded solver); ``rpc``;
+    ``ortho`` (at a height and on a DEM); ``stereo`` (an RPC pair, a generic pair, both kernel variants);
+    ``api`` (kernels only the Python API calls); ``isd`` (a USGS CSM ISD: the camera's kernels; only in a
+    checkout, which has the test ISDs).  A command needs the union of some
     units (:func:`explorer.kernel_cache.needed_units`).
     """
     from explorer.methods import available
@@ -283,7 +359,12 @@ def kernel_units() -> dict[str, Callable[[], None]]:
     isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
     if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
         units["isd"] = partial(_warm_isd, isd)
+    units["api"] = _warm_api
     for name in available():
+        if name == "exact":
+            units[f"method:{name}"] = every_preset(_warm_exact)
+            units[f"method:{name}:relief"] = lambda: _warm_exact(relief())
+            continue
         if name in COMPILED_SEARCH_METHODS:
             units[f"method:{name}"] = every_preset(partial(_warm_one_method, name))
         else:

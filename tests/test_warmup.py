@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+import pytest
 
 from explorer.presets import preset_ids
 from explorer.warmup import _rpc_for_warmup, _warm_ortho, _warm_rpc, steps
@@ -36,3 +37,21 @@ def test_warmup_command_parses():
     register(parser.add_subparsers())
     args = parser.parse_args(["warmup", "--quiet"])
     assert args.quiet and callable(args.func)
+
+
+def test_stereo_kernels_compile_both_variants_from_one():
+    """Which variant of a stereo kernel runs depends on the number of matches: after a small generic-pair
+    triangulation (serial variants), compile_parallel_twins gives every parallel twin the serial one's argument
+    types -- numba's own list of compiled signatures is the truth."""
+    pytest.importorskip("numba")
+    from explorer.stereo import _kernels
+    from explorer.stereo.triangulation import compile_parallel_twins
+    from explorer.warmup import _warm_generic_pair
+
+    _warm_generic_pair()
+    parallel, serial = _kernels._closest_approach_parallel, _kernels._closest_approach_serial
+    assert serial.signatures
+    compile_parallel_twins()
+    for par, ser in _kernels.TWINS:
+        assert set(ser.signatures) <= set(par.signatures) and set(par.signatures) <= set(ser.signatures)
+    assert set(serial.signatures) <= set(parallel.signatures)

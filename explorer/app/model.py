@@ -15,8 +15,8 @@ depends on the machine, never what it is.
 
 Every evaluated point carries a status (:data:`STATUS_NAMES`): valid, *refused* (the method
 declined to answer outside its domain, e.g. a regression's height extrapolation), not
-converged, or outside the image.  Usage and the GUI: ``docs/explorer.md``; conventions:
-``docs/conventions.md``.
+converged, outside the image, or outside the sensor's tables (a CSM camera whose tables stop
+mid-image).  Usage and the GUI: ``docs/explorer.md``; conventions: ``docs/conventions.md``.
 """
 
 from __future__ import annotations
@@ -53,11 +53,12 @@ COLOUR_MODES = ("per method", "shared", "log magnitude", "fixed")
 or the fixed ``Settings.limit_px``."""
 COMPONENTS = ("row", "column", "row and column")
 """Which residual the maps show: the scanline (row) residual, the column residual, or both."""
-STATUS_NAMES = ("valid", "refused", "not converged", "outside image")
-"""Per-point status codes of :attr:`MethodRun.status` (0..3): *refused* = the method declined to
+STATUS_NAMES = ("valid", "refused", "not converged", "outside image", "outside tables")
+"""Per-point status codes of :attr:`MethodRun.status` (0..4): *refused* = the method declined to
 answer (outside its training / validity domain, e.g. lrm/prm height extrapolation); *not
 converged* = its iteration or training failed there; *outside image* = converged to a (row,
-column) off the image."""
+column) off the image; *outside tables* = its row is on a line the sensor's ephemeris tables do not
+cover (``ScanlineResult.covered``; the CSM camera's own status 5)."""
 SWEEP_PURPOSE = "accuracy-vs-SCOPs sweep"
 """How log lines of the background sweep's fits are prefixed (:func:`explorer._log.context`)."""
 DEFAULT_METHODS = ("lrm", "prm", "mlp", "nr")
@@ -618,10 +619,14 @@ def training_note(info: Mapping[str, Any]) -> str:
 def point_status(result: Any) -> np.ndarray:
     """Status codes (N,) int8 of a :class:`~explorer.methods.base.ScanlineResult`
     (:data:`STATUS_NAMES`): 1 refused where the method's ``info["in_domain"]`` is False,
-    else 2 where it did not converge, else 3 where (row, col) is off the image, else 0."""
+    else 2 where it did not converge, else 4 where its row is on a line the sensor's tables do not
+    cover, else 3 where (row, col) is off the image, else 0."""
     n = len(result)
     status = np.zeros(n, np.int8)
     status[~np.asarray(result.inside, bool)] = 3
+    covered = getattr(result, "covered", None)
+    if covered is not None:
+        status[~np.asarray(covered, bool)] = 4
     status[~np.asarray(result.converged, bool)] = 2
     dom = result.info.get("in_domain") if isinstance(result.info, dict) else None
     if dom is not None and np.shape(dom) == (n,):
@@ -633,7 +638,8 @@ def status_text(counts: Mapping[str, int], total: int) -> str:
     """The flagged points of a run in words, e.g. ``"refused (outside its domain, e.g. height
     extrapolation): 12 (0.5%); not converged: 1 of 2,000"``; "" when every point is valid."""
     words = {"refused": "refused (outside its domain, e.g. height extrapolation)",
-             "not converged": "not converged", "outside image": "outside the image"}
+             "not converged": "not converged", "outside image": "outside the image",
+             "outside tables": "outside the sensor's tables"}
     parts = [f"{words[k]}: {count_text(v, total)}" for k, v in counts.items() if k != "valid" and v]
     return "; ".join(parts)
 

@@ -112,6 +112,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         )
         result.doc["truth"] = source.info.get("truth")
         result.doc["dem_coverage"] = coverage
+        result.doc["table_coverage"] = tables  # None when the ephemeris tables cover every line
         if source.stand_in is not None:
             from explorer.evaluate import evaluate_stand_in
             from explorer.points import simulate_points

@@ -34,7 +34,7 @@ from explorer.methods._compiled import inside_flags
 from explorer.methods._polynomial import PairColumnModel
 from explorer.points import PointSet
 from explorer.scene import Scene
-from explorer.sensor import has_line_geometry
+from explorer.sensor import has_line_coverage, has_line_geometry, rows_covered
 
 _REGISTRY: dict[str, type[BestScanlineMethod]] = {}
 _DISCOVERED = False
@@ -60,6 +60,12 @@ class ScanlineResult:
         Collinearity evaluations spent on each point (0 for purely learned methods).
     trace : list of ndarray (N,), optional
         Candidate rows visited per iteration, when requested (for the explorer).
+    info : dict
+        Method-specific extras (status counts, a learned model's domain ``in_domain`` ...).
+    covered : ndarray of bool, shape (N,), optional
+        False where the row is on a line the sensor's tables do not cover (a CSM camera whose tables stop
+        mid-image, :class:`explorer.sensor.LineCoverageSensor`): the camera's own status 5, flagged in every
+        method's result by :meth:`BestScanlineMethod.ground_to_image`.  None: every line is covered.
     """
 
     row: np.ndarray
@@ -69,11 +75,13 @@ class ScanlineResult:
     ce_evaluations: np.ndarray
     trace: list[np.ndarray] | None = None
     info: dict = field(default_factory=dict)
+    covered: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:
-        """Converged and inside the image: the points whose (row, col) may be used."""
-        return self.converged & self.inside
+        """Converged, inside the image and on a covered line: the points whose (row, col) may be used."""
+        ok = self.converged & self.inside
+        return ok if self.covered is None else ok & self.covered
 
     def __len__(self) -> int:
         return int(self.row.shape[0])
@@ -167,9 +175,13 @@ class BestScanlineMethod(ABC):
         ground = as_points(ground)
         step = self.chunk_points
         if step and len(ground) > step and not trace:  # bound the working memory of numpy loops
-            return concatenate_results([self._locate(ground[a:a + step], trace=False)
-                                        for a in range(0, len(ground), step)])
-        return self._locate(ground, trace=trace)  # inside: set by _result from (row, col), NaN outside
+            result = concatenate_results([self._locate(ground[a:a + step], trace=False)
+                                          for a in range(0, len(ground), step)])
+        else:
+            result = self._locate(ground, trace=trace)  # inside: set by _result from (row, col), NaN outside
+        if has_line_coverage(self.scene):  # a row on a line the tables do not cover has no answer: flag it
+            result.covered = ~np.isfinite(result.row) | rows_covered(self.scene, result.row)
+        return result
 
     # ------------------------------------------------------------- helpers
     def _fit(self, control: PointSet) -> None:  # pragma: no cover - overridden by learned methods
@@ -235,8 +247,9 @@ def concatenate_results(parts: list[ScanlineResult]) -> ScanlineResult:
     def joined(field: str) -> np.ndarray:
         return np.concatenate([getattr(p, field) for p in parts])
 
+    covered = None if any(p.covered is None for p in parts) else joined("covered")
     return ScanlineResult(joined("row"), joined("col"), joined("converged"), joined("inside"),
-                          joined("ce_evaluations"), None, info)
+                          joined("ce_evaluations"), None, info, covered)
 
 
 def register(cls: type[BestScanlineMethod]) -> type[BestScanlineMethod]:

@@ -132,6 +132,7 @@ STATUS_STYLE = {
     "refused": ("rgb(0,200,200)", "circle-open", "refused (outside its domain, e.g. height extrapolation)"),
     "not converged": (rgb_string(INVALID_RGB), "x", "not converged"),
     "outside image": ("rgb(255,255,255)", "square-open", "outside the image"),
+    "outside tables": ("rgb(255,160,0)", "diamond-open", "outside the sensor's tables (line not covered)"),
 }
 """Marker colour, symbol and legend text of points without a residual, by status name."""
 MANY_SCOPS = 200
@@ -175,7 +176,8 @@ def _panels(
             missing: dict[str, np.ndarray] = {}
             if (~ok).any():
                 if st is not None and np.shape(st) == res.shape:
-                    for code, name in enumerate(("valid", "refused", "not converged", "outside image")):
+                    for code, name in enumerate(("valid", "refused", "not converged", "outside image",
+                                                 "outside tables")):
                         if code and ((~ok) & (st == code)).any():
                             missing[name] = idx[(~ok) & (st == code)]
                     rest = (~ok) & (st == 0)

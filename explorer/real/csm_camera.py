@@ -71,6 +71,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from explorer._numba import kernel_array
 from explorer.errors import InputError, SceneFileError, as_points, check_finite
 from explorer.io_input import load_json_file
 from explorer.real import csm_kernels as K
@@ -512,7 +513,7 @@ class CsmCamera:
 
         The camera frame is usgscsm's: a focal-plane point ``(x, y)`` looks along ``(-x, -y, -f)``.
         """
-        t = np.ascontiguousarray(np.atleast_1d(np.asarray(t, dtype=np.float64)))
+        t = kernel_array(np.atleast_1d(np.asarray(t, dtype=np.float64)))
         centre, rot = np.empty((t.size, 3)), np.empty((t.size, 3, 3))
         K.exterior_many(t, self._exterior_args(), centre, rot)
         return centre, rot
@@ -527,7 +528,7 @@ class CsmCamera:
         return self._distort(x, y, False)
 
     def _distort(self, x, y, remove: bool) -> tuple[np.ndarray, np.ndarray]:
-        x, y = (np.ascontiguousarray(np.atleast_1d(np.asarray(v, dtype=np.float64))) for v in (x, y))
+        x, y = (kernel_array(np.atleast_1d(np.asarray(v, dtype=np.float64))) for v in (x, y))
         ox, oy = np.empty_like(x), np.empty_like(y)
         K.distortion_many(int(self.distortion_model), self.distortion_coefficients, x, y, remove, ox, oy)
         return ox, oy
@@ -603,7 +604,7 @@ class CsmCamera:
             line, sample, height = np.broadcast_arrays(line, sample, height)
         except ValueError as exc:
             raise InputError(f"line, sample and height do not broadcast: {exc}") from None
-        return tuple(np.ascontiguousarray(a.ravel()) for a in (line, sample, height))  # type: ignore[return-value]
+        return tuple(kernel_array(a.ravel()) for a in (line, sample, height))  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ ground -> image
     def _setup_seed(self) -> None:
@@ -720,8 +721,9 @@ class CsmCamera:
         ground points (N, 3) seen at lines (N,); NaN behind the camera.  Computed at any line (the tables
         extrapolated linearly beyond their ends, so that a search can cross them): check a solved line with
         :meth:`line_covered`, as :meth:`ground_to_image` does."""
-        ground = np.ascontiguousarray(as_points(ground))
-        line = np.ascontiguousarray(np.broadcast_to(np.asarray(line, dtype=np.float64), ground.shape[:1]))
+        ground = kernel_array(as_points(ground))
+        # a writable C array whatever the caller passed (a broadcast view is read-only: another numba signature)
+        line = kernel_array(np.broadcast_to(np.asarray(line, dtype=np.float64), ground.shape[:1]))
         res, samp = np.empty(line.size), np.empty(line.size)
         K.residual_many(ground, line, *self._all_args(), res, samp)  # type: ignore[call-arg]
         return res, samp
@@ -746,7 +748,7 @@ class CsmCamera:
         -------
         GroundToImage
         """
-        ground = np.ascontiguousarray(as_points(ground))
+        ground = kernel_array(as_points(ground))
         if not (tol > 0 and max_iter >= 2):
             raise InputError(f"tol must be > 0 and max_iter >= 2, got {tol}, {max_iter}")
         margin = 0.25 * self.n_lines + 50.0 if margin_lines is None else float(margin_lines)

@@ -39,6 +39,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from explorer._numba import kernel_array
 from explorer.errors import SceneFileError, as_points, check_finite
 from explorer.geometry.exterior import LineTiming
 from explorer.geometry.frames import MARS, MOON, WGS84, Ellipsoid, LocalFrame, ecef_to_geodetic
@@ -217,6 +218,7 @@ class CsmScene(Scene):
 
     #: Interpolated tables, not MPC polynomials; the camera's own lines of sight.
     has_polynomial_exterior: ClassVar[bool] = False
+    has_line_coverage: ClassVar[bool] = True  # the ISD's tables may stop before the last line (sensor.py)
 
     # ------------------------------------------------------------ frames
     def to_body_fixed(self, enu: np.ndarray) -> np.ndarray:
@@ -228,6 +230,11 @@ class CsmScene(Scene):
         return self.frame.ecef_to_enu(xyz)
 
     # ------------------------------------------------------------ line geometry
+    def rows_covered(self, row: np.ndarray) -> np.ndarray:
+        """True (N,) where scene rows (N,) (CSM line - 0.5) lie on lines the ISD's tables cover
+        (:meth:`CsmCamera.line_covered`; False for NaN)."""
+        return self.camera.line_covered(np.asarray(row, dtype=np.float64) + 0.5)
+
     def line_time(self, row: np.ndarray) -> np.ndarray:
         """The camera's time (N,) of rows (N,), seconds from the ISD's ``center_ephemeris_time``."""
         return self.camera.line_time(np.atleast_1d(np.asarray(row, dtype=np.float64)) + 0.5)
@@ -309,7 +316,7 @@ def _undistorted_residual(camera: CsmCamera, xyz: np.ndarray, line: np.ndarray) 
 
     cam, rl, rt, rp, ext, _, _ = camera._all_args()
     res, sample = np.empty(line.size), np.empty(line.size)
-    K.residual_many(np.ascontiguousarray(xyz), np.ascontiguousarray(line), cam, rl, rt, rp, ext,  # type: ignore[call-arg]
+    K.residual_many(kernel_array(xyz), kernel_array(line), cam, rl, rt, rp, ext,  # type: ignore[call-arg]
                     int(K.DIST_NONE), np.zeros(1), res, sample)
     return res, sample
 

@@ -396,6 +396,9 @@ _rpc_localise_parallel = kernel(parallel=True)(_rpc_localise_py)
 _rpc_localise_serial = kernel()(serial_twin(_rpc_localise_py))
 _rpc_pair_parallel = kernel(parallel=True)(_rpc_pair_triangulate_py)
 _rpc_pair_serial = kernel()(serial_twin(_rpc_pair_triangulate_py))
+#: (parallel, serial) variants of each kernel above: the same argument types, two cache entries.
+TWINS = ((_closest_approach_parallel, _closest_approach_serial), (_solve_normal_3_parallel, _solve_normal_3_serial),
+         (_rpc_localise_parallel, _rpc_localise_serial), (_rpc_pair_parallel, _rpc_pair_serial))
 
 
 def rpc_localise(coef, norm, row, col, h, max_iter):

@@ -295,5 +295,24 @@ def _project_pair(left: Sensor, right: Sensor, ecef: np.ndarray) -> np.ndarray:
     return np.stack([lrow, lcol, rrow, rcol], axis=1)
 
 
+def compile_parallel_twins() -> int:
+    """Compile (or load from numba's cache) the other variant -- parallel or serial -- of every stereo kernel for
+    each argument type one variant has been compiled for in this process; returns how many were compiled.
+
+    Which variant runs depends on the number of matches (``_kernels.PARALLEL_MIN_POINTS``); the warm-up runs
+    small pairs and compiles the parallel variants from their serial twins' signatures (:mod:`explorer.warmup`),
+    so a first run on a million matches compiles nothing either."""
+    n = 0
+    for pair in _kernels.TWINS:
+        for disp in pair:
+            for other in pair:
+                if other is not disp:
+                    for sig in list(getattr(disp, "signatures", ())):  # none without numba
+                        if sig not in other.signatures:
+                            other.compile(sig)
+                            n += 1
+    return n
+
+
 __all__ = ["BEHIND", "FLAG_NAMES", "NOT_CONVERGED", "OUTSIDE_DOMAIN", "OUTSIDE_LEFT", "OUTSIDE_RIGHT", "PARALLEL",
-           "Triangulation", "triangulate"]
+           "Triangulation", "compile_parallel_twins", "triangulate"]

@@ -258,3 +258,81 @@ def test_scenes_of_a_camera_whose_centre_line_is_not_covered():
     p = scene.project(scene.from_body_fixed(g.ground))
     assert p.valid.all()
     np.testing.assert_allclose(p.row, lines - 0.5, rtol=0, atol=1e-6)
+
+
+def brute_force_lines(camera, ground: np.ndarray, step: float = 0.25, lo: float = -200.0,
+                      hi: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's line and sample of ground points (N, 3) by brute force: usgscsm's detector-line residual
+    sampled every ``step`` lines over ``[lo, hi]`` (the tables extrapolated, as the residual is defined at any
+    line), its one sign change bracketed, then bisected to 1e-10 line.  NaN where there is no sign change.
+    Independent of every solver of the package (no seed, no secant, no Newton)."""
+    hi = camera.n_lines + 200.0 if hi is None else hi
+    grid = np.arange(lo, hi + step, step)
+    n = ground.shape[0]
+    res = camera.detector_residual(np.repeat(ground, grid.size, axis=0), np.tile(grid, n))[0].reshape(n, grid.size)
+    change = np.signbit(res[:, :-1]) != np.signbit(res[:, 1:])
+    found = change.any(axis=1)
+    k = np.argmax(change, axis=1)
+    a, b = grid[k], grid[k + 1]
+    fa = res[np.arange(n), k]
+    for _ in range(60):  # bisection: step / 2**60 << 1e-10 line
+        m = 0.5 * (a + b)
+        fm = camera.detector_residual(ground, m)[0]
+        left = np.signbit(fm) == np.signbit(fa)
+        a, fa = np.where(left, m, a), np.where(left, fm, fa)
+        b = np.where(left, b, m)
+    line = np.where(found, 0.5 * (a + b), np.nan)
+    sample = camera.detector_residual(ground, np.where(found, line, 0.0))[1]
+    return line, np.where(found, sample, np.nan)
+
+
+def test_every_method_flags_a_row_outside_the_tables(hrsc):
+    """Issue 23: on a CSM camera whose tables stop mid-image (HRSC-like: lines past 2347 not covered), a point the
+    camera would see past the tables is flagged in every method's result -- status "outside tables", the camera's
+    own status 5 -- never returned valid from the extrapolated tables; points on covered lines are found where the
+    brute-force search along the line puts them (exact, csm-secant, nr: 1e-6 px)."""
+    from explorer.app.model import STATUS_NAMES, point_status
+    from explorer.methods import available, create
+    from explorer.points import simulate_points
+    from explorer.real.csm_sensor import csm_scene
+
+    scene = csm_scene(hrsc)
+    rng = np.random.default_rng(5)
+    n = 160
+    lines = np.concatenate([rng.uniform(20, 2330, n // 2), rng.uniform(2365, 2790, n // 2)])
+    samples = rng.uniform(30, 1220, n)
+    xyz, hit = hrsc._image_to_ground_raw(lines, samples, rng.uniform(-500, 500, n))
+    assert hit.all()
+    truth_line, truth_sample = brute_force_lines(hrsc, xyz)
+    assert np.isfinite(truth_line).all()
+    np.testing.assert_allclose(truth_line, lines, rtol=0, atol=1e-6)  # the brute force agrees with the set-up
+    covered = hrsc.line_covered(truth_line)
+    np.testing.assert_array_equal(covered, lines < 2347)
+    ground = scene.from_body_fixed(xyz)
+    # the sensor itself: covered points are its own, the others flagged
+    p = scene.project(ground)
+    np.testing.assert_array_equal(p.valid, covered)
+    np.testing.assert_allclose(p.row[covered], truth_line[covered] - 0.5, rtol=0, atol=1e-6)
+
+    scops = simulate_points(scene, 100, kind="scop", seed=3)
+    outside_tables = STATUS_NAMES.index("outside tables")
+    for name in available():
+        method = create(name, scene)
+        if method.needs_fit:
+            method.fit(scops)
+        r = method.ground_to_image(ground)
+        assert r.covered is not None, name
+        finite = np.isfinite(r.row)
+        # a valid row is always on a covered line; every finite row on an uncovered line is flagged as such
+        assert scene.rows_covered(r.row[r.valid]).all(), name
+        flagged = finite & ~scene.rows_covered(np.where(finite, r.row, 0.0))
+        np.testing.assert_array_equal(~r.covered, flagged, err_msg=name)
+        status = point_status(r)
+        assert (status[flagged & r.converged] == outside_tables).all(), name
+        assert not (r.valid & (status != 0)).any(), name
+        if name in ("exact", "csm-secant", "nr"):  # exact search methods: the camera's own lines
+            np.testing.assert_array_equal(r.valid, covered, err_msg=name)
+            np.testing.assert_allclose(r.row[covered], truth_line[covered] - 0.5, rtol=0, atol=1e-6, err_msg=name)
+            np.testing.assert_allclose(r.col[covered], truth_sample[covered] - 0.5, rtol=0, atol=1e-6,
+                                       err_msg=name)
+            assert (status[~covered] == outside_tables).all(), name
