@@ -219,3 +219,26 @@ def test_host_that_is_not_local_fails_at_once():
         check_listen_address("192.0.2.1", 0)  # TEST-NET-1: never assigned to a host
     with pytest.raises(InputError, match="--host 'no-such-host.invalid'"):
         check_listen_address("no-such-host.invalid", 0)
+
+
+def test_rpc_with_its_dem_simulates_points_of_the_rpc_on_the_dem():
+    """``--rpc`` with a DEM: the DEM (resampled on the RPC's local frame) is the sensor's terrain; every check point
+    is the RPC's own localisation of its pixel (projects back to it) and lies on the DEM, and the learned methods
+    measured on them answer with row and column of the RPC."""
+    from explorer.methods import create
+    from explorer.points import simulate_points
+
+    src = load_source("rpc", str(PHR_2017), dem=str(DEM_2017))
+    assert src.info["dem_coverage"]["fraction"] == 1.0 and src.stand_in is None
+    terrain = src.scene.terrain
+    assert terrain.max_height - terrain.min_height > 50.0  # relief, not a plane
+    scps = simulate_points(src.scene, 2000, kind="scp")
+    assert len(scps) > 1900
+    row, col = src.scene.rpc.projection(*src.scene.frame.enu_to_geodetic(scps.ground))
+    assert np.max(np.abs(row - scps.row)) < 1e-6 and np.max(np.abs(col - scps.col)) < 1e-6
+    z = terrain.height(scps.ground[:, 0], scps.ground[:, 1])
+    assert np.max(np.abs(z - scps.ground[:, 2])) < 0.01  # on the DEM (the straight chord's error is mm)
+    scops = simulate_points(src.scene, 100, kind="scop")
+    res = create("prm", src.scene).fit(scops).ground_to_image(scps.ground)
+    ok = res.valid
+    assert ok.mean() > 0.9 and np.max(np.abs(res.col[ok] - col[ok])) < 0.05  # the column from the pairs (X, Y, Z)
