@@ -109,6 +109,17 @@ class Source:
         return {"kind": self.kind, "label": self.label, "path": self.path, "dem": self.dem, **self.info}
 
 
+def table_coverage_text(tables: dict | None) -> str:
+    """The sentence every front end shows for an ISD whose ephemeris tables do not cover every line
+    (``Source.info["table_coverage"]``), e.g. "ephemeris tables cover 83.3 % of the lines (0-2347): the other
+    lines are flagged, not extrapolated, and carry no check points"; "" when they cover every line."""
+    if not tables:
+        return ""
+    spans = ", ".join(f"{a:.0f}-{b:.0f}" for a, b in tables["lines"])
+    return (f"ephemeris tables cover {100 * tables['fraction']:.1f} % of the lines ({spans}): the other lines are "
+            "flagged, not extrapolated, and carry no check points")
+
+
 DISPLAY_LINE_PERIOD_S = 1e-4
 """Line period given to the MPC drawn for a sensor without scanlines (an RPC has no time; the drawing needs one)."""
 

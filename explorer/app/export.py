@@ -54,6 +54,7 @@ from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings,
 from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
 from explorer.io_atomic import write_folder_atomic
 from explorer.sensor import StandIn
+from explorer.sources import table_coverage_text
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status",
                "x_m", "y_m", "z_m")
@@ -263,6 +264,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     coverage = source.get("dem_coverage")
     if coverage:
         notes.append(f"DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}")
+    if source.get("table_coverage"):
+        notes.append(table_coverage_text(source["table_coverage"]))
     notes.append(f"Every file of this export is the same on every run with the same settings except "
                  f"{TIMING_JSON} and {TIMING_JS} (the measured times).")
     files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes, scripts=[TIMING_JS]).encode()

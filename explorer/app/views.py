@@ -25,6 +25,7 @@ from explorer.methods import registry
 from explorer.panels import diverging_rgb
 from explorer.points import PointSet
 from explorer.scene import Scene
+from explorer.sources import table_coverage_text
 
 STATUS_NAME_CHARS = 48
 """Scene names longer than this are shortened in the status line (the Scene control shows them whole)."""
@@ -318,6 +319,8 @@ class Views:
             coverage = src.info.get("dem_coverage")
             if coverage:
                 notes.append(f"The DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}.")
+            if src.info.get("table_coverage"):
+                notes.append(table_coverage_text(src.info["table_coverage"]).capitalize() + ".")
         self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
         text = summary_markdown(runs, len(scps))
         if pending:

@@ -88,7 +88,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise InputError("--dem goes with --rpc, --dimap or --dg" if args.dem else "--as-mpc goes with --rpc")
     if file_kinds:
         from explorer.bench import bench_scene, parse_counts, resolve_methods
-        from explorer.sources import source_from_args
+        from explorer.sources import source_from_args, table_coverage_text
 
         methods, counts = resolve_methods(args.methods), parse_counts(args.scops)
         source = source_from_args(args, degree=args.degree, n_gcps=args.gcps)
@@ -98,9 +98,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             print(source.report.summary())
         tables = source.info.get("table_coverage")
         if tables:
-            spans = ", ".join(f"{a:.0f}-{b:.0f}" for a, b in tables["lines"])
-            print(f"ephemeris tables cover {100 * tables['fraction']:.1f} % of the lines ({spans}): the other lines "
-                  "are flagged, not extrapolated, and carry no check points")
+            print(table_coverage_text(tables))
         coverage = source.info.get("dem_coverage")
         if coverage:
             print(f"DEM covers {100 * coverage['fraction']:.1f} % of the image ({coverage['covered_points']} of "

@@ -336,3 +336,26 @@ def test_every_method_flags_a_row_outside_the_tables(hrsc):
             np.testing.assert_allclose(r.col[covered], truth_sample[covered] - 0.5, rtol=0, atol=1e-6,
                                        err_msg=name)
             assert (status[~covered] == outside_tables).all(), name
+
+
+def test_explore_export_of_an_isd_whose_tables_stop_mid_image(tmp_path):
+    """``explore --isd --export`` on the HRSC-like ISD runs on the covered lines and says so (summary.json's
+    source and the export page), every check point on a covered line, exact on the camera's own lines."""
+    import csv
+
+    from explorer.cli import main
+
+    isd = tmp_path / "hrsc_like.json"
+    isd.write_text(json.dumps(hrsc_like()))
+    out = tmp_path / "export"
+    assert main(["explore", "--isd", str(isd), "--methods", "exact,lrm", "--scops", "40", "--scps", "1500",
+                 "--export", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["source"]["table_coverage"] == {"fraction": 2347 / 2816, "lines": [[0.0, 2347.0]]}
+    assert "ephemeris tables cover 83.3 % of the lines (0-2347)" in (out / "panels.html").read_text()
+    with open(out / "residuals.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["method"] == "exact"]
+    assert rows and all(r["status"] == "valid" for r in rows)
+    lines = np.array([float(r["line"]) for r in rows])
+    assert lines.max() <= 2347.0  # usgscsm's line of every check point: covered
+    assert max(abs(float(r["row_residual_px"])) for r in rows) < 1e-6
