@@ -14,6 +14,7 @@ applied to their tables, the trajectories before and after, and the sidecar JSON
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import replace
@@ -110,7 +111,18 @@ def adjusted_sensor(sensor: Any, correction: LineCorrection, params: np.ndarray)
     dq = correction.rotation_quaternion(cam.pointing_times - t_ref, p, cam.pointing_constant.T, inverse=True)
     q = quaternion_multiply(dq, cam.pointing_quaternions)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    new_cam = replace(cam, positions_m=np.ascontiguousarray(pos), pointing_quaternions=np.ascontiguousarray(q))
+    # a copy with the corrected tables; it keeps the base camera's seed polynomial, look sign and typical slope
+    # (starting guesses of its line search, set up once per ISD at a cost of 0.1-0.5 s: a correction of a few
+    # pixels leaves them valid) but not its measured curvature: the search accepts a line on its step only
+    # (1e-11 lines), never on a secant error estimate from the base camera's curvature
+    from explorer.real import csm_kernels as K
+
+    new_cam = copy.copy(cam)
+    new_cam.positions_m = np.ascontiguousarray(pos)
+    new_cam.pointing_quaternions = np.ascontiguousarray(q)
+    new_cam._cam = cam._cam.copy()
+    new_cam._cam[K.C_CURV] = np.inf
+    new_cam._ext = None
     return replace(sensor, camera=new_cam, exterior=replace(sensor.exterior, camera=new_cam))
 
 
