@@ -213,6 +213,10 @@ def build_scene(
         lo = corners[:, :2].min(0) - 0.05 * span
         hi = corners[:, :2].max(0) + 0.05 * span
         scene.terrain = synthetic_relief((lo[0], hi[0], lo[1], hi[1]), relief_m, relief_seed, base_height_m=h)
+    from explorer.scene_checks import check_scene_physics
+
+    # a preset shaped by options (relief, attitude rates, jitter) is checked like a scene file (docs/validation.md)
+    check_scene_physics(scene, f"preset {spec['id']}")
     return scene
 
 

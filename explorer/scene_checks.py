@@ -27,9 +27,11 @@ from explorer.errors import ExplorerError, SceneFileError
 __all__ = [
     "FOCAL_LENGTH_RANGE_M",
     "LINE_PERIOD_RANGE_S",
+    "LOWEST_SENSOR_HEIGHT_M",
     "MAX_SENSOR_HEIGHT_M",
     "PITCH_RANGE_M",
     "TERRAIN_RANGE_M",
+    "check_orbit_tables",
     "check_scene_physics",
 ]
 
@@ -41,6 +43,9 @@ PITCH_RANGE_M = (1e-7, 1e-3)
 LINE_PERIOD_RANGE_S = (1e-7, 10.0)
 #: Heights a terrain may have (m): the deepest ocean trench to above Olympus Mons.
 TERRAIN_RANGE_M = (-12_000.0, 30_000.0)
+#: Lowest height of an Earth sensor's ephemeris above the WGS84 ellipsoid (the lowest dry land, the Dead Sea
+#: shore, is about -0.4 km): an ephemeris lower than this is inside the Earth.
+LOWEST_SENSOR_HEIGHT_M = -1000.0
 #: Highest sensor above the ellipsoid (beyond the Moon's distance is no imaging orbit).
 MAX_SENSOR_HEIGHT_M = 5e8
 
@@ -136,6 +141,53 @@ def _check_above_terrain(scene: Any, source: str) -> None:
     if not np.any(np.all(np.isfinite(ground), axis=1)):
         raise _fail(source, "no line of sight (image centre and corners, first/middle/last line) meets the "
                             "terrain: the camera does not look at the ground")
+
+
+def check_orbit_tables(source: str, positions: Any, quaternions: Any = None) -> None:
+    """Refuse an ephemeris inside the Earth or beyond :data:`MAX_SENSOR_HEIGHT_M`, and non-unit attitude quaternions.
+
+    Called by the rigorous metadata readers (DIMAP, DigitalGlobe) before anything is fitted to the tables, so
+    that the message names the table instead of a failure further on.
+
+    Parameters
+    ----------
+    source : str
+        The file, for the messages.
+    positions : array_like, shape (N, 3)
+        Earth-fixed (ECEF) sensor positions, metres.
+    quaternions : array_like, shape (M, 4), optional
+        Attitude quaternions (any component order).
+
+    Raises
+    ------
+    SceneFileError
+        Naming the file, the table and the point.
+    """
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if p.shape[0] == 0:
+        raise _fail(source, "the ephemeris table is empty")
+    if not np.all(np.isfinite(p)):
+        k = int(np.argmin(np.all(np.isfinite(p), axis=1)))
+        raise _fail(source, f"ephemeris point {k} is not finite")
+    from explorer.geometry.frames import ecef_to_geodetic
+
+    _, _, h = ecef_to_geodetic(p)
+    h = np.atleast_1d(np.asarray(h, dtype=np.float64))
+    k = int(np.argmin(h))
+    if h[k] < LOWEST_SENSOR_HEIGHT_M:
+        raise _fail(source, f"ephemeris point {k} is {-h[k] / 1000:.6g} km below the WGS84 ellipsoid: inside the "
+                            "Earth (positions must be Earth-fixed metres of a sensor above the ground)")
+    k = int(np.argmax(h))
+    if h[k] > MAX_SENSOR_HEIGHT_M:
+        raise _fail(source, f"ephemeris point {k} is {h[k] / 1000:.6g} km above the WGS84 ellipsoid: beyond "
+                            f"{MAX_SENSOR_HEIGHT_M:g} m no camera images the ground")
+    if quaternions is not None:
+        q = np.asarray(quaternions, dtype=np.float64).reshape(-1, 4)
+        norms = np.linalg.norm(q, axis=1)
+        bad = ~(np.abs(norms - 1.0) < 1e-3)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise _fail(source, f"attitude quaternion {k} has norm {norms[k]:.6g}: not a rotation")
 
 
 def check_scene_physics(scene: Any, source: str) -> None:

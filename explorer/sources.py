@@ -375,6 +375,12 @@ def load_source(
         check_dem_covers(scene, dem)
         if report is not None and "dem_datum" in report.info:
             info.update(dem_datum=report.info["dem_datum"])
+    from explorer.scene import Scene
+    from explorer.scene_checks import check_scene_physics
+
+    if isinstance(scene, Scene):  # the physical checks of a scene file, on the scene built here (an RPC itself
+        # is checked by its reader, RationalFunctionModel.validate; docs/validation.md)
+        check_scene_physics(scene, str(path) if dem is None else f"{path} with DEM {dem}")
     label = f"{path.name} ({info['sensor']}" + (", resected MPC: a stand-in)" if as_mpc else ")")
     info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns), truth=info["model"])
     if stand_in_model is not None:

@@ -149,6 +149,9 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
             raise InputError(f"{given}: the image is on {body.name}; ortho writes WGS84 UTM grids (the Earth) only")
         if dem is not None:
             scene = scene.with_terrain(_dem_as_terrain(scene, dem, str(args.dem)))
+            from explorer.scene_checks import check_scene_physics
+
+            check_scene_physics(scene, f"--dem {args.dem}")  # the sensor above this terrain, its rays meeting it
         shape = scene.shape
         if args.height is not None:
             surface = EllipsoidHeight(float(args.height))

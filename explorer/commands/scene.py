@@ -59,6 +59,9 @@ def cmd_from_rpc(args: argparse.Namespace) -> int:
         n_check=args.check, seed=args.seed, method=args.method,
         estimate_focal=True if args.estimate_focal else None,
     )  # fmt: skip
+    from explorer.scene_checks import check_scene_physics
+
+    check_scene_physics(scene, str(args.file) if args.dem is None else f"{args.file} with DEM {args.dem}")
     dt = time.perf_counter() - t0
     print(report.summary())
     print(f"  time {dt:.2f} s")
@@ -101,6 +104,9 @@ def _rigorous(args: argparse.Namespace, kind: str) -> int:
         from explorer.real.worldview import rigorous_scene_from_dg
 
         model = rigorous_scene_from_dg(args.file, aberration=args.aberration, refraction=args.refraction)
+    from explorer.scene_checks import check_scene_physics
+
+    check_scene_physics(model, str(args.file))
     print(model.describe())
     payload: dict[str, Any] = {"model": model.describe_dict()}
     if not args.no_compare:
@@ -109,6 +115,7 @@ def _rigorous(args: argparse.Namespace, kind: str) -> int:
         payload["rpc_comparison"] = cmp.to_dict()
     if args.out:
         mpc, fit = model.to_mpc_scene(degree=args.degree)
+        check_scene_physics(mpc, f"{args.file} (its MPC scene)")
         print(fit.summary())
         payload["mpc_fit"] = fit.to_dict()
         mpc.save(args.out)
@@ -140,6 +147,9 @@ def cmd_from_isd(args: argparse.Namespace) -> int:
     print(camera.describe())
     scene = scene_from_camera(camera, degree=args.degree, n_check=args.check, seed=args.seed,
                               harmonics=args.harmonics)
+    from explorer.scene_checks import check_scene_physics
+
+    check_scene_physics(scene, f"{args.file} (its MPC scene)")
     fit = scene.metadata.get("csm_fit")
     if fit:
         print(f"MPC fit to the CSM camera ({fit['n']} check points): row max {fit['row_max_px']:.3g} px, "

@@ -118,6 +118,9 @@ def read_dimap_v1_geometry(path: str | Path) -> dict:
         unit = child(points[0], key).get("unit")
         if unit not in (None, "m", "m/s"):
             raise InputError(f"{path.name}: {key} in {unit!r}, expected m and m/s")
+    from explorer.scene_checks import check_orbit_tables
+
+    check_orbit_tables(path.name, out["eph_position"], out["att_quaternion"])  # above the ground, unit quaternions
     return out
 
 

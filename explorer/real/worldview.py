@@ -115,6 +115,9 @@ def read_dg_metadata(path: str | Path) -> DGMetadata:
     md["att_start"] = _text(att, "STARTTIME", p)
     md["att_interval"] = float(_text(att, "TIMEINTERVAL", p))
     md["att"] = _list(att, "ATTLISTList", "ATTLIST")[:, :5]
+    from explorer.scene_checks import check_orbit_tables
+
+    check_orbit_tables(path.name, md["eph"][:, 1:4], md["att"][:, 1:5])  # above the ground, unit quaternions
     md["pd_mm"] = float(_text(_child(geo, "PRINCIPAL_DISTANCE", p), "PD", p))
     array = _child(geo, ".//DETECTOR_ARRAY", p)
     md["det_origin_mm"] = np.array([float(_text(array, "DETORIGINX", p)), float(_text(array, "DETORIGINY", p))])
