@@ -27,6 +27,7 @@ from tests.truth import brute_force_rows
 viser = pytest.importorskip("viser")
 
 from explorer.app import (  # noqa: E402
+    SCOP_DENSITIES,
     ExplorerApp,
     ExplorerModel,
     FitPool,
@@ -596,6 +597,30 @@ def test_gui_export_is_every_point_and_reproducible(server):
     assert sorted(summary["run_dependent"]) == ["timing.js", "timing.json"]
     timing = json.loads(za.read("timing.json"))["methods"]
     assert timing["toy_bisect"]["n_evaluated"] == n and timing["toy_bisect"]["eval_s"] > 0
+
+
+def test_gui_export_with_the_sweep_equals_a_fresh_export(server):
+    """The GUI's zip reuses the GUI's own fits (maps and accuracy-vs-SCOPs sweep); its files are byte for byte
+    those of an export that fits everything afresh (the CLI's path), but the measured times."""
+    import io
+    import zipfile
+
+    from explorer.app.export import RUN_DEPENDENT, export_files
+
+    app = make_app(server, sweep=True)
+    s = app.settings()
+    assert s.sweep
+    gui = zipfile.ZipFile(io.BytesIO(app.export_bytes()))
+    fresh = export_files(app.model.scene(s), s, source=app._source_info(s), seed=app.model.seed)
+    assert sorted(gui.namelist()) == sorted(fresh)
+    for name, data in fresh.items():
+        if name not in RUN_DEPENDENT:
+            assert gui.read(name) == data, name
+    import json
+
+    sweep = json.loads(fresh["summary.json"])["accuracy_vs_scops"]
+    assert [e["n_scops"] for e in sweep["toy_poly"]] == list(SCOP_DENSITIES) and len(sweep["toy_bisect"]) == 1
+    assert "Accuracy vs SCOP density" in fresh["panels.html"].decode()
 
 
 def test_slider_drag_is_debounced_to_the_last_value(server):

@@ -45,12 +45,13 @@ import json
 import math
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from explorer.app.model import STATUS_NAMES, ExplorerModel, FitRecord, Settings, sensor_truth
+from explorer.app.model import STATUS_NAMES, SWEEP_PURPOSE, ExplorerModel, FitRecord, Settings, sensor_truth
 from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
 from explorer.io_atomic import write_folder_atomic
 from explorer.sensor import StandIn
@@ -166,6 +167,7 @@ def _markdown_html(text: str) -> str:
 
 def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
                  fits: dict[str, FitRecord] | None = None, stand_in: StandIn | None = None,
+                 sweep_fit: Callable[[str, int], FitRecord | None] | None = None,
                  native_pixels: bool = False) -> dict[str, bytes]:
     """Compute the export of ``s`` on ``scene`` (every SCP) and return ``{file name: bytes}``.
 
@@ -181,6 +183,9 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         Seed of the SCOP / SCP heights.
     fits : dict, optional
         Fits already made for these settings (the GUI's), by method; others are fitted here.
+    sweep_fit : callable, optional
+        ``sweep_fit(method, n_scops)``: a fit the GUI already made for the accuracy-vs-SCOPs sweep (same scene,
+        seed and SCOPs), or None to fit it here.
     stand_in : StandIn, optional
         Its error against the sensor is written as ``summary.json["stand_in"]``, as ``residuals.csv`` rows of
         method :data:`STAND_IN_METHOD` and as a map beside the methods'.
@@ -209,7 +214,12 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         summary[name] = method_summary(ev, st, rec, err)
         timing[name] = method_timing(ev, rec)
     # the GUI's accuracy-vs-SCOPs panel: the same sweep (ExplorerModel.sweep), fits at every density
-    sweeps = {name: model.sweep(name, s) for name in s.methods} if s.sweep else {}
+    def get_fit(name: str, density: int) -> FitRecord:
+        return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(
+            name, s, density, purpose=SWEEP_PURPOSE)
+
+    sweeps = {name: model.sweep(name, s, get_fit=lambda d, n=name: get_fit(n, d)) for name in s.methods} \
+        if s.sweep else {}
     maps = dict(evaluations)
     map_status = dict(status)
     stand_in_summary: dict[str, Any] | None = None

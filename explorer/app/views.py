@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from explorer.app.model import SCOP_DENSITIES, MethodRun, Selection, Settings, summary_markdown
+from explorer.app.model import SCOP_DENSITIES, SWEEP_PURPOSE, MethodRun, Selection, Settings, summary_markdown
 from explorer.evaluate import STAND_IN_METHOD, evaluate_stand_in
 from explorer.methods import registry
 from explorer.panels import diverging_rgb
@@ -509,6 +509,7 @@ class Views:
         src = self._source(s)
         files = export_files(self.model.scene(s), s, source=self._source_info(s), seed=self.model.seed,
                              fits={n: self.model.fit(n, s) for n in s.methods},
+                             sweep_fit=lambda n, d: self.model.fit(n, s, d, purpose=SWEEP_PURPOSE),
                              stand_in=src.stand_in if src is not None else None,
                              native_pixels=src is not None and src.kind == "isd")
         buf = io.BytesIO()
