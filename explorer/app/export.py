@@ -26,8 +26,8 @@ then writes
   the network): the residual maps (row and column rasters of every check point, the stand-in's beside them),
   the accuracy-vs-SCOPs sweep, the summary table and the Timing panel;
 * ``timing.json`` -- **the one run-dependent file**: the fit and evaluation times measured on this run
-  (``{"methods": {name: {"fit_s", "eval_s", "n_evaluated", "n_scops"}}}``), which depend on the machine and
-  its load;
+  (``{"methods": {name: {"fit_s", "eval_s", "n_evaluated", "n_scops"}}, "sweep_s"}``), which depend on the
+  machine and its load;
 * ``timing.js`` -- the same numbers as a script (``window.PUSHBROOM_TIMING = {...};``) that ``panels.html``
   loads from its own folder (a relative ``<script src="timing.js">``, no network) to fill its Timing panel
   when opened; without it the panel says where the times are.
@@ -214,12 +214,15 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         summary[name] = method_summary(ev, st, rec, err)
         timing[name] = method_timing(ev, rec)
     # the GUI's accuracy-vs-SCOPs panel: the same sweep (ExplorerModel.sweep), fits at every density
-    def get_fit(name: str, density: int) -> FitRecord:
-        return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(
-            name, s, density, purpose=SWEEP_PURPOSE)
+    t_sweep = time.perf_counter()
+    sweeps: dict[str, list[Evaluation]] = {}
+    for name in (s.methods if s.sweep else ()):
+        def get_fit(density: int, name: str = name) -> FitRecord:
+            return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(
+                name, s, density, purpose=SWEEP_PURPOSE)
 
-    sweeps = {name: model.sweep(name, s, get_fit=lambda d, n=name: get_fit(n, d)) for name in s.methods} \
-        if s.sweep else {}
+        sweeps[name] = model.sweep(name, s, get_fit=get_fit)
+    sweep_s = time.perf_counter() - t_sweep
     maps = dict(evaluations)
     map_status = dict(status)
     stand_in_summary: dict[str, Any] | None = None
@@ -242,7 +245,9 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
                "accuracy_vs_scops": _sweep_summary(sweeps) if s.sweep else None,
                "stand_in": stand_in_summary, "run_dependent": dict(RUN_DEPENDENT)}
     timing_payload = {"methods": timing, "about": RUN_DEPENDENT[TIMING_JSON],
-                      "units": {"fit_s": "s", "eval_s": "s (ground to image of n_evaluated check points)"}}
+                      "sweep_s": float(sweep_s) if s.sweep else None,
+                      "units": {"fit_s": "s", "eval_s": "s (ground to image of n_evaluated check points)",
+                                "sweep_s": "s (the accuracy-vs-SCOPs sweep: its fits and evaluations)"}}
     timing_text = json.dumps(timing_payload, indent=1, sort_keys=True, allow_nan=False)
     body_fixed = scene.frame.enu_to_ecef(scps.ground)
     files = {"summary.json": (json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n").encode(),
@@ -351,7 +356,9 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a
     # failure, SIGTERM or a full disk the folder holds the previous complete export or nothing
     written = write_folder_atomic(out, files)
-    log(f"pushbroom explore: exported {', '.join(files)} to {out} ({time.perf_counter() - t0:.1f} s)")
+    sweep_s = json.loads(files[TIMING_JSON]).get("sweep_s")
+    sweep_note = f"; the accuracy-vs-SCOPs sweep {sweep_s:.1f} s of it (--no-sweep leaves it out)" if sweep_s else ""
+    log(f"pushbroom explore: exported {', '.join(files)} to {out} ({time.perf_counter() - t0:.1f} s{sweep_note})")
     return written
 
 

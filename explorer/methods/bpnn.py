@@ -190,7 +190,7 @@ class MLPRegressor:
                 acts.append(h)
         n = u.shape[0]
         n_out = self._shapes[-1][0]
-        jac = torch.empty((n, n_out, self.n_parameters), dtype=torch.float64)
+        jac = torch.empty((n, n_out, n_parameters(self._shapes)), dtype=torch.float64)
         for out in range(n_out):
             delta = torch.zeros((n, n_out), dtype=torch.float64)
             delta[:, out] = 1.0
@@ -202,7 +202,7 @@ class MLPRegressor:
                 if layer > 0:
                     delta = (delta @ weights[layer]) * derivs[layer - 1]
             jac[:, out, :] = torch.cat([t for gw, gb in reversed(blocks) for t in (gw, gb)], dim=1)
-        return jac.reshape(n * n_out, self.n_parameters)
+        return jac.reshape(n * n_out, -1)
 
     def _init_output_layer(self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """Replace the random output layer by the least-squares one for the random hidden layers.
