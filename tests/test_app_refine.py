@@ -158,3 +158,28 @@ def test_the_apps_3d_view_redraws_the_trajectories_in_its_frame_and_hides_them_o
         app.handles["preset"].value = "WSU"
         assert all(h.visible for h in view._nodes.values())
         drawn(app.frame)
+
+
+EXPORT_REFUSED = ("--gcps refines live in the explorer and is not part of --export; write the refinement's files "
+                  "with 'pushbroom refine SOURCE --gcps FILE --out DIR' (report.json, points.csv, panels.html)")
+PAIR_REFUSED = ("--gcps refines one image, not a --pair (adjust a pair to tie points with "
+                "'pushbroom refine --images A B --ties ties.csv')")
+
+
+@pytest.mark.parametrize("extra, message", [(["--preset", "WSU", "--export", "OUT"], EXPORT_REFUSED),
+                                            (["--pair", "A", "B"], PAIR_REFUSED)])
+def test_explore_gcps_options_that_would_be_ignored_are_refused(tmp_path, capsys, extra, message):
+    from explorer.cli import main
+
+    extra = [str(tmp_path / "out") if e == "OUT" else e for e in extra]
+    assert main(["explore", "--gcps", str(tmp_path / "g.csv"), *extra]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(message)
+    assert not (tmp_path / "out").exists()
+
+
+def test_explore_check_without_gcps_is_refused(tmp_path, capsys):
+    from explorer.cli import main
+
+    assert main(["explore", "--preset", "WSU", "--check", str(tmp_path / "c.csv"), "--port", "8185"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(
+        "--check goes with --gcps (the check points of the refinement)")

@@ -21,8 +21,25 @@ from explorer.commands._args import (
 )
 
 
+def _check_refine_options(args: argparse.Namespace) -> None:
+    """``--gcps`` / ``--check`` only where they act (the live Refinement folder of one image), never ignored."""
+    from explorer.errors import InputError
+
+    gcps = getattr(args, "gcps", None)
+    if getattr(args, "check", None) is not None and gcps is None:
+        raise InputError("--check goes with --gcps (the check points of the refinement)")
+    if gcps is not None and getattr(args, "pair", None):
+        raise InputError("--gcps refines one image, not a --pair (adjust a pair to tie points with "
+                         "'pushbroom refine --images A B --ties ties.csv')")
+    if gcps is not None and getattr(args, "export", None) is not None:
+        raise InputError("--gcps refines live in the explorer and is not part of --export; write the refinement's "
+                         "files with 'pushbroom refine SOURCE --gcps FILE --out DIR' (report.json, points.csv, "
+                         "panels.html)")
+
+
 def cmd_explore(args: argparse.Namespace) -> int:
     """Handler of ``explore``: validate the source and address, then export or serve."""
+    _check_refine_options(args)
     if getattr(args, "pair", None):  # a stereo pair: its own scene and panels (explorer.app.pair)
         from explorer.app.pair import run_pair
 
@@ -97,8 +114,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="leave out the accuracy-vs-SCOPs sweep (it refits every learned method at 8 SCOP counts) "
                         "from the GUI and the export")
     p.add_argument("--gcps", default=None, metavar="CSV",
-                   help="control points id,lon,lat,h,row,col: a Refinement folder adjusts the --rpc or --scene "
-                        "source to them, live (docs/refine.md)")
+                   help="control points id,lon,lat,h,row,col: a Refinement folder adjusts the source (RPC, "
+                        "scene, preset, rigorous DIMAP/DG model, CSM camera) to them, live, and draws the original "
+                        "and adjusted trajectories in 3D (docs/refine.md)")
     p.add_argument("--check", default=None, metavar="CSV", help="check points for --gcps (never adjusted to)")
     p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a GCP's pixel, px (default 0.5)")
     p.set_defaults(func=cmd_explore)
