@@ -338,10 +338,11 @@ def compare_nn_rfm(
     -----
     Measured on ``build_scene("QII", relief_m=300, relief_seed=1)``, 572 GCPs with 0.5 px and
     0.3 m noise, 500 check points, seeds 0-4, defaults: total RMS (m) direct RFM 0.143, 0.392,
-    0.145, 0.246, 0.394 (2 seeds with 2 failed check points each: poles) against NN + RFM 0.123,
-    0.127, 0.122, 0.123, 0.151 with the line-of-sight network (0.132, 0.177, 0.102, 0.170, 0.136 with
-    ``network="free"``; no failure either way): the hybrid wins every seed, as Habib et al. claim
-    (their 1.55 -> 1.09 m).  The gain comes from stability, not from a better model: with
+    0.145, 0.246, 0.394 (2 seeds with 2 failed check points each: poles) against NN + RFM 0.099,
+    0.079, 0.083, 0.101, 0.114 with the line-of-sight network (the network alone 0.087-0.121; with
+    ``network="free"`` 0.132, 0.177, 0.102, 0.170, 0.136; no failure either way): the hybrid wins every
+    seed, as Habib et al. claim (their 1.55 -> 1.09 m).  Measured with the free network (not re-measured
+    with the line-of-sight one): the gain comes from stability, not from a better model: with
     ``rfm_regularization=1e-3`` the direct RFM has no failure and 0.124-0.178 m, as good as the
     hybrid (which wins 2 of 5 seeds then); the network alone is 0.12-0.18 m.  With the paper's
     9 check points the direct RFM is as good or better in all five seeds (0.07-0.11 m against
