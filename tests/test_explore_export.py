@@ -190,6 +190,10 @@ def test_isd_export_is_measured_against_the_camera_itself(tmp_path, capsys, isd)
     a, b = outs
     _assert_byte_identical_but_timing(a, b)
     summary = json.loads(a["summary.json"])
+    # --no-sweep: no accuracy-vs-SCOPs sweep in the summary, the page or the times
+    assert summary["accuracy_vs_scops"] is None and summary["settings"]["sweep_scps"] is None
+    assert "Accuracy vs SCOP density" not in a["panels.html"].decode()
+    assert json.loads(a["timing.json"])["sweep_s"] is None
     assert summary["truth"]["model"].startswith("USGS CSM") and summary["stand_in"]["model"].startswith("MPC")
     assert summary["stand_in"]["n_valid"] == summary["settings"]["scps_used"]
     assert {"lrm", "prm", "mlp", "ann", "exact", "csm-secant"} <= set(summary["methods"])
