@@ -802,3 +802,40 @@ def test_an_rpc_source_runs_the_learned_methods_and_says_why_a_search_is_unavail
     assert app.handles["method_boxes"]["lrm"].label == "lrm"
     app.handles["preset"].value = "WSU"  # a scene with scanlines: the label and hint come back
     assert box.label == "toy_bisect" and "searches the scanlines" not in box.hint
+
+
+@pytest.mark.parametrize("preset", ["WSU", "ISB"])
+def test_3d_labels_are_inside_the_framed_view_and_apart(server, preset):
+    """Issue 24: in the framed view of the default canvas every shown 3D label lies inside the view and clear of
+    the others (boxes recomputed here from each label's anchor, text and point through the camera model); a
+    label that would not be is hidden; the three scanlines' and the selected point's labels are shown."""
+    import itertools
+
+    from explorer.scene3d.camera import DEFAULT_CANVAS_PX, VIEW_FOV_Y, view_ndc
+    from explorer.scene3d.labels import box_at, boxes_overlap, label_box_px
+
+    app = make_app(server, preset=preset)
+    w, h = DEFAULT_CANVAS_PX
+    pos, look, _ = app.camera_pose
+    boxes = {}
+    for key, node in app.nodes.items():
+        if not (hasattr(node, "anchor") and hasattr(node, "text")):
+            continue
+        if not node.visible:
+            assert app.label_layout[key] is None
+            continue
+        ndc, depth = view_ndc(np.asarray(node.position)[None], np.array(pos), np.array(look), fov_y=VIEW_FOV_Y,
+                              aspect=w / h)
+        assert depth[0] > 0
+        p = np.array([(ndc[0, 0] + 1) * w / 2, (1 - ndc[0, 1]) * h / 2])
+        boxes[key] = b = box_at(p, label_box_px(node.text, node.font_screen_scale), node.anchor)
+        assert b[0] >= 0 and b[1] >= 0 and b[2] <= w and b[3] <= h, (key, b)
+    assert {"/selected/label", "/scanlines/labels/0", "/scanlines/labels/1", "/scanlines/labels/2"} <= set(boxes)
+    for a, b in itertools.combinations(boxes, 2):
+        assert not boxes_overlap(boxes[a], boxes[b]), (a, boxes[a], b, boxes[b])
+    # a scanline's label stands at one end of its ground trace
+    scene = app.scene
+    for i, row in ((0, 0.0), (2, scene.n_rows - 1.0)):
+        ends = app.frame.ground(app._B.scanline_footprints(scene, np.array([row]), scene.terrain.mean_height)[0])
+        at = np.asarray(app.nodes[f"/scanlines/labels/{i}"].position)
+        assert min(np.linalg.norm(ends - at, axis=1)) < 1e-5

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import itertools
 import os
 import socket
 import threading
@@ -398,3 +399,136 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
                 th.join(60)
     (titles_a, table_a), (titles_b, table_b) = states
     assert titles_a == titles_b and table_a == table_b
+
+
+# ------------------------------------------- issue 24: the 3D view frames the footprint, labels apart
+HIDE_TOASTS = "() => { for (const el of document.querySelectorAll('.mantine-Notifications-root, " \
+              "[class*=Notification]')) el.style.display = 'none'; }"
+
+
+def _show_only(app, keep: tuple[str, ...]) -> dict:
+    """Hide every 3D node except those whose name starts with one of ``keep``; returns what to restore."""
+    was = {}
+    for name, node in app.nodes.items():
+        with contextlib.suppress(Exception):
+            was[name] = bool(node.visible)
+            node.visible = name.startswith(keep)
+    return was
+
+
+def _restore(app, was: dict) -> None:
+    for name, vis in was.items():
+        with contextlib.suppress(Exception):
+            app.nodes[name].visible = vis
+
+
+def _drawn_box(page, rect, *, dark: bool = False, wait_ms: int = 2500) -> np.ndarray | None:
+    """Bounding box (x0, y0, x1, y1) in canvas pixels of what is drawn on the white canvas (``dark``: text
+    only), the orientation gizmo in the bottom-left corner left out."""
+    page.wait_for_timeout(wait_ms)
+    png = page.screenshot(clip=rect)
+    px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int32)
+    px[int(rect["height"]) - 110:, :110] = 255  # the axes gizmo
+    mask = px.sum(axis=2) < 450 if dark else (765 - px.sum(axis=2)) > 90
+    ys, xs = np.nonzero(mask)
+    if xs.size == 0:
+        return None
+    return np.array([xs.min(), ys.min(), xs.max() + 1, ys.max() + 1], dtype=float)
+
+
+def _check_framing_and_labels(app, page) -> None:
+    """In the browser: the SCP cloud (the footprint) spans at least half of the 3D canvas -- and where the
+    camera model says it does (within 3 px) --; every shown label's text lies inside the canvas and clear of
+    every other label's."""
+    from explorer.scene3d.camera import view_ndc
+
+    page.evaluate(HIDE_TOASTS)
+    rect = page.evaluate(RECT_3D)
+    w, h = rect["width"], rect["height"]
+    (cid, client), = app.server.get_clients().items()
+    t0 = time.monotonic()  # the browser's camera settles on the pose framed for its (docked) canvas
+
+    def settled() -> bool:
+        framed = app._framed_clients.get(cid)
+        return (framed is not None and abs(framed[1] - w / h) < 1e-3 and cid in app.client_poses
+                and np.allclose(client.camera.position, app.client_poses[cid][0], atol=1e-6))
+
+    while time.monotonic() - t0 < 30 and not settled():
+        time.sleep(0.2)
+    assert settled()
+    pos, look = np.array(app.client_poses[cid][0]), np.array(app.client_poses[cid][1])
+    assert client.camera.image_width == int(w) and client.camera.image_height == int(h)
+    was = _show_only(app, ("/points/scps",))
+    try:
+        box = _drawn_box(page, rect)
+        assert box is not None
+        scps = app.model.scps(app.settings()).ground[app.cloud_index]
+        ndc, depth = view_ndc(app.frame.ground(scps), pos, look, fov_y=client.camera.fov, aspect=w / h)
+        # each marker is a disc VISER_POINT_SCALE times its point_size projected at its depth (viser's point
+        # shader: point_size / tan(fov / 2) / depth canvas heights across)
+        size = app._B.point_size_km(app.frame, len(app.cloud_index), app._B.SCP_COVER)
+        r = 0.5 * app._B.VISER_POINT_SCALE * size * (h / 2) / (depth * np.tan(client.camera.fov / 2))
+        x, y = (ndc[:, 0] + 1) * w / 2, (1 - ndc[:, 1]) * h / 2
+        want = np.array([(x - r).min(), (y - r).min(), (x + r).max(), (y + r).max()])
+        assert np.all(np.abs(box - want) < 3), (box, want)
+        assert (box[2] - box[0]) / w >= 0.5 or (box[3] - box[1]) / h >= 0.5
+        assert box[0] > 0 and box[1] > 0 and box[2] < w and box[3] < h  # not clipped
+        shown = [k for k, v in app.label_layout.items() if v is not None]
+        assert {"/scanlines/labels/0", "/scanlines/labels/1", "/scanlines/labels/2"} <= set(shown)
+        texts = {}
+        for key in shown:
+            _show_only(app, (key,))
+            texts[key] = _drawn_box(page, rect, dark=True)
+            assert texts[key] is not None, key
+            t = texts[key]
+            assert t[0] > 0 and t[1] > 0 and t[2] < w and t[3] < h, (key, t)
+            pred = app.label_layout[key][1]  # the layout's box holds the drawn text
+            assert pred[0] - 2 <= t[0] and t[2] <= pred[2] + 2 and pred[1] - 2 <= t[1] and t[3] <= pred[3] + 2, \
+                (key, t, pred)
+        for a, b in itertools.combinations(shown, 2):
+            ta, tb = texts[a], texts[b]
+            assert ta[2] <= tb[0] or tb[2] <= ta[0] or ta[3] <= tb[1] or tb[3] <= ta[1], (a, ta, b, tb)
+    finally:
+        _restore(app, was)
+
+
+def test_default_preset_is_framed_and_its_labels_are_apart(explorer, browser):
+    page = _open(browser, explorer.url)
+    try:
+        _wait_drawn(page)
+        _check_framing_and_labels(explorer, page)
+    finally:
+        page.context.close()
+
+
+def test_dimap_with_dem_is_framed_and_its_labels_are_apart(real_explorer, browser):
+    app = real_explorer
+    label = app.sources[0].label
+    if app.handles["preset"].value != label:
+        app.handles["preset"].value = label
+        assert app.wait_idle(240)
+    page = _open(browser, app.url)
+    try:
+        page.wait_for_function("() => document.body.innerText.includes('nr row: RMSE')")
+        _check_framing_and_labels(app, page)
+    finally:
+        page.context.close()
+
+
+def test_isd_scene_is_framed_and_its_labels_are_apart(browser):
+    from pathlib import Path
+
+    from explorer.sources import load_source
+
+    src = load_source("isd", str(Path(__file__).resolve().parent / "data" / "usgscsm" / "orbitalLineScan.json"))
+    app, stop, th = _serve_real(src, ["exact"], 3000)
+    try:
+        assert app.wait_idle(240)
+        page = _open(browser, app.url)
+        try:
+            _check_framing_and_labels(app, page)
+        finally:
+            page.context.close()
+    finally:
+        stop.set()
+        th.join(60)

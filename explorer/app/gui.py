@@ -138,6 +138,11 @@ class ExplorerApp(Views):
         self.client_poses: dict[Any, tuple] = {}
         """Per browser (client id): (position, look_at, far, near) of its last framing, for its own canvas."""
         self._framed_clients: dict[Any, tuple] = {}
+        self._client_since: dict[Any, float] = {}
+        self.label_layout: dict[str, Any] = {}
+        """Per 3D label: (anchor, box px, point) in the framed view of the default canvas, None when hidden."""
+        self.label_alternatives: dict[str, tuple] = {}
+        """Other points a 3D label may stand at (a scanline's label: the other end of its trace)."""
         """Per browser: (camera key, canvas aspect) of its last framing."""
         self.exports = 0
         self._sent: dict[str, Hashable] = {}
@@ -190,6 +195,7 @@ class ExplorerApp(Views):
             self._discover_methods(wanted)
 
     def _client_connected(self, client: Any) -> None:
+        self._client_since[client.client_id] = time.monotonic()
         client.camera.on_update(lambda cam: self._client_camera_reported(cam.client))
 
     def _discover_methods(self, wanted: list[str] | None) -> None:

@@ -27,6 +27,9 @@ from explorer.points import PointSet
 from explorer.scene import Scene
 from explorer.sources import table_coverage_text
 
+CANVAS_SETTLE_S = 10.0
+"""A browser's canvas may still change shape (its panels docking) this long after it connected: its camera is
+reframed for the new shape even if its reports still carry an earlier pose."""
 STATUS_NAME_CHARS = 48
 """Scene names longer than this are shortened in the status line (the Scene control shows them whole)."""
 
@@ -69,7 +72,10 @@ class Views:
         last_times: dict[str, float]
         camera_pose: tuple | None
         client_poses: dict[Any, tuple]
+        label_layout: dict[str, Any]
+        label_alternatives: dict[str, tuple]
         _framed_clients: dict[Any, tuple]
+        _client_since: dict[Any, float]
         _framing: tuple[np.ndarray, np.ndarray]
         exports: int
         fits: Any
@@ -127,6 +133,7 @@ class Views:
             getattr(self, f"_update_{stage}")(s, gen)
             times[stage] = time.perf_counter() - t0
             self._check(gen)
+        self._layout_labels()
         self.last_update_s = time.perf_counter() - t_start
         times["total"] = self.last_update_s
         if self.request_started is not None:
@@ -344,6 +351,9 @@ class Views:
         drawn = self._drawn_scene(s)
         with self.server.atomic():
             self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights, names))
+            # a scanline's label may stand at either end of its ground trace (whichever keeps it clear)
+            ends = self.frame.ground(B.scanline_footprints(drawn, rows, heights).reshape(-1, 3)).reshape(-1, 2, 3)
+            self.label_alternatives = {f"/scanlines/labels/{i}": (ends[i, 1],) for i, n in enumerate(names) if n}
             self._put("/selected", B.add_selection(
                 self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
                 label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))
@@ -418,6 +428,54 @@ class Views:
                 lines.append(f"visited {len(tr)} scanlines: {shown}")
         self.handles["sel_text"].content = "  \n".join(lines)
 
+    # ----------------------------------------------------------------- labels
+    LABEL_PRIORITY = ("/selected/label", "/scanlines/labels/", "/orbit/flight_label", "/orbit/track_label",
+                      "/selected/trace_labels/")
+    """Which labels yield to which when they would overlap (earlier wins)."""
+
+    def _layout_labels(self) -> None:
+        """Anchor every 3D label so that, in the framed view of the default canvas, none is clipped by the
+        view's edge or stacked on another (:func:`explorer.scene3d.labels.place_labels`); a label that fits
+        nowhere is hidden.  Each keeps its builder's anchor when that fits."""
+        from explorer.scene3d.camera import DEFAULT_CANVAS_PX, VIEW_FOV_Y
+        from explorer.scene3d.labels import Label, place_labels
+
+        if self.camera_pose is None:
+            return
+        prefs = self.__dict__.setdefault("_label_prefs", {})
+        found = []
+        for key, handle in self.nodes.items():
+            if not (hasattr(handle, "anchor") and hasattr(handle, "text")):
+                continue
+            if prefs.get(key, (None,))[0] is not handle:  # a new label: its builder's anchor and point come first
+                prefs[key] = (handle, str(handle.anchor), np.asarray(handle.position, dtype=np.float64).copy())
+            rank = next((i for i, p in enumerate(self.LABEL_PRIORITY) if key.startswith(p)), len(self.LABEL_PRIORITY))
+            found.append((rank, key, handle))
+        found.sort(key=lambda t: (t[0], t[1]))
+        alternatives = getattr(self, "label_alternatives", {})
+        labels = [Label(key, str(h.text), prefs[key][2], (prefs[key][1],), float(getattr(h, "font_screen_scale", 1.0)),
+                        tuple(alternatives.get(key, ()))) for _, key, h in found]
+        pos, look, _ = self.camera_pose
+        layout_key = (pos, look, tuple((lab.key, lab.text, lab.point.tobytes()) for lab in labels))
+        if not self._changed("labels", layout_key):
+            return
+        width, height = DEFAULT_CANVAS_PX
+        placed = place_labels(labels, np.array(pos), np.array(look), fov_y=VIEW_FOV_Y, width=width, height=height)
+        self.label_layout = placed
+        for _, key, handle in found:
+            got = placed.get(key)
+            with contextlib.suppress(Exception):
+                if got is None:
+                    if handle.visible:
+                        handle.visible = False
+                else:
+                    if handle.anchor != got[0]:
+                        handle.anchor = got[0]
+                    if not np.allclose(handle.position, got[2], rtol=0, atol=1e-9):
+                        handle.position = got[2]
+                    if not handle.visible:
+                        handle.visible = True
+
     # ----------------------------------------------------------------- camera
     def _camera_for(self, scene: Scene) -> tuple[tuple, tuple, float]:
         """(position, look_at, far) framing the footprint (and as much of the displayed track as fits) for
@@ -473,9 +531,12 @@ class Views:
             done = self._framed_clients.get(client.client_id)
             if done is not None and done[0] == key:
                 old = self.client_poses.get(client.client_id)
-                moved = old is None or not (np.allclose(cam.position, old[0], atol=1e-6, rtol=1e-6)
-                                            and np.allclose(cam.look_at, old[1], atol=1e-6, rtol=1e-6))
-                if moved or abs(done[1] - w / h) <= 1e-3 * done[1]:
+                at_pose = old is not None and (np.allclose(cam.position, old[0], atol=1e-6, rtol=1e-6)
+                                               and np.allclose(cam.look_at, old[1], atol=1e-6, rtol=1e-6))
+                # just connected: its reports may still carry the pose before ours (the page lays out its
+                # panels in its first seconds); later, only a camera the user has not moved is reframed
+                young = time.monotonic() - self._client_since.get(client.client_id, -np.inf) < CANVAS_SETTLE_S
+                if not (at_pose or young) or abs(done[1] - w / h) <= 1e-3 * done[1]:
                     return
             self._framed_clients[client.client_id] = (key, w / h)
             self._apply_camera([client])

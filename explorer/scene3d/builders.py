@@ -393,11 +393,15 @@ def mesh_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> bytes:
                      struct.pack("<I4s", len(bin_chunk), b"BIN\0"), bin_chunk])
 
 
-SCP_COVER = 1.5
-"""Diameter of a check point's marker in SCP spacings: round markers on a grid leave no gap from 2 ** 0.5 on.
-Smaller markers let the ground show between them wherever the camera is close enough for a spacing to span
-more than a pixel (a closer camera then *washes out* the residual colours: at 0.45 spacings they covered
-16 % of the footprint); from farther away each marker is one pixel anyway."""
+SCP_COVER = 0.75
+"""``point_size`` of a check point's marker in SCP spacings.  viser draws a point ``point_size / (tan(fov / 2)
+depth)`` canvas heights wide -- twice its projected size (its shader takes ``tan(fov / 2) depth``, half the
+frustum, for the frustum's height) --, so 0.75 draws round markers 1.5 spacings wide: a grid of them leaves no
+gap (from 2 ** 0.5 on).  Smaller markers let the ground show between them wherever the camera is close
+enough for a spacing to span more than a pixel (a closer camera then *washes out* the residual colours: the
+former 0.45 drew 0.9 spacings, 64 % of the footprint); from farther away each marker is one pixel anyway."""
+VISER_POINT_SCALE = 2.0
+"""Drawn diameter of a viser point over its ``point_size`` projected through the camera (see SCP_COVER)."""
 
 
 def point_size_km(frame: DisplayFrame, n_points: int, fraction: float = 0.45) -> float:
@@ -590,7 +594,8 @@ def add_selection(
 
 
 __all__ = [
-    "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "SCP_COVER", "DisplayFrame", "add_ground", "add_orbit", "add_points",
+    "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "SCP_COVER", "VISER_POINT_SCALE",
+    "DisplayFrame", "add_ground", "add_orbit", "add_points",
     "ground_mesh_nodes",
     "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
     "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",

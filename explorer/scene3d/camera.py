@@ -24,6 +24,8 @@ VIEW_FOV_Y = np.deg2rad(75.0)
 DEFAULT_ASPECT = 512.0 / 900.0
 """Canvas width / height assumed before a browser reports its own: the 3D canvas between the two docked
 panels of a 1400 x 900 window (measured in Chromium: 512 x 900 px)."""
+DEFAULT_CANVAS_PX = (512, 900)
+"""That canvas in pixels (the labels, a fixed number of pixels tall, are laid out for it)."""
 FOOTPRINT_FILL = 0.7
 """Share of the view the footprint spans along the binding axis (width or height)."""
 VIEW_MARGIN = 0.85
@@ -216,5 +218,5 @@ def footprint_share(ground: np.ndarray, pose: CameraPose, aspect: float | None =
     return float(np.ptp(ndc[:, 0]) / 2.0), float(np.ptp(ndc[:, 1]) / 2.0)
 
 
-__all__ = ["DEFAULT_ASPECT", "FOOTPRINT_FILL", "VIEW_FOV_Y", "VIEW_MARGIN", "CameraPose", "camera_axes",
-           "footprint_share", "frame_footprint", "view_direction", "view_ndc"]
+__all__ = ["DEFAULT_ASPECT", "DEFAULT_CANVAS_PX", "FOOTPRINT_FILL", "VIEW_FOV_Y", "VIEW_MARGIN", "CameraPose",
+           "camera_axes", "footprint_share", "frame_footprint", "view_direction", "view_ndc"]

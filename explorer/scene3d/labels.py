@@ -1,0 +1,171 @@
+"""Placing the 3D view's text labels so that none is clipped by the view's edge or stacked on another.
+
+viser draws a label as screen-sized text beside its 3D point, on the side its ``anchor`` names
+(``"center-right"``: the label's right-centre is at the point, so the text runs to the left).  Given the
+camera pose the view is framed with (:mod:`explorer.scene3d.camera`), :func:`place_labels` projects each
+label's point, estimates its box in pixels (:func:`label_box_px`; measured in Chromium: 5.3 px per
+character and 12 px of text at ``font_screen_scale=1``, plus the label's padding) and gives each label an
+anchor whose box lies inside the view and clear of every other shown label's (the most labels shown, the
+earlier ones of a priority order first, each on the side nearest its preference; a label may also stand at
+one of its alternative points).  A label whose points are outside the view, or that fits nowhere beside the
+others, is hidden -- never drawn half outside or over another.  Pure numpy (no viser).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from explorer.scene3d.camera import view_ndc
+
+CHAR_PX = 5.6
+"""Width of one character of a label at ``font_screen_scale=1``, pixels (measured: 5.0-5.4; rounded up)."""
+TEXT_PX = 14.0
+"""Height of a label's text line, pixels (measured: 12 with descenders; rounded up)."""
+PAD_PX = 4.0
+"""Padding added on every side of a label's text (its background box)."""
+GAP_PX = 2.0
+"""Free pixels kept between two labels and between a label and the view's edge."""
+
+ANCHOR_OFFSET: dict[str, tuple[float, float]] = {
+    "top-left": (0.0, 0.0), "top-center": (-0.5, 0.0), "top-right": (-1.0, 0.0),
+    "center-left": (0.0, -0.5), "center-center": (-0.5, -0.5), "center-right": (-1.0, -0.5),
+    "bottom-left": (0.0, -1.0), "bottom-center": (-0.5, -1.0), "bottom-right": (-1.0, -1.0),
+}
+"""Box origin relative to the label's point, in box widths / heights (x right, y down), per viser anchor."""
+FALLBACK_ANCHORS = ("center-left", "center-right", "bottom-left", "top-left", "bottom-right", "top-right",
+                    "bottom-center", "top-center")
+"""Anchors tried after a label's own preferences, in this order."""
+
+
+@dataclass(frozen=True)
+class Label:
+    """A label to place.
+
+    Attributes
+    ----------
+    key : str
+        Its node name.
+    text : str
+    point : ndarray, shape (3,)
+        Display km.
+    anchors : tuple of str
+        Preferred anchors, best first (then :data:`FALLBACK_ANCHORS`).
+    scale : float
+        viser's ``font_screen_scale``.
+    alternatives : tuple of ndarray (3,)
+        Other points the label may stand at (for example the other end of a scanline), tried after
+        ``point``.
+    """
+
+    key: str
+    text: str
+    point: np.ndarray
+    anchors: tuple[str, ...] = ("center-left",)
+    scale: float = 1.0
+    alternatives: tuple[np.ndarray, ...] = ()
+
+
+def label_box_px(text: str, scale: float = 1.0) -> tuple[float, float]:
+    """(width, height) in pixels of a label showing ``text`` (one line), padding included."""
+    return CHAR_PX * scale * len(text) + 2 * PAD_PX, TEXT_PX * scale + 2 * PAD_PX
+
+
+def box_at(point_px: np.ndarray, size: tuple[float, float], anchor: str) -> np.ndarray:
+    """Box (x0, y0, x1, y1) in pixels (y down) of a label of ``size`` anchored at ``point_px``."""
+    fx, fy = ANCHOR_OFFSET[anchor]
+    x0, y0 = point_px[0] + fx * size[0], point_px[1] + fy * size[1]
+    return np.array([x0, y0, x0 + size[0], y0 + size[1]])
+
+
+def boxes_overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
+    """True when boxes (x0, y0, x1, y1) come closer than ``gap`` pixels on both axes."""
+    return bool(a[0] < b[2] + gap and b[0] < a[2] + gap and a[1] < b[3] + gap and b[1] < a[3] + gap)
+
+
+def project_px(points: np.ndarray, position: np.ndarray, look_at: np.ndarray, *, fov_y: float,
+               width: float, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (N, 2) (x right, y down, origin top-left) and in-front flags (N,) of points."""
+    ndc, depth = view_ndc(points, position, look_at, fov_y=fov_y, aspect=width / height)
+    px = np.stack([(ndc[:, 0] + 1.0) * 0.5 * width, (1.0 - ndc[:, 1]) * 0.5 * height], axis=1)
+    return px, depth > 0
+
+
+def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndarray, *, fov_y: float,
+                 width: float, height: float) -> dict[str, tuple[str, np.ndarray, np.ndarray] | None]:
+    """An anchor for each label so that no two overlap and each lies wholly inside the view.
+
+    Parameters
+    ----------
+    labels : sequence of Label
+        In priority order (a later label yields to an earlier one).
+    position, look_at : ndarray, shape (3,)
+        The camera, display km.
+    fov_y : float
+        Vertical field of view, radians.
+    width, height : float
+        The view in pixels.
+
+    Returns
+    -------
+    dict
+        ``{key: (anchor, box (x0, y0, x1, y1) px, point (3,))}`` -- the point being the label's own or one
+        of its alternatives --, or ``{key: None}`` for a label left out (its points are outside the view or
+        behind the camera, or no anchor fits).
+    """
+    out: dict[str, tuple[str, np.ndarray, np.ndarray] | None] = {lab.key: None for lab in labels}
+    if not labels:
+        return out
+    g = GAP_PX
+    options: list[list[tuple[int, str, np.ndarray, np.ndarray]]] = []  # per label: (rank, anchor, box, point)
+    for lab in labels:
+        opts: list[tuple[int, str, np.ndarray, np.ndarray]] = []
+        cands = np.array([lab.point, *lab.alternatives], dtype=np.float64).reshape(-1, 3)
+        px, front = project_px(cands, position, look_at, fov_y=fov_y, width=width, height=height)
+        size = label_box_px(lab.text, lab.scale)
+        anchors = tuple(dict.fromkeys((*lab.anchors, *FALLBACK_ANCHORS)))
+        for k, (p, ok) in enumerate(zip(px, front, strict=True)):
+            if not (ok and 0.0 <= p[0] <= width and 0.0 <= p[1] <= height):
+                continue
+            for rank, anchor in enumerate(anchors):
+                box = box_at(p, size, anchor)
+                if box[0] >= g and box[1] >= g and box[2] <= width - g and box[3] <= height - g:
+                    opts.append((k * len(anchors) + rank, anchor, box, cands[k]))
+        opts.sort(key=lambda o: o[0])
+        options.append(opts)
+    # the most labels shown, earlier ones first, each as near its preferred side as may be: a depth-first
+    # search over the anchors (a few labels, a few anchors each; bounded)
+    n = len(labels)
+    best: list = [None] * n
+    best_score: tuple = (-1,)
+    chosen: list = [None] * n
+    budget = [20_000]
+
+    def search(i: int, count: int) -> None:
+        nonlocal best, best_score
+        budget[0] -= 1
+        if count + sum(1 for o in options[i:] if o) < best_score[0] or budget[0] < 0:
+            return
+        if i == n:
+            shown = tuple(c is not None for c in chosen)
+            score = (count, shown, -sum(c[0] for c in chosen if c is not None))
+            if score > best_score:
+                best_score, best = score, list(chosen)
+            return
+        for opt in options[i]:
+            if not any(c is not None and boxes_overlap(opt[2], c[2], g) for c in chosen[:i]):
+                chosen[i] = opt
+                search(i + 1, count + 1)
+        chosen[i] = None
+        search(i + 1, count)
+
+    search(0, 0)
+    for lab, c in zip(labels, best, strict=True):
+        out[lab.key] = None if c is None else (c[1], c[2], c[3])
+    return out
+
+
+__all__ = ["ANCHOR_OFFSET", "CHAR_PX", "FALLBACK_ANCHORS", "GAP_PX", "PAD_PX", "TEXT_PX", "Label", "box_at",
+           "boxes_overlap", "label_box_px", "place_labels", "project_px"]
