@@ -183,3 +183,44 @@ def test_explore_check_without_gcps_is_refused(tmp_path, capsys):
     assert main(["explore", "--preset", "WSU", "--check", str(tmp_path / "c.csv"), "--port", "8185"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].endswith(
         "--check goes with --gcps (the check points of the refinement)")
+
+
+def test_a_csm_camera_is_refined_live_with_its_trajectory(server):
+    """``explore --isd --gcps``: the CSM camera itself (usgscsm's orbital test camera) adjusted by a known roll;
+    the folder's 3D trajectory turns by the angle of the fitted roll, pitch and yaw, and does not move."""
+    import numpy as np
+
+    from explorer.app.refine_view import refine_target_of
+    from explorer.geometry.rotations import rotation_from_opk
+    from explorer.refine.line_adjust import adjusted_sensor, correction_for
+    from explorer.refine.points_io import PointTable
+    from explorer.refine.trajectory import rotation_angle
+    from explorer.scene3d.builders import DisplayFrame
+    from explorer.sources import load_source
+    from tests.refine.test_target import ORBITAL
+
+    source = load_source("isd", str(ORBITAL))
+    target = refine_target_of(source)
+    camera = source.scene
+    assert not target.is_stand_in and target.model is camera
+    truth = adjusted_sensor(camera, correction_for(camera, "attitude"), np.array([2e-3, -1e-3, 0.0]))
+    rng = np.random.default_rng(4)
+    r, c = rng.uniform(1, camera.n_rows - 2, 12), rng.uniform(1, camera.n_columns - 2, 12)
+    g = truth.image_to_ground(r, c)
+    lon, lat, h = camera.frame.enu_to_geodetic(g)
+    control = PointTable([f"g{i}" for i in range(12)], r + rng.normal(0, 0.05, 12), c + rng.normal(0, 0.05, 12),
+                         lon, lat, h)
+    frame = DisplayFrame.for_scene(camera)
+    view = RefineView(server.gui, target, control, sigma_px=0.05, scene_api=server.scene, display_frame=lambda: frame)
+    assert view.error is None and view.has_trajectory and view.refinement.model == "attitude"
+    assert view.what.content == "Adjusting **the CSM camera itself**."
+    p = {q["name"]: q["value"] for q in view.refinement.report()["parameters"]}
+    turn = rotation_angle(rotation_from_opk(*(np.array([p[k]]) for k in ("roll_rad", "pitch_rad", "yaw_rad"))))[0]
+    assert view.trajectory_3d["attitude_change_urad"] == pytest.approx([turn * 1e6] * 2, rel=1e-6)
+    assert view.trajectory_3d["displacement_m"] == pytest.approx([0.0, 0.0], abs=1e-6)
+    sigma = np.array([q["sigma"] for q in view.refinement.report()["parameters"]])
+    assert np.all(np.abs(view.refinement.parameters - np.array([2e-3, -1e-3, 0.0])) < 3 * sigma), (
+        view.refinement.parameters, sigma)  # roll, pitch to ~3e-5 rad; yaw is loose on a 16 x 16 px image
+    view.drop.value = "g0"
+    view.update()
+    assert view.error is None and view.refinement.result.outlier.size == 11

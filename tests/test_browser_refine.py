@@ -124,18 +124,21 @@ def _plot_texts(page) -> str:
 
 def _look_at_the_trajectories(app, view) -> None:
     """Point every browser's camera at the drawn trajectories, from the app's viewing direction, far enough back
-    to see both whole."""
+    to see both whole; hide the app's nodes but the orbit."""
     pts = np.concatenate([np.asarray(view._nodes[f"/refine/{k}/track"].points).reshape(-1, 3)
                           for k in ("original", "adjusted")])
     mid = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-    extent = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) + app.frame.diagonal_km
+    extent = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) + 0.5 * app.frame.diagonal_km
+    for name, handle in app.nodes.items():  # only the orbit stays beside them (the SCPs' residual red would count)
+        if not name.startswith("/orbit"):
+            handle.visible = False
     pos, look, _ = app.camera_pose
     direction = (np.asarray(pos) - np.asarray(look)) / np.linalg.norm(np.asarray(pos) - np.asarray(look))
     for client in app.server.get_clients().values():
         with client.atomic():
             client.camera.far = 100.0 * extent
             client.camera.near = 1e-3 * extent
-            client.camera.position = tuple(mid + 2.5 * extent * direction)
+            client.camera.position = tuple(mid + 1.5 * extent * direction)
             client.camera.look_at = tuple(mid)
 
 
@@ -157,6 +160,7 @@ def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
         page.wait_for_function("() => document.body.innerText.includes('trajectory moved by')")
         text = _plot_texts(page)
         assert "residuals (measured - model)" in text and "before (vectors" in text  # the quiver
+        assert f"the field the {view.refinement.model} adjustment removed" in text  # the removed field
         names = view.refinement.parameter_names  # the parameter table: every parameter with its sigma
         assert all(name in text for name in names) and "sigma" in text, (names, text)
         sigma = f"{view.refinement.parameter_table()[0]['sigma']:.3g}"
