@@ -217,13 +217,8 @@ class Ephemeris:
             raise ValueError("ephemeris times must increase")
 
     def position(self, t: np.ndarray) -> np.ndarray:
-        """ECEF position (M, 3), metres.
-
-        Interpolated as offsets from the middle sample (the weights sum to one): the round-off of the weighted
-        sum stays at the offsets' scale (hundreds of km) instead of the Earth's radius, a few 1e-9 m less noise
-        (about 1e-9 px of a 0.7 m pixel seen from 700 km)."""
-        ref = self.position_m[self.position_m.shape[0] // 2]
-        return lagrange_interpolate(self.time_s, self.position_m - ref, t, self.order) + ref
+        """ECEF position (M, 3), metres."""
+        return lagrange_interpolate(self.time_s, self.position_m, t, self.order)
 
     def velocity(self, t: np.ndarray) -> np.ndarray:
         """ECEF velocity (M, 3), m/s (interpolated velocity samples)."""

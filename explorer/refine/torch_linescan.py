@@ -188,7 +188,9 @@ class TorchRigorous(_Projector):
         t_np = t.detach().numpy()
         idx = self._window(eph.time_s, t_np, eph.order)
         w = self._lagrange_weights_compiled_order(eph.time_s, idx, t)
-        ref = eph.position_m[eph.position_m.shape[0] // 2]  # offsets from the middle sample, as the compiled path
+        # offsets from the middle sample (the weights sum to one): the round-off of the weighted sum stays at the
+        # offsets' scale instead of the Earth's radius (the compiled path sums the ECEF positions themselves)
+        ref = eph.position_m[eph.position_m.shape[0] // 2]
         pos = _weighted_sum(w, _t(eph.position_m[idx] - ref)) + _t(ref)
         vel = _weighted_sum(w, _t(eph.velocity_m_s[idx]))
         if corr.has_position:
