@@ -10,6 +10,7 @@ and the brute-force solver of ``tests/truth.py``.
 from __future__ import annotations
 
 import contextlib
+import html
 import socket
 import threading
 import time
@@ -564,7 +565,7 @@ def test_a_loaded_scene_is_named_and_the_preset_dropdown_still_switches(server, 
     app = make_app(server, sources=[src])
     assert app.handles["preset"].value == src.label and app.handles["preset"].options[0] == src.label
     assert app.scene is src.scene and app.handles["relief"].disabled  # preset sliders do not apply
-    assert src.label in app.handles["status"].content
+    assert src.label in html.unescape(app.handles["status"].content)  # Markdown: "_" as an entity
     pose = app.camera_pose
     app.handles["preset"].value = "WSU"
     assert app.scene.name == "WSU" and not app.handles["relief"].disabled
@@ -839,3 +840,53 @@ def test_3d_labels_are_inside_the_framed_view_and_apart(server, preset):
         ends = app.frame.ground(app._B.scanline_footprints(scene, np.array([row]), scene.terrain.mean_height)[0])
         at = np.asarray(app.nodes[f"/scanlines/labels/{i}"].position)
         assert min(np.linalg.norm(ends - at, axis=1)) < 1e-5
+
+
+def test_status_line_shortens_a_long_name_and_gives_it_whole_in_a_tooltip(server, tmp_path):
+    """Issue 24: a long file name is shortened in the status line, its start and end kept, the full name in a
+    tooltip (an HTML title attribute; viser's Markdown passes HTML through); Markdown characters in it are
+    literal."""
+    import re
+
+    from explorer.app.views import STATUS_NAME_CHARS
+    from explorer.presets import build_scene
+    from explorer.sources import load_source
+
+    path = tmp_path / "PHR1B_P_201709281038045_SEN_PRG_FC_178608-001_a_very_long_delivery_name.json"
+    build_scene("WSU").save(path)
+    src = load_source("scene", str(path))
+    assert len(src.label) > STATUS_NAME_CHARS
+    app = make_app(server, sources=[src])
+    content = app.handles["status"].content
+    m = re.search(r'<span title="([^"]*)">(.*?)</span>', content)
+    assert m is not None and html.unescape(m.group(1)) == src.label
+    shown = html.unescape(m.group(2))
+    assert len(shown) == STATUS_NAME_CHARS and "\u2026" in shown
+    head, tail = shown.split("\u2026")
+    assert src.label.startswith(head) and src.label.endswith(tail) and len(head) > 20 and len(tail) > 10
+    assert "_" not in m.group(2) and "&#95;" in m.group(2)  # no emphasis from the name's underscores
+    assert src.label in app.handles["preset"].hint  # the Scene dropdown's tooltip names it whole too
+    app.handles["preset"].value = "WSU"  # a short name: as it is, no tooltip
+    assert app.handles["status"].content.startswith("**Status:** WSU: updated in") and "<span" not in \
+        app.handles["status"].content
+
+
+def test_status_line_times_the_whole_update_from_the_change(server):
+    """Issue 24: the status line's time runs from the user's change (a slider: its debounce included) to the
+    scene and maps shown, not only the last redraw -- checked against the test's own stopwatch."""
+    import re
+
+    app = make_app(server, methods=("toy_poly",), background=True, debounce_s=0.4)
+    try:
+        assert app.wait_idle(60)
+        t0 = time.monotonic()
+        app.handles["relief"].value = 700  # a slider: computed once it has been still for debounce_s
+        assert app.wait_idle(60)
+        elapsed = time.monotonic() - t0
+        m = re.search(r"updated in ([0-9.]+) s", app.handles["status"].content)
+        assert m is not None and app.settings().relief_m == 700.0
+        whole = float(m.group(1))
+        assert 0.4 <= whole <= elapsed + 0.01  # the debounce wait is part of it; nothing before the change
+        assert whole >= app.last_times["total"] + 0.39  # more than the redraw alone
+    finally:
+        app.close()

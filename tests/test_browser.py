@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import itertools
+import json
 import os
 import socket
 import threading
@@ -511,6 +512,12 @@ def test_dimap_with_dem_is_framed_and_its_labels_are_apart(real_explorer, browse
     try:
         page.wait_for_function("() => document.body.innerText.includes('nr row: RMSE')")
         _check_framing_and_labels(app, page)
+        # the status line shows the long file name shortened, the whole name as its tooltip
+        from explorer.app.views import STATUS_NAME_CHARS, short_name
+
+        assert len(label) > STATUS_NAME_CHARS
+        tip = page.locator(f"span[title={json.dumps(label)}]")
+        assert tip.count() == 1 and tip.inner_text() == short_name(label)
     finally:
         page.context.close()
 

@@ -43,6 +43,25 @@ def short_name(name: str, limit: int = STATUS_NAME_CHARS) -> str:
     return name[:head] + "\u2026" + name[len(name) - (limit - 1 - head):]
 
 
+def markdown_literal(text: str) -> str:
+    """``text`` as literal characters in viser's Markdown inside a line (HTML-escaped; the characters Markdown
+    would read as emphasis, code, links, strike-through or escapes -- ``\\`*_[]~|`` -- as numeric entities)."""
+    import html
+
+    return "".join(f"&#{ord(c)};" if c in "\\`*_[]~|" else c for c in html.escape(text, quote=True))
+
+
+def status_name(name: str, limit: int = STATUS_NAME_CHARS) -> str:
+    """A scene name for the status line (Markdown): shortened by :func:`short_name` when longer than
+    ``limit``, the full name then in a tooltip (an HTML ``title``; viser's Markdown passes HTML through)."""
+    shown = markdown_literal(short_name(name, limit))
+    if len(name) <= limit:
+        return shown
+    import html
+
+    return f'<span title="{html.escape(name, quote=True)}">{shown}</span>'
+
+
 class Superseded(Exception):
     """A newer update request arrived; the current one stops at its next checkpoint."""
 
@@ -162,7 +181,7 @@ class Views:
     def _update_scene(self, s: Settings, gen: int | None) -> None:
         """Scene, SCOPs and SCPs; ground (DEM mesh), orbit and camera on a new scene / frame."""
         B, m = self._B, self.model  # noqa: N806
-        self._status(f"building scene {s.preset}", 2)
+        self._status(f"building scene {status_name(s.preset)}", 2)
         scene = m.scene(s)
         self._check(gen)
         scops = m.scops(s)
@@ -203,6 +222,9 @@ class Views:
                 self.handles["sel_col"].max = float(scene.n_columns - 1)
                 for key in ("relief", "rates", "jitter"):
                     self.handles[key].disabled = fixed
+                # the dropdown may cut a long file name: its tooltip gives the one shown whole
+                self.handles["preset"].hint = f"shown: {s.preset} -- a loaded file (named by file and sensor) or a " \
+                    "synthetic preset"
         if self._changed("scops", (frame_key, s.scop_density)):
             self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
 
@@ -398,7 +420,7 @@ class Views:
         sub = [n for n, r in runs.items() if r.preview]
         name = self.handles["preset"].value if self.scene is not None else ""
         whole = self.last_times.get("since_request", self.last_update_s)
-        txt = f"{short_name(name)}: updated in {whole:.2f} s ({len(scps):,} SCPs)"
+        txt = f"{status_name(name)}: updated in {whole:.2f} s ({len(scps):,} SCPs)"
         if sub:
             txt += f"; preview on a seeded subset (full result computing): {', '.join(sub)}"
         if pending:
@@ -635,4 +657,4 @@ class Views:
             run()
 
 
-__all__ = ["Superseded", "Views", "short_name"]
+__all__ = ["Superseded", "Views", "markdown_literal", "short_name", "status_name"]
