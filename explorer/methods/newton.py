@@ -52,6 +52,14 @@ from explorer.sensor import has_polynomial_exterior
 DERIVATIVES = ("analytic", "central")
 TABLE_MODEL_TOL_PX = 1e-8
 """Least step tolerance (rows) on a sensor without MPC polynomials (the round-off floor of its residual)."""
+PREDICTED_STOP_MAX_STEP = 1e-2
+"""On a sensor without MPC polynomials (3 CE per iteration: central differences) ``nr`` also stops when Newton's
+error estimate of the next iterate, ``K step^2`` with ``K = |f''| / (2 |f'|)`` from the derivatives at the last
+two iterates (times :data:`PREDICTED_STOP_SAFETY`), is below ``tol_px`` and the step is below this many rows:
+its column is then evaluated at the returned row (1 CE) instead of a further iteration (3 CE).  Without it
+``nr`` took 3-4 iterations (9-12 CE) on the Pleiades DIMAP model where the second one had already landed
+within its round-off (measured 11.3 CE per point)."""
+PREDICTED_STOP_SAFETY = 10.0
 
 
 def residual_and_derivative(
@@ -225,6 +233,9 @@ class NewtonRaphson(BestScanlineMethod):
             # and the residual of such a model (interpolated tables, iterated corrections) carries round-off of
             # a few 1e-10 px, so a step below 1e-10 rows is not always reached: its floor is the tolerance
             tol_px = max(float(tol_px), TABLE_MODEL_TOL_PX)
+        #: Stop when Newton's own error estimate of the next iterate is below ``tol_px`` (table models: see
+        #: :data:`PREDICTED_STOP_MAX_STEP`), not only when a step is.
+        self.predicted_stop = not has_polynomial_exterior(scene)
         self.start = start
         self.tol_px = float(tol_px)
         self.max_iter = int(max_iter)
@@ -295,6 +306,9 @@ class NewtonRaphson(BestScanlineMethod):
         lo_known = np.zeros(n, dtype=bool)  # bracket end evaluated (root proven on its right)
         hi_known = np.zeros(n, dtype=bool)
         f_prev = np.full(n, np.inf)
+        t_last = np.full(n, np.nan)  # the previous iterate and its derivative (Newton's error estimate)
+        fd_last = np.full(n, np.nan)
+        predicted = np.zeros(n, dtype=bool)  # stopped on the error estimate: column evaluated at the row
         for _ in range(self.max_iter):
             if not act.size:
                 break
@@ -320,6 +334,15 @@ class NewtonRaphson(BestScanlineMethod):
             step = np.where(fd_ok, f / np.where(fd_ok, fd, 1.0), np.inf)
             t_newton = t - step
             done = (exact | (np.abs(step) < self.tol_px)) & ~outside
+            if self.predicted_stop:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    k_est = np.abs(fd - fd_last) / np.abs(t - t_last) / (2.0 * np.abs(fd))
+                near = (np.isfinite(k_est) & (np.abs(step) < PREDICTED_STOP_MAX_STEP) & (t_newton > lo)
+                        & (t_newton < hi) & (np.abs(f) < f_prev)
+                        & (PREDICTED_STOP_SAFETY * k_est * step * step < self.tol_px))
+                landed = near & ~done & ~outside
+                predicted[act[landed]] = True
+                done |= landed
             row_out[act[done]] = np.where(exact[done], t[done], t_newton[done])
             converged[act[done]] = True
             row_out[act[outside]] = np.nan
@@ -333,8 +356,15 @@ class NewtonRaphson(BestScanlineMethod):
             t_next = np.where(~slow & fd_ok & leave_lo, np.where(lo_known, 0.5 * (lo + hi), lo), t_next)
             keep = ~(done | outside)
             act, g = act[keep], g[keep]
+            t_last, fd_last = t[keep], fd[keep]
             t, lo, hi = t_next[keep], lo[keep], hi[keep]
             lo_known, hi_known, f_prev = lo_known[keep], hi_known[keep], np.abs(f[keep])
         # points still active hit max_iter: last iterate, converged False (already stored)
-        info = {"iterations": iterations, "start_row": start, "bracket": (lo0, hi0), "evaluator": "numpy"}
+        if predicted.any():  # the column at the returned row (the last evaluation was a Newton step away)
+            idx = np.flatnonzero(predicted)
+            _, y = self.scene.focal_plane(ground[idx], self.scene.scanline_time(row_out[idx]))
+            col_out[idx] = self.scene.interior.y_to_column(y)
+            ce[idx] += 1
+        info = {"iterations": iterations, "start_row": start, "bracket": (lo0, hi0), "evaluator": "numpy",
+                "predicted_stop": predicted}
         return self._result(ground, row_out, converged, ce, col=col_out, trace=tr, info=info)
