@@ -1,9 +1,11 @@
 """Orthorectification benchmark: our RPC orthoimage against GDAL's RPC warp on the same points in one run,
 and the scale run.  Writes ``benchmarks/results/ortho.json``.
 
-Usage: python benchmarks/ortho_bench.py [--size 400] [--scale 10000]
-  --size   source crop (pixels) of the real Pleiades RPC scene for the GDAL comparison
-  --scale  output size of the synthetic ISB scale run (0 skips it)
+Usage: python benchmarks/ortho_bench.py [--size 400] [--scale 10000] [--schedulers 1500]
+  --size        source crop (pixels) of the real Pleiades RPC scene for the GDAL comparison
+  --scale       output size of the synthetic ISB scale run (0 skips it)
+  --schedulers  source crop of the threads-vs-processes run on a big DEM (0 skips it): the same job written with
+                ``--scheduler threads`` and ``processes`` in one run (blocks/s of each)
 """
 
 from __future__ import annotations
@@ -101,11 +103,48 @@ def scale_run(n: int, chunk: int, tmp: Path) -> dict:
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, **stats}
 
 
+def scheduler_comparison(n: int, chunk: int, tmp: Path, upsample: int = 20) -> dict:
+    """The same orthoimage (Pleiades RPC crop on its DEM resampled ``upsample`` x finer: a 34 MB grid, as a big
+    DEM tile) written with the threads and the processes scheduler, one after the other in one run."""
+    import cloudpickle
+
+    from explorer.terrain_io import GeoDEM
+
+    rpc = read_rpc(RPC_FILE).with_pixel_shift(-19000, -19500)
+    dem0 = read_geotiff_dem(DEM)
+    a, b, c, d, e, f = dem0.transform
+    dem = GeoDEM(np.kron(dem0.heights, np.ones((upsample, upsample))), (a / upsample, b, c, d, e / upsample, f),
+                 dem0.crs, "ellipsoid")
+    r = np.array([0, 0, n - 1, n - 1.0])
+    cc = np.array([0, n - 1, n - 1, 0.0])
+    lon, lat, _, _ = localization_on_dem(rpc, r, cc, dem)
+    epsg = LocalFrame(float(lat.mean()), float(lon.mean())).utm_epsg()
+    grid = grid_covering(lon, lat, 0.5, epsg)
+    pattern = default_pattern(epsg, 0.5, (grid.x0, grid.y0))
+    geometry = OrthoGeometry(RPCSensor(dataclasses.replace(rpc, image_size=(n, n))), DEMHeights(dem))
+    src = render_synthetic_source(geometry.image_to_lonlat, (n, n), pattern, tmp / "sched_src.npy")
+    arr = ortho_dask_array(geometry, SourceImage(src), grid, chunk)
+    out: dict = {"source_px": [n, n], "output_px": [grid.height, grid.width], "chunk": chunk,
+                 "dem_cells": list(dem.heights.shape), "geometry_pickle_mb": len(cloudpickle.dumps(geometry)) / 1e6,
+                 "load_avg_1min": os.getloadavg()[0]}
+    files = {}
+    for scheduler in ("threads", "processes"):
+        t0 = time.perf_counter()
+        stats = write_orthoimage(arr, grid, tmp / f"sched_{scheduler}.tif", scheduler=scheduler)
+        dt = time.perf_counter() - t0
+        out[scheduler] = {"seconds": dt, "blocks": stats["blocks"], "blocks_per_s": stats["blocks"] / dt}
+        files[scheduler] = (tmp / f"sched_{scheduler}.tif").read_bytes()
+    out["identical_files"] = files["threads"] == files["processes"]
+    out["threads_over_processes"] = out["processes"]["seconds"] / out["threads"]["seconds"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=400)
     ap.add_argument("--scale", type=int, default=10000)
     ap.add_argument("--chunk", type=int, default=2048)
+    ap.add_argument("--schedulers", type=int, default=1500)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "ortho.json")
     args = ap.parse_args()
@@ -113,6 +152,9 @@ def main() -> None:
         out = {"measured": time.strftime("%Y-%m-%dT%H:%M:%S"),
                "gdal_comparison": gdal_comparison(args.size, Path(tmp), args.repeats)}
         print(json.dumps(out, indent=1), flush=True)
+        if args.schedulers:
+            out["schedulers"] = scheduler_comparison(args.schedulers, 128, Path(tmp))
+            print(json.dumps(out["schedulers"], indent=1), flush=True)
         if args.scale:
             out["scale"] = scale_run(args.scale, args.chunk, Path(tmp))
             print(json.dumps(out["scale"], indent=1))

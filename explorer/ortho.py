@@ -13,6 +13,7 @@ file is byte-identical whatever the scheduler.  Pixel convention:
 from __future__ import annotations
 
 import os
+import weakref
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -432,40 +433,97 @@ def render_block(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, 
     return out.reshape(shape)
 
 
-def ortho_dask_array(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, chunk: int = 2048) -> da.Array:
-    """The orthoimage as a lazy dask array (float32) over output chunks of ``chunk`` x ``chunk``."""
+class BlockRenderer:
+    """The function of every output block of one orthoimage: ``render_block`` on one geometry, source and grid.
 
-    def block(block_info: dict | None = None) -> np.ndarray:
+    With ``--scheduler processes`` dask pickles a task's function for every block; a geometry on a DEM holds the
+    DEM's grid (an SRTM tile is 100 MB of float64), so the job would travel to a worker once per block.  Instead
+    :func:`process_pool` sends each worker the pickled renderer **once**, when it starts, and while that pool
+    runs a renderer pickles as its token only (:func:`_shipped_renderer` finds it in the worker).
+    """
+
+    def __init__(self, geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid) -> None:
+        import uuid
+
+        self.geometry, self.source, self.grid = geometry, source, grid
+        self.token = uuid.uuid4().hex
+        _LIVE_RENDERERS[self.token] = self
+
+    def __call__(self, block_info: dict | None = None) -> np.ndarray:
         assert block_info is not None  # dask passes it to map_blocks functions that accept it
         (r0, r1), (c0, c1) = block_info[None]["array-location"]
-        return render_block(geometry, source, grid, slice(r0, r1), slice(c0, c1))
+        return render_block(self.geometry, self.source, self.grid, slice(r0, r1), slice(c0, c1))
 
-    return da.map_blocks(block, dtype=np.float32, chunks=da.core.normalize_chunks(chunk, (grid.height, grid.width)),
+    def __reduce__(self):  # noqa: ANN204 - pickle protocol
+        if self.token in _SHIPPED_TOKENS:
+            return (_shipped_renderer, (self.token,))
+        return (_rebuilt_renderer, (self.geometry, self.source, self.grid, self.token))
+
+
+#: Renderers of this process (weak: a finished run's job is not kept), and the tokens the running pool's workers
+#: hold; in a worker, the renderers it was sent at start.
+_LIVE_RENDERERS: weakref.WeakValueDictionary[str, BlockRenderer] = weakref.WeakValueDictionary()
+_SHIPPED_TOKENS: set[str] = set()
+_WORKER_RENDERERS: dict[str, BlockRenderer] = {}
+
+
+def _rebuilt_renderer(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, token: str) -> BlockRenderer:
+    renderer = BlockRenderer.__new__(BlockRenderer)
+    renderer.geometry, renderer.source, renderer.grid, renderer.token = geometry, source, grid, token
+    return renderer
+
+
+def _shipped_renderer(token: str) -> BlockRenderer:
+    try:
+        return _WORKER_RENDERERS[token]
+    except KeyError:  # pragma: no cover - a pool is always made with its renderers
+        raise RuntimeError(f"ortho worker {os.getpid()} was not sent renderer {token}") from None
+
+
+def ortho_dask_array(geometry: OrthoGeometry, source: SourceImage, grid: OrthoGrid, chunk: int = 2048) -> da.Array:
+    """The orthoimage as a lazy dask array (float32) over output chunks of ``chunk`` x ``chunk``."""
+    return da.map_blocks(BlockRenderer(geometry, source, grid), dtype=np.float32,
+                         chunks=da.core.normalize_chunks(chunk, (grid.height, grid.width)),
                          meta=np.empty((0, 0), np.float32))
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
-    """One pool of worker processes for a whole ``--scheduler processes`` run.
+    """One pool of worker processes for a whole ``--scheduler processes`` run, holding the run's job.
 
     dask's ``processes`` scheduler starts a new pool for every ``compute`` call unless it is given one; each
     new worker imports the package and loads its compiled kernels again (about 2 s a batch of blocks: the
-    25x slowdown of issue 25), so the pool is made once and handed to every batch.  Workers are spawned
+    25x slowdown of issue 25), so the pool is made once and handed to every batch.  The live
+    :class:`BlockRenderer` objects (the geometry with its DEM, the source, the grid) are pickled once and sent to
+    each worker as it starts; until :func:`release_pool` the tasks carry their token only.  Workers are spawned
     (dask's default context), initialised as dask does, and leave when the run is killed (:func:`_init_worker`).
     """
+    import cloudpickle
     from dask.multiprocessing import get_context
 
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):  # as dask.multiprocessing.get: consistent hashing
         os.environ["PYTHONHASHSEED"] = "6640"
-    return ProcessPoolExecutor(max(1, workers), mp_context=get_context(), initializer=_init_worker,
-                               initargs=(os.getpid(),))
+    renderers = dict(_LIVE_RENDERERS.items())
+    _SHIPPED_TOKENS.difference_update(renderers)
+    payload = cloudpickle.dumps(renderers)  # once, in full
+    pool = ProcessPoolExecutor(max(1, workers), mp_context=get_context(), initializer=_init_worker,
+                               initargs=(os.getpid(), payload))
+    _SHIPPED_TOKENS.update(renderers)
+    pool._pushbroom_tokens = set(renderers)  # type: ignore[attr-defined]
+    return pool
+
+
+def release_pool(pool: ProcessPoolExecutor, *, wait: bool) -> None:
+    """Shut a :func:`process_pool` down; its renderers pickle in full again."""
+    _SHIPPED_TOKENS.difference_update(getattr(pool, "_pushbroom_tokens", ()))
+    pool.shutdown(wait=wait, cancel_futures=True)
 
 
 #: Seconds between a pool worker's checks that the run that started it is alive.
 PARENT_POLL_S = 0.2
 
 
-def _init_worker(parent_pid: int) -> None:
-    """Initialise a pool worker as dask does, and make it leave when its run is gone.
+def _init_worker(parent_pid: int, payload: bytes = b"") -> None:
+    """Initialise a pool worker as dask does, receive the run's renderers, and make it leave when its run is gone.
 
     A worker holds its own end of the pool's queues, so it never sees them close when the run is killed
     (SIGKILL, the out-of-memory killer): left alone it would wait forever, or finish its block, beside the
@@ -477,6 +535,10 @@ def _init_worker(parent_pid: int) -> None:
     from dask.multiprocessing import initialize_worker_process
 
     initialize_worker_process()
+    if payload:
+        import cloudpickle
+
+        _WORKER_RENDERERS.update(cloudpickle.loads(payload))
 
     def watch() -> None:
         while os.getppid() == parent_pid:
@@ -555,7 +617,7 @@ def write_orthoimage(
         completed = True
     finally:
         if pool is not None:  # the workers leave with the run (on an error or Ctrl-C without waiting for them)
-            pool.shutdown(wait=completed, cancel_futures=True)
+            release_pool(pool, wait=completed)
         if client is not None:
             cluster = getattr(client, "cluster", None)
             client.close()
