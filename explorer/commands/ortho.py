@@ -10,7 +10,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 from explorer.commands._args import (
     add_dem_datum_argument,
@@ -114,10 +114,14 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         if others:
             raise InputError(f"give one source: --rpc and {' and '.join(others)} were given")
 
-        if args.method is not None:
-            raise InputError(f"--method {args.method}: an RPC has no scanlines to search; ortho projects with the "
-                             "RPC itself (leave out --method, or give a scene)")
         rpc = read_rpc(args.rpc)
+        if args.method is not None:
+            from explorer.methods import unavailable_reason
+
+            reason = unavailable_reason(args.method, RPCSensor(rpc))  # what the method needs, declared
+            if reason is not None:
+                raise InputError(f"--method {args.method}: {reason}; ortho projects with the RPC itself without "
+                                 "--method")
         if args.image:
             shape = SourceImage(args.image).shape
             if rpc.image_size and tuple(rpc.image_size) != tuple(shape):
@@ -139,6 +143,14 @@ def build_ortho_job(args: argparse.Namespace, workdir: Path):
         surface: Surface = DEMHeights(dem) if dem is not None else EllipsoidHeight(
             float(args.height if args.height is not None else rpc.height_offset))
         h_ref = float(args.height) if args.height is not None else float(rpc.height_offset)
+        if args.method is not None:  # a learned method fitted on SCOPs of the RPC itself (it needs only pairs)
+            from explorer.methods.adapter import MethodSensor
+
+            lo_h, hi_h = surface.height_range()  # ellipsoidal; the RPC's local frame sits on the ellipsoid (h0 = 0)
+            pad = max(100.0, 0.1 * (hi_h - lo_h))
+            # (the methods take any sensor; their annotations name the Scene they were written for)
+            sensor = MethodSensor.create(cast(Any, sensor), args.method, height_range=(lo_h - pad, hi_h + pad),
+                                         scops=args.scops)
     else:
         from explorer.methods.adapter import MethodSensor
 
@@ -357,7 +369,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gsd", type=positive_float, required=True, help="output pixel size, metres (> 0)")
     p.add_argument("--method", default=None,
                    help="best-scanline method on the scene (default exact; a learned one is fitted on --scops SCOPs "
-                        "simulated from the scene)")
+                        "simulated from the scene); with --rpc a learned method fitted on the RPC (default: the RPC "
+                        "itself; the search methods need scanlines, which an RPC has none of)")
     p.add_argument("--scops", type=int_in_range(4, 100_000, "--scops"), default=100,
                    help="SCOPs per height layer a learned --method is fitted on (default 100, 3 layers)")
     p.add_argument("--chunk", type=int_in_range(16, 65536, "--chunk"), default=2048,

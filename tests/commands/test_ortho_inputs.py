@@ -190,3 +190,15 @@ def test_a_scenes_dem_becomes_its_terrain_and_one_missing_the_footprint_is_refus
                  "--out", str(out2)]) == 2
     _one_line_error(capsys, "--dem", "does not cover")
     assert not out2.exists()
+
+
+def test_a_learned_method_on_an_rpc_is_fitted_on_the_rpc_itself(tmp_path, capsys):
+    """Issue 23: a learned method needs only ground / image pairs, so ``ortho --rpc --method`` fits it on SCOPs of
+    the RPC itself (3 height layers; its column from the pairs).  Truth: the synthetic pattern rendered through the
+    RPC's own localisation; the geolocation the report measures is the method's ground to image against it
+    (measured: lrm 0.0013 px, the RPC itself 0.00076 px; a cubic-in-height column model gave 0.79 px)."""
+    out = tmp_path / "o.tif"
+    assert main(["ortho", "--rpc", str(PHR), "--synthetic", "--rpc-shape", "600x600", "--gsd", "2",
+                 "--method", "lrm", "--out", str(out)]) == 0
+    geo = _report(capsys.readouterr().out)["geolocation"]
+    assert out.exists() and geo["n_tiles"] >= 4 and geo["max_px"] < 0.01
