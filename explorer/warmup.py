@@ -7,10 +7,11 @@ load it instead of compiling.  :func:`warm_up` runs the real entry points on tin
 scene -- every preset (flat) with the compiled search methods, one paper preset with every registered
 method, the ``agile`` preset with relief (DEM kernel, relief paths of the methods), a rational function
 model at a height and on a DEM (serial and parallel projection loops, the inverse, the DEM walk) -- so
-numba compiles each kernel for the argument types the commands use; a last step compiles directly what
-``explorer/kernel_manifest.json`` lists and is still missing (:mod:`explorer.kernel_cache`, which also shows
-the progress line of a command that has to compile).  ``pushbroom warmup`` runs it; the set-up script
-calls it once.
+numba compiles each kernel for the argument types the commands use; then the data-dependent and API-only
+paths (``exact``'s safeguarded solver, the branch-free residual), in a checkout the CSM camera of the test ISD;
+a last step compiles directly what ``explorer/kernel_manifest.json`` lists and is still missing
+(:mod:`explorer.kernel_cache`, which also shows the progress line of a command that has to compile).
+``pushbroom warmup`` runs it; the set-up script calls it once.
 
 A numba kernel is compiled per argument-type signature: the inputs here have the commands' types
 (float64 arrays, tuples of floats), so one warm-up covers every scene size.
@@ -58,6 +59,7 @@ def _warm_rpc() -> None:
     from explorer.rpc import project_compiled
     from explorer.rpc.dem import localization_on_dem
     from explorer.rpc.inverse import RPCInverse
+    from explorer.rpc.sensor import RPCSensor
 
     rpc = _rpc_for_warmup()
     rng = np.random.default_rng(0)
@@ -66,6 +68,7 @@ def _warm_rpc() -> None:
     h = rng.uniform(300, 700, 64)
     lon, lat, _ = rpc.localization(row, col, h)
     rpc.projection(lon, lat, h)
+    RPCSensor(rpc).project_geodetic(lon, lat, h)  # the Sensor path's geodetic entry (its in-image pass)
     norm = (rpc.lon_offset, rpc.lon_scale, rpc.lat_offset, rpc.lat_scale, rpc.height_offset, rpc.height_scale,
             rpc.row_offset, rpc.row_scale, rpc.col_offset, rpc.col_scale)
     for parallel in (False, True):  # both loops (the choice is made by size in projection)
@@ -158,6 +161,11 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
     out.append(("orthorectification block", _warm_ortho))
     out.append(("stereo pair (triangulation, epipolar curve)", _warm_stereo))
     out.append(("rigorous line-scan model (DIMAP / DigitalGlobe line geometry)", _warm_linescan))
+    out.append(("exact's safeguarded solver on every preset and with relief", partial(_warm_exact_everywhere, ids)))
+    out.append(("kernels only the Python API calls", _warm_api))
+    isd = _checkout_isd()
+    if isd is not None:  # run here in a checkout; an installed wheel compiles them from the manifest below
+        out.append(("USGS CSM camera (the checkout's CTX ISD)", partial(_warm_isd, isd)))
     out.append(("every other kernel of the manifest (explorer.kernel_cache)", _warm_manifest))
     return out
 
@@ -219,14 +227,28 @@ def _warm_generic_pair() -> None:
 
 
 def _warm_exact(scene: Any, **options: Any) -> None:
-    """``exact`` as a command runs it, and its safeguarded iteration (the compiled general solver): that one runs
-    only on the points the fast Newton passes leave -- a data-dependent path a first run may take on any image --
-    so it is run here on every point, with the fast evaluator's tables and without them."""
+    """``exact`` as a command runs it, and its safeguarded solver (:func:`_warm_exact_safeguarded`)."""
+    _warm_one_method("exact", scene, **options)
+    _warm_exact_safeguarded(scene)
+
+
+def _warm_exact_everywhere(ids: Sequence[str]) -> None:
+    """:func:`_warm_exact_safeguarded` on every preset and on ``agile`` with relief."""
+    from explorer.presets import build_scene
+
+    for pid in ids:
+        _warm_exact_safeguarded(build_scene(pid))
+    _warm_exact_safeguarded(build_scene("agile", relief_m=500.0))
+
+
+def _warm_exact_safeguarded(scene: Any) -> None:
+    """``exact``'s safeguarded iteration (the compiled general solver) runs only on the points the fast Newton
+    passes leave -- a data-dependent path a first run may take on any image -- so it is run here on every point,
+    with the fast evaluator's tables and without them."""
     from explorer.geometry.kernels import solve_exact
     from explorer.methods import create
     from explorer.points import simulate_points
 
-    _warm_one_method("exact", scene, **options)
     method = cast(Any, create("exact", scene))
     if method.kernel_params is None:  # line geometry only: no compiled MPC solver
         return
@@ -302,6 +324,12 @@ def _warm_linescan() -> None:
     _warm_methods(scene, ["exact", "nr"], n_scops=30, n_scps=200)
 
 
+def _checkout_isd() -> Path | None:
+    """The CTX test ISD of a checkout (``tests/data``, beside the package), or None in an installed wheel."""
+    isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
+    return isd if isd.is_file() else None
+
+
 def _isd_scene(path: Path) -> object:
     """The sensor ``--isd`` gives: the CSM camera itself (as :func:`explorer.sources.load_source`)."""
     from explorer.real.csm_camera import read_isd
@@ -356,8 +384,8 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         "stereo": _warm_stereo,
         "linescan": _warm_linescan,
     }
-    isd = Path(__file__).resolve().parents[1] / "tests" / "data" / "usgscsm" / "ctxLineScan.json"
-    if isd.is_file():  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
+    isd = _checkout_isd()
+    if isd is not None:  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
         units["isd"] = partial(_warm_isd, isd)
     units["api"] = _warm_api
     for name in available():
