@@ -33,6 +33,8 @@ def test_refine_folder_readjusts_live(server):
     ids = {r["id"] for r in view.refinement.points_rows() if r["role"] == "control"}
     assert "g0" not in ids and "g5" not in ids
     view.model.value = "poly2"
+    view.update()  # poly2 on 10 points (the GUI's own change runs in the background; this one now)
+    assert view.refinement.model == "poly2"
     view.drop.value = ",".join(f"g{i}" for i in range(7))  # 5 points left for 12 parameters
     view.update()
     assert view.error.startswith("too few control points") and "Not adjusted" in view.summary.content
@@ -224,3 +226,26 @@ def test_a_csm_camera_is_refined_live_with_its_trajectory(server):
     view.drop.value = "g0"
     view.update()
     assert view.error is None and view.refinement.result.outlier.size == 11
+
+
+def test_gui_changes_readjust_in_the_background_and_the_newest_change_wins(server, monkeypatch):
+    import explorer.refine.adjust as adjust
+
+    rpc = pleiades()
+    view = RefineView(server.gui, rpc, simulate_points(rpc, 12, seed=1, prefix="g"), sigma_px=0.3)
+    calls = []
+    real = adjust.refine_images
+    monkeypatch.setattr(adjust, "refine_images", lambda *a, **k: calls.append(k["model"]) or real(*a, **k))
+    with view._run_lock:  # an adjustment is running: the GUI changes queue behind it
+        view.model.value = "shift"  # (a GUI change: the handle's callback)
+        first = view.thread
+        assert view.summary.content == "*Re-adjusting (shift, 0 point(s) dropped) ...*"
+        view.model.value = "poly2"
+        second = view.thread
+    first.join(60)
+    second.join(60)
+    assert calls == ["poly2"]  # the superseded change never adjusted
+    assert view.refinement.model == "poly2" and view.summary.content.startswith("**poly2**")
+    view.drop.value = "nope"
+    view.thread.join(60)
+    assert view.error == "no control point nope" and view.refinement.model == "poly2"

@@ -1,18 +1,20 @@
 """The explorer's *Refinement* folder (``pushbroom explore SOURCE --gcps gcps.csv``, ``docs/refine.md``).
 
 A correction model dropdown and a list of dropped point ids; every change re-adjusts the sensor to the
-control points (:func:`explorer.refine.adjust.refine_images`) and redraws the refinement panels
-(:mod:`explorer.panels.refine`): the residual vectors before and after, the field the adjustment removed,
-the parameter table with sigmas and, for a sensor with scanlines, the original and adjusted trajectory --
-as a panel and in the 3D scene (:mod:`explorer.scene3d.refine`, the displacement exaggerated with the factor
-stated).  What is adjusted is :func:`refine_target_of` the source: the RPC itself for ``--rpc``, the MPC scene
-of ``--scene`` / a preset, the rigorous DIMAP / DG model or the CSM camera itself, and for a sensor no adapter
-refines the MPC that stands in for it, labelled so with its distance from the sensor at the points.
-A bad configuration (too few points left, a degenerate one) shows its one-line message in the folder.
+control points (:func:`explorer.refine.adjust.refine_images`, in a background thread, the newest change
+winning) and redraws the refinement panels (:mod:`explorer.panels.refine`): the residual vectors before and
+after, the field the adjustment removed, the parameter table with sigmas and, for a sensor with scanlines,
+the original and adjusted trajectory -- as a panel and in the 3D scene (:mod:`explorer.scene3d.refine`, the
+displacement exaggerated with the factor stated).  What is adjusted is :func:`refine_target_of` the source:
+the RPC itself for ``--rpc``, the MPC scene of ``--scene`` / a preset, the rigorous DIMAP / DG model or the
+CSM camera itself, and for a sensor no adapter refines the MPC that stands in for it, labelled so with its
+distance from the sensor at the points.  A bad configuration (too few points left, a degenerate one) shows
+its one-line message in the folder.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -112,8 +114,13 @@ class RefineView:
             self.field = gui.add_plotly(empty, aspect=1.8)
             self.table = gui.add_plotly(empty, aspect=1.4)
             self.trajectory = gui.add_plotly(empty, aspect=1.2, visible=self.has_trajectory)
-        self.model.on_update(lambda _: self.update())
-        self.drop.on_update(lambda _: self.update())
+        self._gen = 0
+        self._gen_lock = threading.Lock()
+        self._run_lock = threading.Lock()  # one adjustment at a time
+        self._draw_lock = threading.Lock()  # the app's worker redraws the 3D too (draw_3d)
+        self.thread: threading.Thread | None = None
+        self.model.on_update(lambda _: self.request_update())
+        self.drop.on_update(lambda _: self.request_update())
         self.update()
 
     def _what_text(self) -> str:
@@ -126,9 +133,32 @@ class RefineView:
     def dropped(self) -> set[str]:
         return {t.strip() for t in str(self.drop.value).split(",") if t.strip()}
 
+    def _next_gen(self) -> int:
+        with self._gen_lock:
+            self._gen += 1
+            return self._gen
+
+    def request_update(self) -> threading.Thread:
+        """A change in the GUI: re-adjust in a background thread, so the GUI stays live while a rigorous model
+        adjusts (seconds); the folder says so meanwhile, and a newer change supersedes one still waiting."""
+        gen = self._next_gen()
+        self.summary.content = f"*Re-adjusting ({self.model.value}, {len(self.dropped())} point(s) dropped) ...*"
+        self.thread = threading.Thread(target=self._run, args=(gen,), daemon=True, name="refine-view")
+        self.thread.start()
+        return self.thread
+
+    def _run(self, gen: int) -> None:
+        with self._run_lock:
+            if gen == self._gen:  # (else superseded while it waited)
+                self._adjust(gen)
+
     def update(self) -> None:
-        """Re-adjust with the current model and points; redraw the panels and the 3D trajectories (or show
+        """Re-adjust now with the current model and points; redraw the panels and the 3D trajectories (or show
         the error)."""
+        with self._run_lock:
+            self._adjust(self._next_gen())
+
+    def _adjust(self, gen: int) -> None:
         from explorer.panels.refine import (
             correction_field_figure,
             parameter_table_figure,
@@ -146,9 +176,12 @@ class RefineView:
             ref = refine_images([self.sensor], model=str(self.model.value), control=_subset(self.control, keep),
                                 check=self.check, sigma_px=self.sigma_px)
         except ExplorerError as exc:
-            self.error = " ".join(str(exc).split())
-            self.summary.content = f"**Not adjusted:** {self.error}"
+            if gen == self._gen:
+                self.error = " ".join(str(exc).split())
+                self.summary.content = f"**Not adjusted:** {self.error}"
             return
+        if gen != self._gen:
+            return  # a newer change is waiting: its adjustment is shown instead
         self.error = None
         self.refinement = ref
         rep = ref.report()
@@ -178,11 +211,12 @@ class RefineView:
         from explorer.refine.trajectory import refinement_trajectory
         from explorer.scene3d.refine import add_refined_trajectories
 
-        comparison = refinement_trajectory(self.refinement)
-        for handle in self._nodes.values():
-            handle.remove()
-        self._nodes, info = add_refined_trajectories(self.scene_api, comparison, frame)
-        for handle in self._nodes.values():
-            handle.visible = visible
-        self.trajectory_3d = info
-        self.trajectory_text.content = f"3D: {info['text']}."
+        with self._draw_lock:
+            comparison = refinement_trajectory(self.refinement)
+            for handle in self._nodes.values():
+                handle.remove()
+            self._nodes, info = add_refined_trajectories(self.scene_api, comparison, frame)
+            for handle in self._nodes.values():
+                handle.visible = visible
+            self.trajectory_3d = info
+            self.trajectory_text.content = f"3D: {info['text']}."
