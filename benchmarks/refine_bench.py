@@ -133,7 +133,7 @@ def _line_problem(which: str, n: int, seed: int):
     g = biased.image_to_ground(rng.uniform(0.05 * rows, 0.95 * rows, n), rng.uniform(0.05 * cols, 0.95 * cols, n),
                                height=rng.uniform(-300.0, 300.0, n))
     row, col = biased.ground_to_image(g)
-    ok = np.isfinite(row)
+    ok = np.isfinite(row) & np.isfinite(sensor.ground_to_image(g)[0])  # seen by the unadjusted sensor too
     lon, lat, h = sensor.frame.enu_to_geodetic(g[ok])
     m = int(ok.sum())
     axes = (float(sensor.frame.body.a_m), float(sensor.frame.body.b_m))

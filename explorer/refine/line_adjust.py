@@ -83,8 +83,13 @@ def correction_for(sensor: Any, model: str, frequencies_hz: tuple[float, ...] | 
     return corr
 
 
-def adjusted_sensor(sensor: Any, correction: LineCorrection, params: np.ndarray) -> Any:
-    """The sensor with its position and attitude samples corrected (same class and frame)."""
+def adjusted_sensor(sensor: Any, correction: LineCorrection, params: np.ndarray, *, reuse_setup: bool = False) -> Any:
+    """The sensor with its position and attitude samples corrected (same class and frame).
+
+    ``reuse_setup`` (CSM cameras; what the adjustment's iterations use): the adjusted camera keeps the base camera's
+    seed polynomial and solver constants instead of measuring its own (0.1-0.5 s per camera); its lines are solved
+    from the same kind of start to the same tolerance (the differentiable model's Newton step then takes them to
+    the root); without it (default) the adjusted camera is set up as a camera read from a file."""
     p = np.asarray(params, dtype=np.float64).reshape(-1)
     if p.size != correction.n_parameters:
         raise InputError(f"the {correction.model} correction has {correction.n_parameters} parameters, got {p.size}")
@@ -111,18 +116,14 @@ def adjusted_sensor(sensor: Any, correction: LineCorrection, params: np.ndarray)
     dq = correction.rotation_quaternion(cam.pointing_times - t_ref, p, cam.pointing_constant.T, inverse=True)
     q = quaternion_multiply(dq, cam.pointing_quaternions)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    # a copy with the corrected tables; it keeps the base camera's seed polynomial, look sign and typical slope
-    # (starting guesses of its line search, set up once per ISD at a cost of 0.1-0.5 s: a correction of a few
-    # pixels leaves them valid) but not its measured curvature: the search accepts a line on its step only
-    # (1e-11 lines), never on a secant error estimate from the base camera's curvature
-    from explorer.real import csm_kernels as K
-
-    new_cam = copy.copy(cam)
-    new_cam.positions_m = np.ascontiguousarray(pos)
-    new_cam.pointing_quaternions = np.ascontiguousarray(q)
-    new_cam._cam = cam._cam.copy()
-    new_cam._cam[K.C_CURV] = np.inf
-    new_cam._ext = None
+    if reuse_setup:  # a copy with the corrected tables and the base camera's seed and solver constants
+        new_cam = copy.copy(cam)
+        new_cam.positions_m = np.ascontiguousarray(pos)
+        new_cam.pointing_quaternions = np.ascontiguousarray(q)
+        new_cam._cam = cam._cam.copy()
+        new_cam._ext = None
+    else:
+        new_cam = replace(cam, positions_m=np.ascontiguousarray(pos), pointing_quaternions=np.ascontiguousarray(q))
     return replace(sensor, camera=new_cam, exterior=replace(sensor.exterior, camera=new_cam))
 
 

@@ -91,7 +91,7 @@ class _Projector:
     def adjusted(self, params: np.ndarray) -> Any:
         key = np.asarray(params, dtype=np.float64).tobytes()
         if self._cache is None or self._cache[0] != key:
-            self._cache = (key, adjusted_sensor(self.sensor, self.correction, params))
+            self._cache = (key, adjusted_sensor(self.sensor, self.correction, params, reuse_setup=True))
         return self._cache[1]
 
     def _theta(self, params: Any, n: int) -> tuple[torch.Tensor, np.ndarray]:
