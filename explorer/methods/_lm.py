@@ -265,6 +265,32 @@ class SigmoidMLP:
         """Network output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)."""
         return dense_forward(theta, self.shapes, x, torch.sigmoid)[:, 0]
 
+    def per_sample_jacobian(self, theta: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """d output_n / d theta, shape (N, P), by back-propagation written out for these layers (every sample at
+        once, no autograd): the Jacobian :func:`levenberg_marquardt` otherwise gets from ``torch.func`` (vmap of
+        jacrev), whose first call imports torch's compiler stack (seconds) and whose per-call overhead dominated
+        the training of these small networks; equal to it within round-off (tests/methods/test_lm_jacobian.py)."""
+        layers = dense_layers(theta, self.shapes)
+        last = len(layers) - 1
+        acts = [x]  # acts[k]: the input of layer k
+        h = x
+        for k, (w, b) in enumerate(layers):
+            h = h @ w.T + b
+            if k < last:
+                h = torch.sigmoid(h)
+            acts.append(h)
+        n = x.shape[0]
+        delta = torch.ones((n, 1), dtype=theta.dtype, device=theta.device)  # d output / d z of the linear output
+        blocks: list[torch.Tensor] = []
+        for k in range(last, -1, -1):
+            w, _ = layers[k]
+            a = acts[k]
+            blocks.append(delta)  # d / d b
+            blocks.append((delta[:, :, None] * a[:, None, :]).reshape(n, -1))  # d / d W, row-major
+            if k:
+                delta = (delta @ w) * a * (1.0 - a)  # through the sigmoid of layer k - 1 (a = its output)
+        return torch.cat(blocks[::-1], dim=1)
+
 
 # ----------------------------------------------------------- Levenberg-Marquardt
 
@@ -527,12 +553,20 @@ def levenberg_marquardt(
         return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)).to(dev)
 
     xt, yt, xv, yv = tensor(x_train), tensor(y_train), tensor(x_val), tensor(y_val)
-    per_sample = torch.func.vmap(
-        torch.func.jacrev(lambda theta, xi: net.forward(theta, xi[None, :])[0]), in_dims=(None, 0)
-    )
+    own = getattr(net, "per_sample_jacobian", None)  # a network that back-propagates itself (SigmoidMLP)
+    if own is not None:
+        def jacobian(theta: torch.Tensor) -> torch.Tensor:
+            return own(theta, xt)
+    else:
+        per_sample = torch.func.vmap(
+            torch.func.jacrev(lambda theta, xi: net.forward(theta, xi[None, :])[0]), in_dims=(None, 0)
+        )
+
+        def jacobian(theta: torch.Tensor) -> torch.Tensor:
+            return per_sample(theta, xt)
     return lm_minimise(
         lambda theta: yt - net.forward(theta, xt),
-        lambda theta: per_sample(theta, xt),
+        jacobian,
         theta0.detach().clone().to(device=dev, dtype=torch.float64),
         validation_error=(lambda theta: float(torch.mean((yv - net.forward(theta, xv)) ** 2))) if xv.shape[0] else None,
         min_grad=min_grad, **options,
