@@ -222,9 +222,15 @@ def _evaluate(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], stat
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _evaluate_torch(problem, scale, state, jacobians)
+        projected, lin = _evaluate_torch(problem, scale, state, jacobians)
     finally:
         torch.set_num_threads(threads)
+    if jacobians and not np.isfinite(projected).all():  # (a trial step without projection is rejected by its cost)
+        k = int(np.flatnonzero(~np.isfinite(projected).all(axis=1))[0])
+        raise InputError(f"observation {k} (image {problem.image_index[k]}, ground point {problem.point_index[k]}) "
+                         "has no projection: the sensor sees its ground point on no image line (outside the image, "
+                         "behind the sensor or outside its ephemeris tables)")
+    return projected, lin
 
 
 def _evaluate_torch(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _State,

@@ -215,3 +215,24 @@ def test_trajectories_carry_the_offsets(sensors):
     delta = Rotation.from_euler("XYZ", params[3:6]).as_matrix()  # intrinsic X, Y, Z = R_x R_y R_z
     got = np.einsum("nji,njk->nik", tr["attitude_original"], tr["attitude_adjusted"])
     np.testing.assert_allclose(got, np.broadcast_to(delta, (7, 3, 3)), atol=1e-12)
+
+
+def test_a_point_without_projection_is_a_clear_error(sensors):
+    """A ground point the sensor sees on no line (far outside the image) stops the adjustment with its index,
+    not a NaN normal matrix reported as a degenerate configuration."""
+    from explorer.errors import InputError
+    from explorer.refine.bundle import BundleProblem, bundle_adjust
+
+    scene = sensors["dimap"]
+    corr = correction_for(scene, "attitude")
+    ground = _ground(scene, 20, seed=4)
+    row, col = scene.ground_to_image(ground)
+    ground[7] += np.array([0.0, 1e6, 0.0])  # 1,000 km north: on no line of the image
+    lon, lat, h = scene.frame.enu_to_geodetic(ground)
+    problem = BundleProblem(projectors=[line_projector(scene, corr)], initial_parameters=[np.zeros(3)],
+                            ground=np.stack([lon, lat, h], axis=1), ground_sigma_m=np.zeros((20, 3)),
+                            image_index=np.zeros(20, int), point_index=np.arange(20),
+                            measured=np.stack([row, col], axis=1), sigma_px=np.full(20, 0.3),
+                            axes=(scene.frame.body.a_m, scene.frame.body.b_m))
+    with pytest.raises(InputError, match="observation 7 .* has no projection"):
+        bundle_adjust(problem)
