@@ -199,6 +199,11 @@ def local_epipolar(left: Sensor, right: Sensor, row: np.ndarray, col: np.ndarray
     return angle, ratio, rr, rc, ground
 
 
+#: Peak memory per grid node of :func:`epipolar_grids` (positions, angles, ratios, ground points and the
+#: temporaries of one column of nodes), bytes.
+GRID_BYTES_PER_NODE = 200
+
+
 def epipolar_grids(left: Any, right: Any, *, height: float | None = None, dem: Any = None, step: float = 30.0,
                    elevation_offset_m: float = ELEVATION_OFFSET_M, margin: int = 0) -> EpipolarGrids:
     """Left and right epipolar resampling grids of a pair at an ellipsoidal height (shareloc's scheme).
@@ -284,6 +289,11 @@ def epipolar_grids(left: Any, right: Any, *, height: float | None = None, dem: A
     start = origin + along * minx + ortho * miny
     n_rows_grid = int(size[0] / step + 2) + 2 * int(margin)
     n_cols_grid = int(size[1] / step + 2) + 2 * int(margin)
+    from explorer.memory import check_allocation
+
+    # before the first node is walked: a step of 0.001 px on a 40,000 px image asks for 1.6e15 nodes
+    check_allocation(float(n_rows_grid) * n_cols_grid * GRID_BYTES_PER_NODE,
+                     f"step {step:g} px ({n_rows_grid:,} x {n_cols_grid:,} grid nodes)", "raise --step")
 
     def walk(points: np.ndarray, angles: np.ndarray, axis: int) -> np.ndarray:
         direction = angles + (np.pi / 2 if axis == 0 else 0.0)
