@@ -890,3 +890,23 @@ def test_status_line_times_the_whole_update_from_the_change(server):
         assert whole >= app.last_times["total"] + 0.39  # more than the redraw alone
     finally:
         app.close()
+
+
+def test_the_height_exaggeration_is_written_in_the_3d_view(server):
+    """Issue 24: relief exaggerated automatically (the factor of auto_height_exaggeration) and the factor written
+    in the 3D view itself, at a corner of the footprint, laid out with the other labels; none on flat ground."""
+    from explorer.scene3d.builders import auto_height_exaggeration
+
+    app = make_app(server)
+    assert "/ground/note" not in app.nodes  # WSU is flat: nothing exaggerated
+    app.handles["preset"].value = "SCB"  # a wide footprint (the relief slider's 100 m are ~1 % of it)
+    app.handles["relief"].value = 100
+    factor, relief = auto_height_exaggeration(app.scene)
+    assert factor > 1 and relief > 100
+    note = app.nodes["/ground/note"]
+    assert note.text == f"heights x{factor:g} (auto)" and note.visible and app.label_layout["/ground/note"] is not None
+    assert app.frame.height_exaggeration == factor
+    corners = app.frame.ground(app._B.footprint_corners(app.scene))
+    assert min(np.linalg.norm(corners - np.asarray(note.position), axis=1)) < 1e-5
+    app.handles["exaggeration"].value = 5.0  # by hand: the automatic one is off, the note says the new factor
+    assert app.nodes["/ground/note"].text == "heights x5" and app.frame.height_exaggeration == 5.0

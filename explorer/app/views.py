@@ -210,7 +210,10 @@ class Views:
                 with self.quiet():
                     self.handles["exaggeration"].value = factor
             with self.server.atomic():
-                self._put("/ground", B.add_ground(self.server.scene, drawn, self.frame, n=n))
+                note = f"heights x{factor:g}" + (" (auto)" if s.auto_exaggeration else "") if factor != 1.0 else ""
+                self._put("/ground", B.add_ground(self.server.scene, drawn, self.frame, n=n, note=note))
+                # the note may stand at any corner of the footprint (whichever keeps it clear)
+                self.label_alternatives["/ground/note"] = tuple(self.frame.ground(B.footprint_corners(drawn)))
                 self._put("/orbit", B.add_orbit(self.server.scene, drawn, self.frame))
             refine_view = getattr(self, "refine_view", None)  # explore --gcps: its trajectories, in the new frame
             if refine_view is not None:
@@ -375,7 +378,7 @@ class Views:
             self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights, names))
             # a scanline's label may stand at either end of its ground trace (whichever keeps it clear)
             ends = self.frame.ground(B.scanline_footprints(drawn, rows, heights).reshape(-1, 3)).reshape(-1, 2, 3)
-            self.label_alternatives = {f"/scanlines/labels/{i}": (ends[i, 1],) for i, n in enumerate(names) if n}
+            self.label_alternatives.update({f"/scanlines/labels/{i}": (ends[i, 1],) for i, n in enumerate(names) if n})
             self._put("/selected", B.add_selection(
                 self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
                 label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))
@@ -451,8 +454,8 @@ class Views:
         self.handles["sel_text"].content = "  \n".join(lines)
 
     # ----------------------------------------------------------------- labels
-    LABEL_PRIORITY = ("/selected/label", "/scanlines/labels/", "/orbit/flight_label", "/orbit/track_label",
-                      "/selected/trace_labels/")
+    LABEL_PRIORITY = ("/ground/note", "/selected/label", "/scanlines/labels/", "/orbit/flight_label",
+                      "/orbit/track_label", "/selected/trace_labels/")
     """Which labels yield to which when they would overlap (earlier wins)."""
 
     def _layout_labels(self) -> None:

@@ -413,10 +413,16 @@ def point_size_km(frame: DisplayFrame, n_points: int, fraction: float = 0.45) ->
 Handles = dict[str, Any]
 
 
-def add_ground(api: viser.SceneApi, scene: Scene, frame: DisplayFrame, *, n: int = 41) -> Handles:
+def add_ground(api: viser.SceneApi, scene: Scene, frame: DisplayFrame, *, n: int = 41, note: str = "") -> Handles:
     """Footprint mesh coloured by height (height ramp with relief, flat colour without) + outline.
 
-    Nodes: ``/ground/surface`` (mesh, vertex colours), ``/ground/outline`` (segments).
+    Parameters
+    ----------
+    note : str
+        Text written in the view at a corner of the footprint (the height exaggeration); "" for none.
+
+    Nodes: ``/ground/surface`` (mesh, vertex colours), ``/ground/outline`` (segments), ``/ground/note``
+    (label at the first row's last-column corner; :func:`footprint_corners` gives the others).
     """
     verts_m, faces = footprint_mesh(scene, n)
     lo, hi = scene.terrain.min_height, scene.terrain.max_height
@@ -427,7 +433,17 @@ def add_ground(api: viser.SceneApi, scene: Scene, frame: DisplayFrame, *, n: int
     seg = frame.ground(footprint_outline(scene).reshape(-1, 3)).reshape(-1, 2, 3)
     out["/ground/outline"] = api.add_line_segments(
         "/ground/outline", seg, (20, 20, 20), thickness=2.0, thickness_units="screen")
+    if note:
+        out["/ground/note"] = api.add_label("/ground/note", note, position=frame.ground(footprint_corners(scene))[1],
+                                            anchor="bottom-left")
     return out
+
+
+def footprint_corners(scene: Scene) -> np.ndarray:
+    """The image's outer corners on the terrain (4, 3), local ENU metres: (first row, first column), (first
+    row, last column), (last row, last column), (last row, first column), at pixel edges."""
+    r1, c1 = scene.n_rows - 0.5, scene.n_columns - 0.5
+    return _on_terrain(scene, np.array([-0.5, -0.5, r1, r1]), np.array([-0.5, c1, c1, -0.5]))
 
 
 def add_orbit(api: viser.SceneApi, scene: Scene, frame: DisplayFrame, *, n_frames: int = 5) -> Handles:
@@ -598,6 +614,6 @@ __all__ = [
     "DisplayFrame", "add_ground", "add_orbit", "add_points",
     "ground_mesh_nodes",
     "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
-    "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
+    "footprint_corners", "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
     "scanline_planes", "scene_centre", "track_positions", "vertex_normals", "auto_height_exaggeration",
 ]
