@@ -50,9 +50,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from explorer import _log
-from explorer.methods._lm import dense_forward, layer_shapes, n_parameters, take_params, torch
+from explorer.methods._lm import take_params
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
-from explorer.methods.bpnn import BPNetworkGeometryModel, MLPRegressor
+from explorer.methods.bpnn import BPNetworkGeometryModel, LineOfSightNetwork, MLPRegressor
 from explorer.methods.rfm import rfm_domain_mask, rfm_ground_errors
 from explorer.points import PointSet, scanline_times
 from explorer.rpc.fit import fit_rfm_from_gcps
@@ -60,80 +60,6 @@ from explorer.rpc.model import RationalFunctionModel
 from explorer.scene import Scene
 
 __all__ = ["LineOfSightNetwork", "NNRFMMethod", "compare_nn_rfm", "fit_nn_rfm", "irregular_gcps"]
-
-
-class LineOfSightNetwork(BPNetworkGeometryModel):
-    """``(row, col, Z) -> (X, Y)`` with the shape of a line of sight: ``(X, Y) = A(row, col) + Z B(row, col)``.
-
-    A :class:`~explorer.methods.bpnn.BPNetworkGeometryModel` whose hidden layers see only the image position and
-    give ``A``, where the pixel's line of sight crosses the middle height (plus an affine trend in row and col);
-    its slope ``B`` (X and Y per metre of height) is affine in the image position, ``B = b0 + b1 row + b2 col``
-    (normalised units), fitted with the network.  So X and Y are **affine in Z** at a fixed image point -- exact
-    geometry: in the local ENU frame (Cartesian, ``docs/conventions.md#frames``) a line of sight is straight --
-    and the slope varies smoothly across the image, as a pushbroom's view directions do.
-
-    Why (the ``nn-rfm`` seed fragility): Yue et al.'s network takes Z as a third free input.  Trained on SCOPs
-    on 3 height layers (the MLP paper's protocol) it sees only 3 distinct heights, so nothing constrains what its
-    sigmoids do with Z between them; the validation points lie on the same 3 layers and cannot see it either.
-    Measured on the contract scene (WSU, 800 m relief, 200 x 3 SCOPs, 500 check points on the terrain): 1 cm
-    training RMS but 1.6 / 440 / 446 m ground error at the check points for seeds 0 / 1 / 2, which the RFM fitted
-    on the synthetic 5-layer grid turned into 2.05 / 111 / 2,381 px.  With Z entering linearly, 2 layers already
-    identify the model and the synthetic layers between the training heights are a straight-line interpolation.
-    A slope that is a free network output instead (four outputs A, B) fixes the layered case too but not SCOPs on
-    real terrain, whose heights span little and follow the position: on the Pleiades DIMAP with 100 SCOPs it
-    reached 570 px RMS at seed 3 (a slope field the points did not constrain).
-
-    Parameters and attributes: those of :class:`~explorer.methods.bpnn.BPNetworkGeometryModel`.
-    """
-
-    def _set_sizes(self, n_in: int, n_out: int) -> None:
-        # hidden layers on (row, col) -> the nonlinear part of A (n_out); then per output the coefficients of
-        # the linear features (row, col, Z, Z row, Z col): A's affine trend and the slope B = b0 + b1 row + b2 col
-        self._shapes = layer_shapes((n_in - 1, *self.hidden, n_out))
-        self._linear_shape = (n_out, 2 * n_in - 1)
-        self.n_parameters = n_parameters(self._shapes) + n_out * (2 * n_in - 1)
-
-    @staticmethod
-    def _linear_features(u: torch.Tensor) -> torch.Tensor:
-        """(row, col, Z, Z row, Z col) of normalised inputs (N, 3): the terms entering linearly."""
-        z = u[:, -1:]
-        return torch.cat([u[:, :-1], z, z * u[:, :-1]], dim=1)
-
-    def _forward(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        k = n_parameters(self._shapes)
-        a = dense_forward(theta[:k], self._shapes, u[:, :-1], self._act)
-        return a + self._linear_features(u) @ theta[k:].reshape(self._linear_shape).T
-
-    def _jacobian(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        n, k = u.shape[0], n_parameters(self._shapes)
-        n_out, n_feat = self._linear_shape
-        j_a = super()._jacobian(theta[:k], u[:, :-1]).reshape(n, n_out, k)  # d A / d (network weights)
-        feats = self._linear_features(u)  # d (output o) / d (its linear coefficients)
-        j_b = torch.zeros((n, n_out, n_out * n_feat), dtype=torch.float64)
-        for o in range(n_out):
-            j_b[:, o, o * n_feat:(o + 1) * n_feat] = feats
-        return torch.cat([j_a, j_b], dim=2).reshape(n * n_out, k + n_out * n_feat)
-
-    def _init_theta(self, gen: torch.Generator) -> torch.Tensor:
-        return torch.cat([super()._init_theta(gen), torch.zeros(int(np.prod(self._linear_shape)), dtype=torch.float64)])
-
-    def _init_output_layer(self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """The least-squares output layer and linear terms for the random hidden layers (all enter linearly): the
-        training starts from the best affine-in-(row, col, Z) line-of-sight model plus the network's random
-        features, and learns what that trend leaves (as ``mlp`` learns the row minus its linear trend)."""
-        k = n_parameters(self._shapes)
-        h = dense_forward(theta[:k], self._shapes[:-1], u[:, :-1], self._act, linear_output=False)
-        one = torch.ones((h.shape[0], 1), dtype=torch.float64)
-        design = torch.cat([h, one, self._linear_features(u)], dim=1)
-        sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1 + 5, n_out)
-        nh = h.shape[1]
-        o, i = self._shapes[-1]
-        start = n_parameters(self._shapes[:-1])
-        theta = theta.clone()
-        theta[start:start + o * i] = sol[:nh].T.reshape(-1)
-        theta[start + o * i:k] = sol[nh]
-        theta[k:] = sol[nh + 1:].T.reshape(-1)
-        return theta
 
 
 def irregular_gcps(

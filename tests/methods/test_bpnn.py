@@ -145,3 +145,57 @@ def test_compare_bpnn_rfm_terrain_dependent_counts():
     assert np.isfinite(tab["rfm"]["check"]["planar"]["rms"])
     with pytest.raises(ValueError):
         compare_bpnn_rfm(scene, mode="nope")
+
+
+# ------------------------------------------------------------------ seed fragility (the line-of-sight network)
+#: Seeds at which Yue's free-Z network failed the contract (row max 18.9 / 0.9 / 5.2 px with 20 / 31 / 23 % of the
+#: check points flagged; 1,046 / 1,263 / 1,220 m ground error between the SCOPs' height layers).
+FRAGILE_SEEDS = (4, 6, 7)
+
+
+def contract_scene():
+    from tests.methods.cases import scene_for
+
+    return scene_for("WSU", 800.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5, 6, 7])
+def test_every_seed_meets_the_declared_exactness_on_the_contract_scene(seed):
+    """The contract (seed 0 is tests/methods/test_contract.py) at every other seed: every check point valid, row
+    and column within the approximate bar (1 px; measured <= 0.0003 px), and the network between the SCOPs'
+    3 height layers a line of sight: its ground error at the check points' own heights is millimetres.  Truth:
+    the check points' exact (row, col) and ground from the scene's own projection."""
+    from tests.methods.test_contract import BAR_PX, contract_points
+
+    scops, check = contract_points()
+    method = create("bpnn", contract_scene(), seed=seed).fit(scops)
+    res = method.ground_to_image(check.ground)
+    assert res.valid.all(), (seed, 1 - res.valid.mean())
+    assert np.max(np.abs(res.row - check.row)) <= BAR_PX["approximate"]
+    assert np.max(np.abs(res.col - check.col)) <= BAR_PX["approximate"]
+    assert np.max(np.abs(res.row - check.row)) < 0.01  # far inside it: not a near miss of the bar
+    x, y = method.network.image_to_ground(check.row, check.col, check.ground[:, 2])
+    assert np.max(np.hypot(x - check.ground[:, 0], y - check.ground[:, 1])) < 0.01  # metres, between the layers
+
+
+@pytest.mark.slow
+def test_the_free_z_network_is_what_was_fragile():
+    """The cause, shown: Yue et al.'s network literally (``network="free"``, Z a third sigmoid input) fits its 3
+    training layers to centimetres at the seeds that failed, yet is hundreds of metres off between them, and the
+    method then misses the bar or flags a fifth of the points."""
+    from tests.methods.test_contract import BAR_PX, contract_points
+
+    scops, check = contract_points()
+    for seed in FRAGILE_SEEDS:
+        method = create("bpnn", contract_scene(), seed=seed, network="free").fit(scops)
+        assert max(method.fit_info["train_rms"]) < 0.2  # metres, on the 3 layers
+        x, y = method.network.image_to_ground(check.row, check.col, check.ground[:, 2])
+        assert np.max(np.hypot(x - check.ground[:, 0], y - check.ground[:, 1])) > 100.0  # between the layers
+        res = method.ground_to_image(check.ground)
+        err = np.abs(res.row - check.row)[res.valid]
+        assert res.valid.mean() < 0.9 or np.max(err) > BAR_PX["approximate"], seed
+
+
+def test_unknown_network_is_refused(wsu):
+    with pytest.raises(ValueError, match="line-of-sight"):
+        create("bpnn", wsu, network="deep")
