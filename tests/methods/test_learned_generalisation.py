@@ -2,8 +2,8 @@
 
 Truth: the exact rows of ``simulate_points(kind="scp")`` check points.  With 4 control points,
 ``bpnn`` (42 weights) and ``nn-rfm`` (47 weights; both the line-of-sight network) interpolate their points and miss
-the check points by hundreds of pixels (measured: 534 px and 731 px on WSU; the issue saw 690-770 px); they
-must warn (one log line on the ``explorer`` logger, like ``mlp``) and flag every answer not
+the check points by hundreds of pixels (measured: 176 px and 731 px on WSU, 534 px with the free-Z bpnn; the issue saw
+690-770 px); they must warn (one log line on the ``explorer`` logger, like ``mlp``) and flag every answer not
 converged and not valid.  With enough points the same methods are trusted again.
 """
 
