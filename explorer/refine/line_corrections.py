@@ -12,8 +12,8 @@ reproduced exactly by the interpolation; an attitude drift or a harmonic is the 
 (harmonics must lie below the Nyquist frequency of the attitude table, checked).
 
 Position offsets (metres) and drifts (m/s) are in the **orbital frame at t_ref**, fixed for the image:
-``along`` (the velocity direction, made orthogonal to radial), ``cross`` (radial x along... completed
-right-handed: ``cross = radial x along``) and ``radial`` (away from the body's centre), computed from the
+``radial`` (away from the body's centre), ``along`` (the velocity direction made orthogonal to radial) and
+``cross = radial x along`` (a right-handed triad along, cross, radial), computed from the
 model's own trajectory in the frame of its position table (ECEF for DIMAP/DG and body-fixed ISDs, J2000 for
 an ISD whose positions are J2000).
 
