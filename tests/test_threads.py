@@ -64,3 +64,23 @@ def test_forked_child_gets_a_working_pool(monkeypatch):
     proc.join(60)
     assert proc.exitcode == 0
     assert queue.get(timeout=5) == 50_000
+
+
+def test_blas_threads_sets_openblas_to_one_thread_and_restores_it_nested_and_across_threads():
+    before = _threads.blas_thread_count()
+    if before is None:
+        pytest.skip("numpy's BLAS is not an OpenBLAS found in this process")
+    with _threads.blas_threads(1):
+        assert _threads.blas_thread_count() == 1
+        with _threads.blas_threads(1):
+            assert _threads.blas_thread_count() == 1
+        assert _threads.blas_thread_count() == 1  # the inner block does not restore while the outer runs
+        seen = []
+        worker = threading.Thread(target=lambda: seen.append(_threads.blas_thread_count()))
+        worker.start()
+        worker.join()
+        assert seen == [1]  # process-wide: the setting OpenBLAS's own getter reports
+    assert _threads.blas_thread_count() == before
+    with pytest.raises(RuntimeError), _threads.blas_threads(1):
+        raise RuntimeError("restored on error too")
+    assert _threads.blas_thread_count() == before

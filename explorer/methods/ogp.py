@@ -19,8 +19,11 @@ collinearity at the final row.  Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
+from explorer._threads import blas_threads
 from explorer.methods._lm import check_split_sizes, split_train_validation
 from explorer.methods.ann import REFERENCE_2021, ThreeStageMethod
 from explorer.methods.base import register
@@ -99,6 +102,16 @@ def genetic_term_selection(
         cache[key] = out
         return out
 
+    with blas_threads(1):  # hundreds of small solves: OpenBLAS's threads cost 25x here on a busy machine
+        return _evolve(fitness, rng, k_all, pm, population=population, generations=generations,
+                       crossover_rate=crossover_rate, tournament=tournament, elite=elite, initial=initial,
+                       cache=cache)
+
+
+def _evolve(fitness: Callable[[np.ndarray], tuple[float, float]], rng: np.random.Generator, k_all: int, pm: float,
+            *, population: int, generations: int, crossover_rate: float, tournament: int, elite: int,
+            initial: list[np.ndarray] | None, cache: dict) -> tuple[np.ndarray, float, dict]:
+    """The generations of :func:`genetic_term_selection` (its parameters; ``fitness`` cached in ``cache``)."""
     pop = rng.random((population, k_all)) < 0.5
     for j, chrom in enumerate(initial or []):
         if j < population:
