@@ -910,3 +910,19 @@ def test_the_height_exaggeration_is_written_in_the_3d_view(server):
     assert min(np.linalg.norm(corners - np.asarray(note.position), axis=1)) < 1e-5
     app.handles["exaggeration"].value = 5.0  # by hand: the automatic one is off, the note says the new factor
     assert app.nodes["/ground/note"].text == "heights x5" and app.frame.height_exaggeration == 5.0
+
+
+def test_the_dem_mesh_does_not_cut_through_the_check_points_markers(server):
+    """Issue 24: the check points' markers tile the footprint (drawn SCP_COVER * VISER_POINT_SCALE spacings wide,
+    more than the sqrt(2) a grid needs); the DEM mesh under them, which cut through each marker (a marker is drawn
+    at its centre's depth) and striped the residual colours, is not drawn."""
+    from explorer.scene3d.builders import SCP_COVER, VISER_POINT_SCALE
+
+    assert SCP_COVER * VISER_POINT_SCALE >= 2 ** 0.5
+    app = make_app(server, preset="SCB")
+    app.handles["relief"].value = 300
+    assert app.scene.terrain.max_height > app.scene.terrain.min_height
+    assert "/ground/surface" in app.nodes and not app.nodes["/ground/surface"].visible
+    assert app.nodes["/ground/outline"].visible and app.nodes["/points/scps"].visible
+    size = app._B.point_size_km(app.frame, len(app.cloud_index), SCP_COVER)
+    assert app.nodes["/points/scps"].point_size == pytest.approx(size)

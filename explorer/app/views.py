@@ -195,9 +195,8 @@ class Views:
             self.frame = B.DisplayFrame.for_scene(drawn, sensor_distance=s.sensor_distance,
                                                   height_exaggeration=factor)
             n, dem_cells = B.ground_mesh_nodes(drawn)
-            self.ground_text = (f"Ground: the DEM sampled on a {n} x {n} image grid"
-                                + (f" (decimated from ~{dem_cells} DEM cells across)" if dem_cells and dem_cells > n - 1
-                                   else "") if dem_cells is not None else f"Ground: {n} x {n} image grid")
+            self.ground_text = ("Ground: the check points on the terrain (the footprint outlined in black)"
+                                + ("; DEM heights" if dem_cells is not None else ""))
             if relief > 1.0 or factor != 1.0:
                 how = (f"automatic: the terrain's {relief:.0f} m relief drawn at about "
                        f"{100 * B.RELIEF_SHARE:g} % of the footprint" if s.auto_exaggeration else "set by hand")
@@ -212,6 +211,10 @@ class Views:
             with self.server.atomic():
                 note = f"heights x{factor:g}" + (" (auto)" if s.auto_exaggeration else "") if factor != 1.0 else ""
                 self._put("/ground", B.add_ground(self.server.scene, drawn, self.frame, n=n, note=note))
+                # the check points' markers tile the whole footprint (SCP_COVER); the DEM mesh under them only
+                # hid part of each marker -- a marker is drawn at its centre's depth, the decimated mesh cut
+                # through it --: pale stripes across the residual colours.  Their cloud shows the relief.
+                self.nodes["/ground/surface"].visible = False
                 # the note may stand at any corner of the footprint (whichever keeps it clear)
                 self.label_alternatives["/ground/note"] = tuple(self.frame.ground(B.footprint_corners(drawn)))
                 self._put("/orbit", B.add_orbit(self.server.scene, drawn, self.frame))
