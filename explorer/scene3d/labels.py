@@ -94,7 +94,8 @@ def project_px(points: np.ndarray, position: np.ndarray, look_at: np.ndarray, *,
 
 
 def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndarray, *, fov_y: float,
-                 width: float, height: float) -> dict[str, tuple[str, np.ndarray, np.ndarray] | None]:
+                 width: float, height: float, search_first: int = 7
+                 ) -> dict[str, tuple[str, np.ndarray, np.ndarray] | None]:
     """An anchor for each label so that no two overlap and each lies wholly inside the view.
 
     Parameters
@@ -107,6 +108,9 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
         Vertical field of view, radians.
     width, height : float
         The view in pixels.
+    search_first : int
+        The first this many labels are placed together by a (bounded) search for the most shown; the later
+        ones (minor labels: a search's iteration numbers) one by one where they still fit.
 
     Returns
     -------
@@ -137,31 +141,40 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
         options.append(opts)
     # the most labels shown, earlier ones first, each as near its preferred side as may be: a depth-first
     # search over the anchors (a few labels, a few anchors each; bounded)
-    n = len(labels)
+    n = min(len(labels), search_first)
     best: list = [None] * n
     best_score: tuple = (-1,)
     chosen: list = [None] * n
     budget = [20_000]
 
-    def search(i: int, count: int) -> None:
+    possible = [bool(o) for o in options[:n]]
+
+    def search(i: int, count: int, rank: int) -> None:
         nonlocal best, best_score
         budget[0] -= 1
-        if count + sum(1 for o in options[i:] if o) < best_score[0] or budget[0] < 0:
+        if budget[0] < 0:
+            return
+        # the best this branch can reach: every later label that has a place shown, at its preferred side
+        reach = (count + sum(possible[i:]), tuple(c is not None for c in chosen[:i]) + tuple(possible[i:]), -rank)
+        if reach <= best_score:
             return
         if i == n:
-            shown = tuple(c is not None for c in chosen)
-            score = (count, shown, -sum(c[0] for c in chosen if c is not None))
-            if score > best_score:
-                best_score, best = score, list(chosen)
+            best_score, best = reach, list(chosen)
             return
         for opt in options[i]:
             if not any(c is not None and boxes_overlap(opt[2], c[2], g) for c in chosen[:i]):
                 chosen[i] = opt
-                search(i + 1, count + 1)
+                search(i + 1, count + 1, rank + opt[0])
         chosen[i] = None
-        search(i + 1, count)
+        search(i + 1, count, rank)
 
-    search(0, 0)
+    search(0, 0, 0)
+    placed = [c for c in best if c is not None]
+    for opts in options[n:]:  # the rest (minor labels) greedily around them
+        pick = next((o for o in opts if not any(boxes_overlap(o[2], c[2], g) for c in placed)), None)
+        best.append(pick)
+        if pick is not None:
+            placed.append(pick)
     for lab, c in zip(labels, best, strict=True):
         out[lab.key] = None if c is None else (c[1], c[2], c[3])
     return out

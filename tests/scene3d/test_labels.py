@@ -63,3 +63,15 @@ def test_a_label_that_fits_nowhere_is_hidden_not_stacked():
     wide = "x" * 120  # wider than the view on either side of its point
     out = place_labels([Label("/w", wide, p)], CAM, LOOK, fov_y=VIEW_FOV_Y, width=W, height=H)
     assert out["/w"] is None
+
+
+def test_a_label_moves_to_its_alternative_point_so_that_both_show():
+    """One by one, the first label would take the shared point and hide the second; the search moves the first to
+    its alternative point so both are shown."""
+    p, q = _at_px(200, 450), _at_px(200, 200)
+    labels = [Label("/first", "first label", p, ("center-left",), alternatives=(q,)),
+              Label("/second", "second label", p, ("center-left",))]
+    out = place_labels(labels, CAM, LOOK, fov_y=VIEW_FOV_Y, width=W, height=H)
+    assert out["/first"] is not None and out["/second"] is not None
+    np.testing.assert_allclose(out["/first"][2], q) and np.testing.assert_allclose(out["/second"][2], p)
+    assert not boxes_overlap(out["/first"][1], out["/second"][1], GAP_PX)
