@@ -94,20 +94,15 @@ class RPCImage:
     stem = "adjusted_rpc"
 
 
-class SceneImage:
-    """An MPC scene (:class:`~explorer.scene.Scene`) being refined by its exterior orientation."""
+class _SensorBackedImage:
+    """What an image refined through a sensor with a local frame (an MPC scene, a rigorous model, a CSM camera)
+    shares: the body's axes, the image size, and localisation on the sensor's own terrain."""
 
-    kind = "scene"
-    what = "scene"
-    suffix = ".json"
-    stem = "adjusted_scene"
+    sensor: Any
 
-    def __init__(self, scene: Scene) -> None:
-        from explorer.refine.torch_scene import SCENE_MODELS
-
-        self.sensor = scene
-        self.models = tuple(SCENE_MODELS)
-        self.adjusted: Scene | None = None
+    def project(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray, model: str,
+                params: np.ndarray | None) -> np.ndarray:
+        raise NotImplementedError
 
     @property
     def axes(self) -> tuple[float, float]:
@@ -122,11 +117,27 @@ class SceneImage:
         return np.isfinite(self.project(lon, lat, h, "attitude", None)).all(axis=1)
 
     def localise(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(lon, lat, h, ok) of image points on the scene's own terrain."""
+        """(lon, lat, h, ok) of image points on the sensor's own terrain."""
         ground = self.sensor.image_to_ground(row, col)
         ok = np.isfinite(ground).all(axis=1)
         lon, lat, h = self.sensor.frame.enu_to_geodetic(np.where(ok[:, None], ground, 0.0))
         return lon, lat, h, ok
+
+
+class SceneImage(_SensorBackedImage):
+    """An MPC scene (:class:`~explorer.scene.Scene`) being refined by its exterior orientation."""
+
+    kind = "scene"
+    what = "scene"
+    suffix = ".json"
+    stem = "adjusted_scene"
+
+    def __init__(self, scene: Scene) -> None:
+        from explorer.refine.torch_scene import SCENE_MODELS
+
+        self.sensor = scene
+        self.models = tuple(SCENE_MODELS)
+        self.adjusted: Scene | None = None
 
     def projector(self, model: str) -> Any:
         from explorer.refine.torch_scene import TorchScene
@@ -157,7 +168,7 @@ class SceneImage:
         return path
 
 
-class LineScanImage:
+class LineScanImage(_SensorBackedImage):
     """A rigorous DIMAP/DG model or a USGS CSM camera refined by corrections of its position and attitude tables
     (:mod:`explorer.refine.line_corrections`); the adjusted model is written as a JSON sidecar
     (:func:`explorer.refine.line_adjust.sidecar_dict`: parameters, sigmas, the base file's name and SHA-256)."""
@@ -186,25 +197,6 @@ class LineScanImage:
         if model not in self._corrections:
             self._corrections[model] = correction_for(self.sensor, model, self.jitter_hz)
         return self._corrections[model]
-
-    @property
-    def axes(self) -> tuple[float, float]:
-        body = self.sensor.frame.body
-        return float(body.a_m), float(body.b_m)
-
-    @property
-    def size(self) -> tuple[int, int]:
-        return int(self.sensor.n_rows), int(self.sensor.n_columns)
-
-    def ground_ok(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> np.ndarray:
-        return np.isfinite(self.project(lon, lat, h, "attitude", None)).all(axis=1)
-
-    def localise(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(lon, lat, h, ok) of image points on the sensor's own terrain."""
-        ground = self.sensor.image_to_ground(row, col)
-        ok = np.isfinite(ground).all(axis=1)
-        lon, lat, h = self.sensor.frame.enu_to_geodetic(np.where(ok[:, None], ground, 0.0))
-        return lon, lat, h, ok
 
     def projector(self, model: str) -> Any:
         from explorer.refine.torch_linescan import line_projector
