@@ -109,6 +109,12 @@ class Source:
         return {"kind": self.kind, "label": self.label, "path": self.path, "dem": self.dem, **self.info}
 
 
+def stand_in_truth(info: dict | None) -> str | None:
+    """What every residual is measured against when the truth is a stand-in (``--as-mpc``: the MPC resected
+    from the RPC), for the maps' titles; None when the truth is the sensor itself."""
+    return "the STAND-IN MPC (--as-mpc)" if info and info.get("stand_in_model") is True else None
+
+
 def table_coverage_text(tables: dict | None) -> str:
     """The sentence every front end shows for an ISD whose ephemeris tables do not cover every line
     (``Source.info["table_coverage"]``), e.g. "ephemeris tables cover 83.3 % of the lines (0-2347): the other
@@ -453,4 +459,4 @@ def source_from_args(args: Any, **options: Any) -> Source:
 
 __all__ = ["DEM_KINDS", "DISPLAY_LINE_PERIOD_S", "SENSOR_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers",
            "display_scene_of", "load_sensor", "load_source", "readable_file", "resolve_preset", "sensor_kind",
-           "source_from_args"]
+           "source_from_args", "stand_in_truth", "table_coverage_text"]

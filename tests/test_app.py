@@ -926,3 +926,23 @@ def test_the_dem_mesh_does_not_cut_through_the_check_points_markers(server):
     assert app.nodes["/ground/outline"].visible and app.nodes["/points/scps"].visible
     size = app._B.point_size_km(app.frame, len(app.cloud_index), SCP_COVER)
     assert app.nodes["/points/scps"].point_size == pytest.approx(size)
+
+
+def test_as_mpc_maps_name_the_stand_in_they_are_measured_against(server):
+    """Issue 23: with ``--as-mpc`` every method runs on the resected MPC and is measured against it, so each
+    method's map title says so (the RPC-vs-MPC map beside them is the stand-in's own error)."""
+    import json
+
+    from explorer.evaluate import STAND_IN_METHOD
+    from explorer.sources import load_source
+    from tests.rpc.conftest import RPC_DIR
+
+    src = load_source("rpc", str(RPC_DIR / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML"), as_mpc=True)
+    app = make_app(server, sources=[src], methods=("toy_poly",), scp_count=2000)
+    assert app.errors == []
+    fig = json.loads(app.handles["maps"]._plotly_json_str)
+    titles = [a.get("text", "") for a in fig["layout"].get("annotations", []) if " px<br>" in a.get("text", "")]
+    method_titles = [t for t in titles if t.startswith("toy_poly")]
+    assert method_titles and all(t.endswith("; against the STAND-IN MPC (--as-mpc))") for t in method_titles)
+    stand_in = [t for t in titles if t.startswith(f"{STAND_IN_METHOD}:")]
+    assert stand_in and not any(t.endswith("(--as-mpc))") for t in stand_in), titles

@@ -119,6 +119,10 @@ def test_rpc_exports_byte_identical_residuals(tmp_path, capsys):
     summary = json.loads(a["summary.json"])  # the resected MPC is labelled a stand-in wherever it appears
     assert "stand-in" in summary["source"]["label"] and summary["truth"]["model"].startswith("STAND-IN")
     assert summary["stand_in"]["model"].startswith("the RPC itself") and summary["stand_in"]["max_row_px"] < 0.01
+    page = a["panels.html"].decode()  # every method's map title names the stand-in it is measured against
+    n_maps = 2 * sum(1 for m in summary["methods"].values() if "unavailable" not in m)
+    # each map title is written twice: its annotation and the layout's meta["titles"]
+    assert page.count("against the STAND-IN MPC (--as-mpc)") == 2 * n_maps > 0
 
 
 def test_bad_sources_fail_with_one_line_and_no_url(tmp_path, capsys):

@@ -55,7 +55,7 @@ from explorer.app.model import STATUS_NAMES, SWEEP_PURPOSE, ExplorerModel, FitRe
 from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
 from explorer.io_atomic import write_folder_atomic
 from explorer.sensor import StandIn
-from explorer.sources import table_coverage_text
+from explorer.sources import stand_in_truth, table_coverage_text
 
 CSV_COLUMNS = ("method", "scp_index", "row_px", "col_px", "row_residual_px", "col_residual_px", "status",
                "x_m", "y_m", "z_m")
@@ -259,7 +259,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         figs.append((f"Residual maps (row and column; every check point, cell {s.aggregate})" + (
             "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
             F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
-                            component="row and column", status=map_status, aggregate=s.aggregate, labels=labels)))
+                            component="row and column", status=map_status, aggregate=s.aggregate, labels=labels,
+                            against=stand_in_truth(source))))
     if sweeps:
         figs.append((f"Accuracy vs SCOP density (each method refitted at every density, evaluated on "
                      f"{min(model.sweep_points, len(scps)):,} check points)",

@@ -25,7 +25,7 @@ from explorer.methods import registry
 from explorer.panels import diverging_rgb
 from explorer.points import PointSet
 from explorer.scene import Scene
-from explorer.sources import table_coverage_text
+from explorer.sources import stand_in_truth, table_coverage_text
 
 CANVAS_SETTLE_S = 10.0
 """A browser's canvas may still change shape (its panels docking) this long after it connected: its camera is
@@ -331,7 +331,7 @@ class Views:
                                   limit_px=s.limit_px if s.colour_mode == "fixed" else None,
                                   mode=s.colour_mode, component=s.component, difference=s.diff,
                                   status=status, aggregate=s.aggregate, max_cells=self.max_map_cells,
-                                  labels=labels)
+                                  labels=labels, against=stand_in_truth(src.info if src is not None else None))
         else:
             fig = F.empty_figure("waiting for " + ", ".join(pending) if pending else self._no_method_text())
         self._set_figure("maps", fig)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import plotly.graph_objects as go
 
-from explorer.evaluate import Evaluation
+from explorer.evaluate import STAND_IN_METHOD, Evaluation
 from explorer.panels import (
     DIVERGING,
     INVALID_RGB,
@@ -157,7 +157,7 @@ class MapPanel:
 def _panels(
     evaluations: Mapping[str, Evaluation], check: PointSet, component: str,
     difference: tuple[str, str] | None, status: Mapping[str, np.ndarray] | None,
-    labels: Mapping[str, str] | None, aggregate: str,
+    labels: Mapping[str, str] | None, aggregate: str, against: str | None = None,
 ) -> list[MapPanel]:
     comps = {"row": ("row",), "column": ("column",), "row and column": ("row", "column")}.get(component)
     if comps is None:
@@ -172,7 +172,8 @@ def _panels(
             rms = float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else float("nan")
             m = idx.size
             sub = f"{m:,} of {ev.n_scps:,} SCPs: seeded preview" if m < ev.n_scps else f"all {m:,} SCPs"
-            title = f"{_label(n, labels)} {c}: RMSE {rms:.3g} px<br>({sub}; cell {aggregate})"
+            vs = f"; against {against}" if against and n != STAND_IN_METHOD else ""
+            title = f"{_label(n, labels)} {c}: RMSE {rms:.3g} px<br>({sub}; cell {aggregate}{vs})"
             missing: dict[str, np.ndarray] = {}
             if (~ok).any():
                 if st is not None and np.shape(st) == res.shape:
@@ -217,6 +218,7 @@ def residual_maps(
     columns: int | None = None,
     show_control: bool = True,
     percentile: float = ROBUST_PERCENTILE,
+    against: str | None = None,
 ) -> go.Figure:
     """Residual maps over the image: one small multiple per method (and component), each a raster of
     the residual aggregated per image cell (:mod:`explorer.panels.raster`).
@@ -266,6 +268,9 @@ def residual_maps(
         Draw the SCOPs.
     percentile : float
         Percentile of |residual| that sets the automatic limits.
+    against : str, optional
+        What the residuals are measured against when it is not the sensor itself (``--as-mpc``: "the
+        STAND-IN MPC"); every method's title then says so (the stand-in's own map is labelled already).
 
     Returns
     -------
@@ -286,7 +291,7 @@ def residual_maps(
         raise ValueError(f"the fixed mode needs a positive limit_px, got {limit_px}")
     if aggregate not in AGGREGATES:
         raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
-    panels = _panels(evaluations, check, component, difference, status, labels, aggregate)
+    panels = _panels(evaluations, check, component, difference, status, labels, aggregate, against)
     if not panels:
         return empty_figure("no method evaluated")
     n = len(panels)

@@ -377,3 +377,21 @@ def test_panels_html_opens_offline_and_is_deterministic(results):
     for bad in ("https://cdn.plot.ly/plotly.js", "../timing.js", "timing.json"):
         with pytest.raises(ValueError):
             F.figures_html([], "export", scripts=[bad])
+
+
+def test_every_method_title_names_a_stand_in_truth_and_only_then(results):
+    """``--as-mpc``: each method's map says its residuals are measured against the stand-in; the stand-in's
+    own map (its error against the sensor) and maps against the sensor itself do not."""
+    from explorer.evaluate import STAND_IN_METHOD
+
+    scene, scops, scps, evs = results
+    maps = {**evs, STAND_IN_METHOD: evs["toy_poly"]}
+    fig = F.residual_maps(maps, scps, shape=scene.shape, component="row and column",
+                          against="the STAND-IN MPC (--as-mpc)")
+    titles = [a.text for a in fig.layout.annotations if " px<br>" in str(a.text)]
+    assert len(titles) == 6
+    marked = [t for t in titles if t.endswith("; against the STAND-IN MPC (--as-mpc))")]
+    assert sorted(t.split(":")[0] for t in marked) == ["toy_bisect column", "toy_bisect row",
+                                                       "toy_poly column", "toy_poly row"]
+    plain = F.residual_maps(evs, scps, shape=scene.shape)
+    assert not any("against" in str(a.text) for a in plain.layout.annotations)
