@@ -122,9 +122,25 @@ def _plot_texts(page) -> str:
                          ".join('\\n')")
 
 
+def _wait_for_the_canvas_to_settle(app, timeout_s: float = 120.0) -> None:
+    """Wait until every browser is past the app's canvas-settling window (``CANVAS_SETTLE_S`` after it
+    connected): within it the app reframes a browser whose canvas changes shape (its panels docking), which would
+    undo a camera the test sets; on a loaded machine the docking comes late."""
+    from explorer.app.views import CANVAS_SETTLE_S
+
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        since = [app._client_since.get(cid) for cid in app.server.get_clients()]
+        if since and all(t is not None and time.monotonic() - t > CANVAS_SETTLE_S + 0.5 for t in since):
+            return
+        time.sleep(0.2)
+    raise AssertionError("the browsers' canvases did not settle")
+
+
 def _look_at_the_trajectories(app, view) -> None:
     """Point every browser's camera at the drawn trajectories, from the app's viewing direction, far enough back
-    to see both whole; hide the app's nodes but the orbit."""
+    to see both whole; hide the app's nodes but the orbit (after the app's canvas-settling window)."""
+    _wait_for_the_canvas_to_settle(app)
     pts = np.concatenate([np.asarray(view._nodes[f"/refine/{k}/track"].points).reshape(-1, 3)
                           for k in ("original", "adjusted")])
     mid = 0.5 * (pts.min(axis=0) + pts.max(axis=0))

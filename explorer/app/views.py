@@ -558,9 +558,11 @@ class Views:
             key = self._sent.get("camera")
             done = self._framed_clients.get(client.client_id)
             if done is not None and done[0] == key:
-                old = self.client_poses.get(client.client_id)
-                at_pose = old is not None and (np.allclose(cam.position, old[0], atol=1e-6, rtol=1e-6)
-                                               and np.allclose(cam.look_at, old[1], atol=1e-6, rtol=1e-6))
+                # at a pose the app gave it: the one framed for this browser, or the server's initial camera (a
+                # report sent before the browser's own framing arrived carries that one)
+                at_pose = any(p is not None and np.allclose(cam.position, p[0], atol=1e-6, rtol=1e-6)
+                              and np.allclose(cam.look_at, p[1], atol=1e-6, rtol=1e-6)
+                              for p in (self.client_poses.get(client.client_id), self.camera_pose))
                 # just connected: its reports may still carry the pose before ours (the page lays out its
                 # panels in its first seconds); later, only a camera the user has not moved is reframed
                 young = time.monotonic() - self._client_since.get(client.client_id, -np.inf) < CANVAS_SETTLE_S
