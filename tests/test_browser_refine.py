@@ -35,6 +35,7 @@ from explorer.refine.points_io import PointTable  # noqa: E402
 from explorer.scene3d.refine import ADJUSTED_RGB  # noqa: E402
 from explorer.sources import load_source  # noqa: E402
 from tests.refine.cases import write_points_csv  # noqa: E402
+from tests.test_browser import RECT_3D  # noqa: E402
 
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-quic",
         "--no-first-run", "--disable-component-update", "--disable-sync"]
@@ -100,14 +101,7 @@ def _open(browser, url: str):
     return page
 
 
-RECT_3D = """() => {
-  let best = null, area = 0;
-  for (const c of document.querySelectorAll('canvas')) {
-    const r = c.getBoundingClientRect();
-    if (r.width * r.height > area) { area = r.width * r.height; best = r; }
-  }
-  return {x: best.x, y: best.y, width: best.width, height: best.height};
-}"""
+
 
 
 def _near(page, rgb, tol: int = 60) -> int:

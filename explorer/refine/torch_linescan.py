@@ -36,6 +36,7 @@ import torch
 from explorer.errors import InputError
 from explorer.refine.line_adjust import adjusted_sensor
 from explorer.refine.line_corrections import LineCorrection, quaternion_multiply
+from explorer.refine.torch_scene import radially_distorted
 
 __all__ = ["TorchCsm", "TorchRigorous", "line_projector"]
 
@@ -249,15 +250,7 @@ class TorchRigorous(_Projector):
         interior = scene.interior
         scale = -interior.focal_length_m / v[:, 2]
         x, y = v[:, 0] * scale, v[:, 1] * scale
-        if interior.radial_distortion:
-            r2 = x * x + y * y
-            factor = torch.ones_like(r2)
-            power = torch.ones_like(r2)
-            for k in interior.radial_distortion:
-                power = power * r2
-                factor = factor + k * power
-            x, y = x * factor, y * factor
-        return x, y
+        return radially_distorted(x, y, interior.radial_distortion)
 
     def _refraction_shift(self, ground: torch.Tensor, geodetic: tuple[torch.Tensor, ...],
                           centre: torch.Tensor) -> torch.Tensor:

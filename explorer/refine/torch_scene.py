@@ -70,6 +70,20 @@ def _polyval(coeffs: np.ndarray, t: torch.Tensor) -> torch.Tensor:
     return out
 
 
+
+def radially_distorted(x: torch.Tensor, y: torch.Tensor, coefficients) -> tuple[torch.Tensor, torch.Tensor]:
+    """Focal-plane (x, y) (N,) times ``1 + k1 r^2 + k2 r^4 + ...`` (the interior orientation's radial distortion,
+    :attr:`explorer.geometry.interior.InteriorOrientation.radial_distortion`); unchanged without coefficients."""
+    if not coefficients:
+        return x, y
+    r2 = x * x + y * y
+    factor = torch.ones_like(r2)
+    power = torch.ones_like(r2)
+    for k in coefficients:
+        power = power * r2
+        factor = factor + k * power
+    return x * factor, y * factor
+
 class TorchScene:
     """Ground (lon, lat, h on the frame's body) -> corrected (row, col) of one MPC scene, differentiable.
 
@@ -134,15 +148,7 @@ class TorchScene:
         vx, vy, vz = (torch.sum(r * d, dim=1) for r in (r0, r1, r2))
         scale = -interior.focal_length_m / vz
         x, y = vx * scale, vy * scale
-        if interior.radial_distortion:
-            r2_ = x * x + y * y
-            factor = torch.ones_like(r2_)
-            power = torch.ones_like(r2_)
-            for coefficient in interior.radial_distortion:
-                power = power * r2_
-                factor = factor + coefficient * power
-            x, y = x * factor, y * factor
-        return x, y
+        return radially_distorted(x, y, interior.radial_distortion)
 
     def _detector_x(self, y: torch.Tensor) -> torch.Tensor:
         interior = self.scene.interior
