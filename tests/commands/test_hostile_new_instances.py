@@ -19,6 +19,7 @@ import pytest
 
 from explorer.cli import main
 from explorer.presets import build_scene
+from tests.commands._hostile import assert_one_line_refusal, snapshot
 
 ROOT = Path(__file__).resolve().parents[2]
 RPC_DIR = ROOT / "tests" / "data" / "rpc"
@@ -67,29 +68,17 @@ CASES = [
 ]
 
 
-def _snapshot(folder: Path) -> dict[str, str]:
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        mode = p.lstat().st_mode
-        out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest() if stat.S_ISREG(mode) else stat.filemode(mode)
-    return out
-
-
 @pytest.mark.parametrize(("argv", "words"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_new_instance_exits_2_with_one_line_and_touches_nothing(folder, argv, words, capsys):
     args = [a.format(d=folder) for a in argv]
-    before = _snapshot(folder)
+    before = snapshot(folder)
     ikonos_before = hashlib.sha256(Path(IKONOS).read_bytes()).hexdigest()
     try:
         status = main(args)
     except SystemExit as exc:  # argparse
         status = exc.code
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("compiling")]
-    assert status == 2, err
-    assert len(lines) == 1 and "Traceback" not in err, err
-    assert all(w.lower() in lines[0].lower() for w in words), lines[0]
-    assert _snapshot(folder) == before
+    assert_one_line_refusal(status, capsys.readouterr().err, words)
+    assert snapshot(folder) == before
     assert hashlib.sha256(Path(IKONOS).read_bytes()).hexdigest() == ikonos_before
     assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
 
