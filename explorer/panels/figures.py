@@ -40,7 +40,7 @@ from explorer.panels import (
     rgb_string,
     robust_limit,
 )
-from explorer.panels.raster import AGGREGATES, MAX_CELLS, cell_grid, occupied
+from explorer.panels.raster import AGGREGATES, MAX_CELLS, MAX_FIGURE_CELLS, cell_grid, occupied
 from explorer.panels.raster import aggregate as aggregate_cells
 from explorer.points import PointSet
 
@@ -259,7 +259,9 @@ def residual_maps(
         transparent (a legend entry counts them); cells whose points all lack a residual show their
         status (refused / not converged / outside the image, named and counted in the legend).
     max_cells : int
-        At most this many cells per map (:func:`explorer.panels.raster.cell_grid`).
+        At most this many cells per map (:func:`explorer.panels.raster.cell_grid`); with many maps the
+        figure's budget :data:`explorer.panels.raster.MAX_FIGURE_CELLS` lowers it (``layout.meta["cells"]``
+        gives the grid drawn).
     labels : mapping, optional
         Display names.
     columns : int, optional
@@ -336,7 +338,8 @@ def residual_maps(
     image_shape = shape if shape is not None else (
         int(np.ceil(np.max(check.row) + 0.5)) if len(check) else 1, int(np.ceil(np.max(check.col) + 0.5)) if len(check)
         else 1)
-    cells = cell_grid(image_shape, len(check), grid_rc, max_cells)
+    # the figure's cell budget: many maps get fewer cells each (the same grid for every map)
+    cells = cell_grid(image_shape, len(check), grid_rc, max(1, min(max_cells, MAX_FIGURE_CELLS // n)))
     all_points = occupied(cells, check.row, check.col)
     empty_cells = int((all_points == 0).sum())
     value_word = "mean residual" if aggregate == "mean" else "max |residual| (signed)"

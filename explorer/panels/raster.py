@@ -27,6 +27,10 @@ AGGREGATES = ("mean", "max |residual|")
 """How a map cell aggregates the residuals of its check points."""
 MAX_CELLS = 15_000
 """Default upper bound of the cells of one map (50,000 grid SCPs: 2 x 2 nodes per cell)."""
+MAX_FIGURE_CELLS = 150_000
+"""Upper bound of the cells of all the maps of one figure: with many maps each gets fewer cells (a coarser
+block of grid nodes, the same for every map), so the export's ``panels.html`` stays under 5 MB with every
+method checked (14 methods and a stand-in, row and column: 30 maps of at most 5,000 cells)."""
 
 
 @dataclass(frozen=True)
@@ -172,4 +176,4 @@ def occupied(grid: CellGrid, row: np.ndarray, col: np.ndarray) -> np.ndarray:
     return np.bincount(grid.cell_of(np.asarray(row), np.asarray(col)), minlength=nr * nc).reshape(nr, nc)
 
 
-__all__ = ["AGGREGATES", "MAX_CELLS", "CellField", "CellGrid", "aggregate", "cell_grid", "occupied"]
+__all__ = ["AGGREGATES", "MAX_CELLS", "MAX_FIGURE_CELLS", "CellField", "CellGrid", "aggregate", "cell_grid", "occupied"]

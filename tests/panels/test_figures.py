@@ -22,6 +22,7 @@ from explorer.panels import (
     ramp,
 )
 from explorer.panels import figures as F  # noqa: N812
+from explorer.panels.raster import MAX_FIGURE_CELLS
 from explorer.points import simulate_points
 from explorer.presets import build_scene
 from tests.test_app import ToyBisect, ToyPoly
@@ -161,6 +162,34 @@ def test_constant_field_draws_the_constant_in_every_cell(how, layout):
         assert np.asarray(_map(fig, "m row").customdata)[..., 0].max() == 4
     with pytest.raises(ValueError, match="aggregate"):
         F.residual_maps({"m": ev}, scps, aggregate="median")
+
+
+def test_many_maps_share_the_figure_cell_budget():
+    """Issue 24: panels.html under 5 MB with every method.  Thirty maps (15 methods, row and column) of
+    50,000 grid SCPs share :data:`MAX_FIGURE_CELLS`: each map gets the same coarser grid of whole node
+    blocks, a constant field still draws its constant in every cell, and the maps' arrays stay small."""
+    scene = build_scene("WSU")
+    scps = simulate_points(scene, 50_000, kind="scp")
+    n = len(scps)
+    c = 0.1234567890123
+    base = evaluate_method(ToyPoly(scene), scps.subset(np.arange(10)), simulate_points(scene, 50, kind="scop"))
+    ev = dataclasses.replace(base, n_scps=n, n_evaluated=n, residual_row=np.full(n, c),
+                             residual_col=np.full(n, c), evaluated_index=np.arange(n))
+    few = F.residual_maps({"m0": ev}, scps, shape=scene.shape, component="row and column")
+    many = F.residual_maps({f"m{k}": ev for k in range(15)}, scps, shape=scene.shape, component="row and column")
+    maps = [t for t in many.data if t.type == "heatmap" and t.coloraxis]
+    assert len(maps) == 30
+    sizes = {np.asarray(t.z).shape for t in maps}
+    assert len(sizes) == 1  # one grid for every map
+    (shape,) = sizes
+    assert 30 * shape[0] * shape[1] <= MAX_FIGURE_CELLS
+    few_shape = np.asarray(_map(few, "m0 row").z).shape
+    assert few_shape[0] * few_shape[1] > shape[0] * shape[1]  # one method keeps the finer grid
+    for t in maps:
+        z = np.asarray(t.z)
+        assert np.isfinite(z).all() and (z == c).all()
+        assert np.asarray(t.customdata)[..., 0].sum() == n  # every point in one cell
+    assert len(many.to_json()) < 3_400_000  # + plotly.js (1.5 MB) and the other panels: < 5 MB
 
 
 def test_max_residual_cells_hold_the_worst_point(results):
