@@ -218,8 +218,9 @@ class OrthoGeometry:
     """Ground (lon, lat) on a surface -> image (row, col) of any :class:`~explorer.sensor.Sensor`.
 
     A sensor declaring ``has_geodetic_projection`` (:class:`~explorer.sensor.GeodeticSensor`, the RPC) is asked in
-    longitude, latitude and ellipsoidal height (valid: on the image); any other through local ENU ground points of
-    its frame (:meth:`~explorer.sensor.Sensor.project`: valid as the sensor says).  A
+    longitude, latitude and ellipsoidal height (valid: on the image); any other through its geodetic entry on a
+    surface of ellipsoidal heights (:meth:`~explorer.sensor.Sensor.project_geodetic`) and through local ENU ground
+    points of its frame on its own terrain (:meth:`~explorer.sensor.Sensor.project`; valid as the sensor says).  A
     best-scanline method is a sensor too (:class:`explorer.methods.adapter.MethodSensor`).
 
     Parameters
@@ -245,9 +246,15 @@ class OrthoGeometry:
                 row[ok], col[ok] = sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])
             nr, nc = self.image_shape
             return row, col, (row >= -0.5) & (row <= nr - 0.5) & (col >= -0.5) & (col <= nc - 0.5)  # NaN: False
+        valid = np.zeros(lon.shape, dtype=bool)
+        if not isinstance(self.surface, SensorTerrain):  # geodetic points: the sensor's geodetic entry
+            h = self.surface.heights(sensor, lon, lat)
+            ok = np.isfinite(h)
+            if ok.any():
+                row[ok], col[ok], valid[ok] = sensor.project_geodetic(lon[ok], lat[ok], h[ok])
+            return row, col, valid
         ground = self.surface.ground(self.sensor, lon, lat)
         ok = np.all(np.isfinite(ground), axis=1)
-        valid = np.zeros(lon.shape, dtype=bool)
         if ok.any():
             row[ok], col[ok], valid[ok] = self.sensor.project(ground[ok])  # the sensor's own validity flags
         return row, col, valid

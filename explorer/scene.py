@@ -326,10 +326,16 @@ class Scene:
         row, col = self.ground_to_image(ground)
         return Projection(row, col, self.inside_image(row, col))
 
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`ground_to_image` of geodetic points on the frame's body: longitude, latitude (N,) degrees, height
+        (N,) metres above its ellipsoid (:meth:`explorer.sensor.Sensor.geodetic_to_image`; the scene's model is
+        defined in the local frame: converted to it once)."""
+        return self.ground_to_image(self.frame.geodetic_to_enu(lon, lat, h))
+
     def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
         """:meth:`project` of geodetic points on the frame's body: longitude, latitude (N,) degrees, height (N,)
-        metres above its ellipsoid (the geodetic entry point every sensor of the package offers; here converted
-        to the local frame once)."""
+        metres above its ellipsoid (:meth:`explorer.sensor.Sensor.project_geodetic`; converted to the local frame
+        once)."""
         return self.project(self.frame.geodetic_to_enu(lon, lat, h))
 
     def time_range(self) -> tuple[float, float]:

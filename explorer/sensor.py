@@ -20,6 +20,13 @@ What every sensor offers:
 
 * ``ground_to_image(ground) -> (row, col)`` and ``project(ground) -> Projection(row, col, valid)``
   (``valid``: the model solved the point and it lies on the image, pixel edges included);
+* the same from geodetic coordinates, ``geodetic_to_image(lon, lat, h)`` and ``project_geodetic(lon, lat, h)``
+  (degrees, metres above the ellipsoid of ``body``): callers whose points are geodetic (GCP files, orthoimage
+  grids in a geographic CRS, an RPC's own localisations) hand them over as they are, and each sensor converts
+  them only into the coordinates its model is defined on -- nothing for an RPC, body-fixed for a CSM camera,
+  the local frame for a scene (``docs/conventions.md#geodetic-entry``).  An RPC asked in local ENU pays
+  an exact ENU -> geodetic conversion that costs several RPC evaluations; asked in geodetic coordinates it is
+  within a few per cent of the RPC itself (``benchmarks/sensor_path.py``);
 * ``image_to_ground(row, col, height=...)`` on the plane(s) ``Z = height``, or on the sensor's own
   terrain (plane or DEM; first hit from the sensor); ``localize(row, col, height=...) -> Localization
   (ground, flags)`` says per point why there is no ground point (outside the DEM, no-data, no hit);
@@ -36,7 +43,8 @@ Optional capabilities are declared explicitly as class attributes, never discove
   MPC polynomials of time, which the compiled collinearity kernels (:mod:`explorer.geometry.kernels`)
   pack;
 * :class:`GeodeticSensor` (``has_geodetic_projection = True``): the model is defined on longitude, latitude
-  and ellipsoidal height (an RPC), so orthorectification asks it without the local-frame round trip.
+  and ellipsoidal height (an RPC), so it localises in them too (on heights, on a lon/lat DEM) and
+  orthorectification asks it without the local-frame round trip.
 * :class:`LineCoverageSensor` (``has_line_coverage = True``): its tables may cover only some lines (a CSM
   camera); ``rows_covered(row)`` says which, and every best-scanline method flags a row outside them.
 
@@ -141,6 +149,18 @@ class Sensor(Protocol):
 
     def project(self, ground: np.ndarray) -> Projection:
         """:meth:`ground_to_image` with the validity flags (:class:`Projection`)."""
+        ...
+
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The geodetic entry of :meth:`ground_to_image`: ground points given as longitude, latitude (N,) degrees
+        and height above the ellipsoid of :attr:`body` (N,) metres -> (row, col) (N,), the same numbers as
+        ``ground_to_image(frame.geodetic_to_enu(lon, lat, h))``; the sensor converts them only into the
+        coordinates its model is defined on (none for an RPC, body-fixed for a CSM camera, the local frame for a
+        scene; ``docs/conventions.md#geodetic-entry``)."""
+        ...
+
+    def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
+        """:meth:`geodetic_to_image` with the validity flags of :meth:`project` (:class:`Projection`)."""
         ...
 
     def image_to_ground(
@@ -253,17 +273,14 @@ class StandIn:
 @runtime_checkable
 class GeodeticSensor(Sensor, Protocol):
     """Capability: the model is defined on longitude, latitude (degrees) and ellipsoidal height (metres), as an
-    RPC is, so a caller with geodetic ground points (orthorectification) asks it directly instead of through
-    the local frame (60 times the RPC's own projection for the round trip).
+    RPC is, so it also *localises* in geodetic coordinates (every sensor projects them:
+    :meth:`Sensor.geodetic_to_image`); a caller localising onto a lon/lat DEM (orthorectification) asks it
+    directly instead of through the local frame.
 
     Declared by the class attribute ``has_geodetic_projection = True`` (:class:`explorer.rpc.sensor.RPCSensor`).
     """
 
     has_geodetic_projection: ClassVar[bool]
-
-    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lon, lat, h) (N,) -> (row, col) (N,), fractional pixels."""
-        ...
 
     def geodetic_localization(
         self, row: np.ndarray, col: np.ndarray, h: np.ndarray

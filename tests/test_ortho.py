@@ -180,6 +180,12 @@ class _LocalFrameOnly:
     def project(self, ground):
         return self._s.project(ground)
 
+    def geodetic_to_image(self, lon, lat, h):
+        return self._s.ground_to_image(self.frame.geodetic_to_enu(lon, lat, h))
+
+    def project_geodetic(self, lon, lat, h):
+        return self._s.project(self.frame.geodetic_to_enu(lon, lat, h))
+
     def image_to_ground(self, row, col, *, height=None):
         return self._s.image_to_ground(row, col, height=height)
 

@@ -125,6 +125,15 @@ class MethodSensor:
         res = self.method.ground_to_image(ground)
         return Projection(res.row, res.col, res.valid)
 
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`ground_to_image` of geodetic points (degrees, metres above the ellipsoid; the methods work in the
+        scene's local frame: converted to it once)."""
+        return self.ground_to_image(self.frame.geodetic_to_enu(lon, lat, h))
+
+    def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
+        """:meth:`project` of geodetic points (converted to the scene's local frame once)."""
+        return self.project(self.frame.geodetic_to_enu(lon, lat, h))
+
     def image_to_ground(
         self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
     ) -> np.ndarray:

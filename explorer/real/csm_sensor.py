@@ -42,7 +42,7 @@ import numpy as np
 from explorer._numba import kernel_array
 from explorer.errors import SceneFileError, as_points, check_finite
 from explorer.geometry.exterior import LineTiming
-from explorer.geometry.frames import MARS, MOON, WGS84, Ellipsoid, LocalFrame, ecef_to_geodetic
+from explorer.geometry.frames import MARS, MOON, WGS84, Ellipsoid, LocalFrame, ecef_to_geodetic, geodetic_to_ecef
 from explorer.geometry.interior import InteriorOrientation
 from explorer.geometry.rotations import opk_from_rotation
 from explorer.geometry.terrain import FlatTerrain
@@ -298,6 +298,19 @@ class CsmScene(Scene):
     def project(self, ground: np.ndarray) -> Projection:
         """:meth:`ground_to_image` with the camera's validity flags (solved, and on the image)."""
         g = self.camera.ground_to_image(self.frame.enu_to_ecef(as_points(ground)))
+        return Projection(g.line - 0.5, g.sample - 0.5, g.valid)
+
+    def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`ground_to_image` of planetodetic points on the camera's body -- longitude, latitude (N,) degrees,
+        height above its ellipsoid (N,) metres -- converted straight to the body-fixed coordinates the camera is
+        defined on (:meth:`explorer.sensor.Sensor.geodetic_to_image`)."""
+        g = self.camera.ground_to_image(geodetic_to_ecef(lon, lat, h, self.frame.body))
+        solved = g.status == 0
+        return np.where(solved, g.line - 0.5, np.nan), np.where(solved, g.sample - 0.5, np.nan)
+
+    def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
+        """:meth:`geodetic_to_image` with the camera's validity flags (solved, and on the image)."""
+        g = self.camera.ground_to_image(geodetic_to_ecef(lon, lat, h, self.frame.body))
         return Projection(g.line - 0.5, g.sample - 0.5, g.valid)
 
     # ------------------------------------------------------------ description

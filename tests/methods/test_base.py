@@ -58,6 +58,12 @@ class AffineSensor:
         r, c = self.ground_to_image(ground)
         return Projection(r, c, inside_image(r, c, self.n_rows, self.n_columns))
 
+    def geodetic_to_image(self, lon, lat, h):
+        return self.ground_to_image(self.frame.geodetic_to_enu(lon, lat, h))
+
+    def project_geodetic(self, lon, lat, h):
+        return self.project(self.frame.geodetic_to_enu(lon, lat, h))
+
     def image_to_ground(self, row, col, *, height=None):
         z = np.broadcast_to(self.terrain.height_m if height is None else np.asarray(height, float), np.shape(row))
         a = np.array([self.row_coef[1:3], self.col_coef[1:3]])
