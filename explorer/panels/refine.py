@@ -85,7 +85,8 @@ def residual_quiver_figure(ref: Refinement, image: int = 0, *, scale: float | No
         fig.update_yaxes(range=[rows - 0.5, -0.5], title_text="row" if k == 0 else None, row=1, col=k + 1)
     rep = ref.report()
     fig.update_layout(height=height, margin={"l": 50, "r": 20, "t": 70, "b": 40},
-                      title=f"{ref.image_names[image]}: residuals (measured - model), {ref.model}; control RMSE "
+                      title=f"{ref.image_names[image]}: residuals (measured - model), {ref.models[image]}; "
+                            f"control RMSE "
                             f"{_fmt(rep['control_rmse_px_before'])} -> {_fmt(rep['control_rmse_px'])} px")
     return fig
 
@@ -105,8 +106,8 @@ def correction_field(ref: Refinement, image: int = 0, n: int = 25) -> tuple[np.n
     lon, lat, h, ok = adapter.localise(rr.ravel(), cc.ravel())
     field = np.full((n * n, 2), np.nan)
     if ok.any():
-        before = adapter.project(lon[ok], lat[ok], h[ok], ref.model, None)
-        after = adapter.project(lon[ok], lat[ok], h[ok], ref.model, ref.result.parameters[image])
+        before = adapter.project(lon[ok], lat[ok], h[ok], ref.models[image], None)
+        after = adapter.project(lon[ok], lat[ok], h[ok], ref.models[image], ref.result.parameters[image])
         field[ok] = after - before
     return r, c, field.reshape(n, n, 2)
 
@@ -124,7 +125,8 @@ def correction_field_figure(ref: Refinement, image: int = 0, *, n: int = 25, hei
         fig.update_yaxes(autorange="reversed", title_text="row" if k == 0 else None, row=1, col=k + 1)
         fig.update_xaxes(title_text="column", row=1, col=k + 1)
     fig.update_layout(height=height, margin={"l": 50, "r": 30, "t": 70, "b": 40},
-                      title=f"{ref.image_names[image]}: the field the {ref.model} adjustment removed (after - before)")
+                      title=f"{ref.image_names[image]}: the field the {ref.models[image]} adjustment removed "
+                            "(after - before)")
     return fig
 
 

@@ -30,6 +30,7 @@ import csv
 import io
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,7 @@ from explorer.refine.images import LineScanImage, RPCImage, SceneImage, image_ad
 from explorer.refine.line_adjust import is_line_scanner
 from explorer.refine.points_io import PointTable
 
-__all__ = ["Refinement", "image_size", "refine_images"]
+__all__ = ["DEFAULT_MODELS", "Refinement", "image_size", "refine_images"]
 
 #: RMSE definition written into every report.
 RMSE_DEFINITION = "per image coordinate: sqrt(mean((d_row^2 + d_col^2) / 2)) over non-outlier points, pixels"
@@ -62,6 +63,7 @@ class Refinement:
     """Result of :func:`refine_images`; :meth:`report` and :meth:`write` give it to other tools."""
 
     model: str
+    models: list[str]
     image_names: list[str]
     images: list[RPCImage | SceneImage | LineScanImage]
     parameter_names: list[str]
@@ -94,8 +96,8 @@ class Refinement:
 
     def parameter_table(self) -> list[dict[str, Any]]:
         sigma = self.result.parameter_sigma
-        n_per = len(self.parameter_names) // len(self.images)
-        return [{"name": name, "value": float(v), "sigma": float(s), "image": self.image_names[k // n_per]}
+        owner = np.repeat(np.arange(len(self.images)), [p.size for p in self.result.parameters])
+        return [{"name": name, "value": float(v), "sigma": float(s), "image": self.image_names[int(owner[k])]}
                 for k, (name, v, s) in enumerate(zip(self.parameter_names, self.parameters, sigma, strict=True))]
 
     def report(self) -> dict[str, Any]:
@@ -118,9 +120,10 @@ class Refinement:
             "iterations": res.iterations,
             "n_observations": int(res.outlier.size),
             "n_outliers": int(res.outlier.sum()),
-            "images": [{"name": n, "kind": im.kind, "rows": im.size[0], "columns": im.size[1],
+            "images": [{"name": n, "kind": im.kind, "model": m, "rows": im.size[0], "columns": im.size[1],
                         "adjusted_model": im.stem + (f"_{k}" if len(self.images) > 1 else "") + im.suffix, **f}
-                       for k, (n, im, f) in enumerate(zip(self.image_names, self.images, self.adjusted, strict=True))],
+                       for k, (n, im, m, f) in enumerate(zip(self.image_names, self.images, self.models, self.adjusted,
+                                                             strict=True))],
             "settings": self.settings,
         }
         if self.check_ground is not None:
@@ -231,10 +234,44 @@ def _initial_ground(images: list[RPCImage | SceneImage | LineScanImage], image: 
     return out
 
 
+#: The correction model of each kind of image when none is given.
+DEFAULT_MODELS = {"rpc": "affine", "scene": "attitude", "linescan": "attitude"}
+
+
+def _check_one_body(images: list[RPCImage | SceneImage | LineScanImage], labels: list[str]) -> None:
+    """InputError for images on different bodies (ellipsoid axes differing by more than 1 mm)."""
+    a0, b0 = images[0].axes
+    for k, im in enumerate(images[1:], start=1):
+        a, b = im.axes
+        if abs(a - a0) > 1e-3 or abs(b - b0) > 1e-3:
+            raise InputError(f"images on different bodies: {labels[0]} has ellipsoid axes {a0:.3f} / {b0:.3f} m, "
+                             f"{labels[k]} {a:.3f} / {b:.3f} m (tie and control points need one body)")
+
+
+def _image_models(model: str | Sequence[str] | None, images: list[RPCImage | SceneImage | LineScanImage],
+                  labels: list[str]) -> list[str]:
+    """The correction model of each image: one for all, one per image, or each kind's default."""
+    if model is None:
+        return [DEFAULT_MODELS[im.kind] for im in images]
+    given = [model] if isinstance(model, str) else list(model)
+    if len(given) == 1:
+        given = given * len(images)
+    if len(given) != len(images):
+        raise InputError(f"{len(given)} correction models for {len(images)} images (give one for all or one per "
+                         "image)")
+    for k, (m, im) in enumerate(zip(given, images, strict=True)):
+        if m not in im.models:
+            other = (" (attitude models need a rigorous sensor: an MPC scene, a DIMAP/DG model or a CSM camera)"
+                     if im.kind == "rpc" else "")
+            where = f"image {labels[k]}: " if len(images) > 1 else ""
+            raise InputError(f"{where}unknown {im.what} correction model {m!r} (one of {', '.join(im.models)}){other}")
+    return given
+
+
 def refine_images(
     sensors: list[Any],
     *,
-    model: str = "affine",
+    model: str | Sequence[str] | None = None,
     control: PointTable | None = None,
     ties: PointTable | None = None,
     check: PointTable | None = None,
@@ -254,14 +291,15 @@ def refine_images(
     Parameters
     ----------
     sensors : list of RationalFunctionModel, Scene, RigorousLineScanScene or CsmScene
-        The images (one for a resection to control points, several for a bundle adjustment), all RPCs, all
-        MPC scenes or all line scanners (rigorous DIMAP/DG models, CSM cameras), on one body.
-    model : str
-        The same for every image: for RPCs ``shift``, ``affine`` or ``poly2`` (image space,
-        :mod:`explorer.refine.corrections`); for MPC scenes ``attitude`` or ``attitude-drift`` (exterior
-        orientation, :mod:`explorer.refine.torch_scene`); for rigorous and CSM line scanners ``attitude``,
-        ``attitude-drift``, ``position-attitude``, ``position-attitude-drift`` or ``jitter`` (their tables,
-        :mod:`explorer.refine.line_corrections`).
+        The images (one for a resection to control points, several for a bundle adjustment), of any kinds
+        mixed (RPCs, MPC scenes, rigorous DIMAP/DG models, CSM cameras), on one body.
+    model : str or sequence of str, optional
+        One correction model for every image, or one per image: for RPCs ``shift``, ``affine`` or ``poly2``
+        (image space, :mod:`explorer.refine.corrections`); for MPC scenes ``attitude`` or ``attitude-drift``
+        (exterior orientation, :mod:`explorer.refine.torch_scene`); for rigorous and CSM line scanners
+        ``attitude``, ``attitude-drift``, ``position-attitude``, ``position-attitude-drift`` or ``jitter`` (their
+        tables, :mod:`explorer.refine.line_corrections`).  None: :data:`DEFAULT_MODELS` of each image's kind
+        (``affine`` for an RPC, ``attitude`` for a scene or a line scanner).
     control, ties, check : PointTable, optional
         Control points (``id,lon,lat,h,row,col`` [+ ``image``]), tie points (``id,image,row,col``) and
         check points (as control; never used as control).
@@ -293,16 +331,18 @@ def refine_images(
         raise InputError("no image to refine")
     files: list[str | None] = list(image_files) if image_files else [None] * len(sensors)
     kinds: list[str | None] = list(source_kinds) if source_kinds else [None] * len(sensors)
-    images = [image_adapter(s, base_file=files[k], source_kind=kinds[k], jitter_hz=jitter_hz)
-              if is_line_scanner(s) else image_adapter(s) for k, s in enumerate(sensors)]
-    if len({im.kind for im in images}) > 1 or len({im.axes for im in images}) > 1:
-        raise InputError("the images must be all RPCs, all MPC scenes or all line scanners, on one body")
-    if model not in images[0].models:
-        other = (" (attitude models need a rigorous sensor: an MPC scene, a DIMAP/DG model or a CSM camera)"
-                 if images[0].kind == "rpc" else "")
-        raise InputError(f"unknown {images[0].what} correction model {model!r} (one of "
-                         f"{', '.join(images[0].models)}){other}")
-    labels: list[str] = list(names) if names else [f"image{k}" for k in range(len(images))]
+    labels: list[str] = list(names) if names else [f"image{k}" for k in range(len(sensors))]
+    if len(labels) != len(sensors):
+        raise InputError(f"{len(labels)} image name(s) for {len(sensors)} image(s)")
+    images: list[RPCImage | SceneImage | LineScanImage] = []
+    for k, s in enumerate(sensors):
+        try:
+            images.append(image_adapter(s, base_file=files[k], source_kind=kinds[k], jitter_hz=jitter_hz)
+                          if is_line_scanner(s) else image_adapter(s))
+        except InputError as exc:
+            raise InputError(f"image {labels[k]}: {exc}") from exc
+    _check_one_body(images, labels)
+    models = _image_models(model, images, labels)
     if not (np.isfinite(sigma_px) and sigma_px > 0):
         raise InputError(f"pixel sigma must be a finite number > 0, got {sigma_px}")
     if not (np.isfinite(sigma_ground_m) and sigma_ground_m >= 0):
@@ -313,8 +353,8 @@ def refine_images(
         raise InputError(f"{control.path}: control points need lon, lat, h")
     if check is not None and not check.has_ground:
         raise InputError(f"{check.path}: check points need lon, lat, h")
-    projectors = [im.projector(model) for im in images]
-    n_par = len(projectors[0].parameter_names)
+    projectors = [im.projector(m) for im, m in zip(images, models, strict=True)]
+    n_pars = [len(p.parameter_names) for p in projectors]
     multi = len(images) > 1
 
     point_key: dict[tuple[str, str], int] = {}  # (role, id) -> ground point index
@@ -379,12 +419,12 @@ def refine_images(
     if not obs["id"]:
         raise InputError("no usable observation (every check point is measured in one image only)")
     n_control = sum(1 for r in obs["role"] if r == "control")
-    if not multi and n_control * 2 <= n_par:
-        raise InputError(f"too few control points: the {model} model has {n_par} parameters and needs at least "
-                         f"{n_par // 2 + 1} points, got {n_control}")
+    if not multi and n_control * 2 <= n_pars[0]:
+        raise InputError(f"too few control points: the {models[0]} model has {n_pars[0]} parameters and needs at "
+                         f"least {n_pars[0] // 2 + 1} points, got {n_control}")
     problem = BundleProblem(
         projectors=projectors,
-        initial_parameters=[np.zeros(n_par) for _ in images],
+        initial_parameters=[np.zeros(n) for n in n_pars],
         ground=np.asarray(ground),
         ground_sigma_m=np.asarray(sigma_g)[:, None],
         image_index=np.asarray(obs["image"]),
@@ -393,14 +433,13 @@ def refine_images(
         sigma_px=np.asarray(sigma_px, dtype=np.float64),
         axes=images[0].axes,
     )
-    base = list(projectors[0].parameter_names)
-    stacked = [n if not multi else f"{labels[k]}:{n}" for k in range(len(images)) for n in base]
+    stacked = [n if not multi else f"{labels[k]}:{n}" for k, p in enumerate(projectors) for n in p.parameter_names]
     result = bundle_adjust(problem, loss=loss, loss_scale=loss_scale, outlier_probability=outlier_probability,
                            max_iterations=max_iterations, parameter_names=stacked)
     offs = np.concatenate([[0], np.cumsum([p.size for p in result.parameters])])
     sigma_all = result.parameter_sigma
-    adjusted = [im.adjust(model, p, sigma_all[offs[k]:offs[k + 1]]) if isinstance(im, LineScanImage)
-                else im.adjust(model, p) for k, (im, p) in enumerate(zip(images, result.parameters, strict=True))]
+    adjusted = [im.adjust(models[k], p, sigma_all[offs[k]:offs[k + 1]]) if isinstance(im, LineScanImage)
+                else im.adjust(models[k], p) for k, (im, p) in enumerate(zip(images, result.parameters, strict=True))]
 
     # check points: their surveyed ground projected by the model before and after (compiled paths)
     ck_before = np.zeros((0, 2))
@@ -414,8 +453,8 @@ def refine_images(
         after = np.empty_like(measured)
         for k, adapter in enumerate(images):
             sel = img == k
-            before[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], model, None)
-            after[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], model, result.parameters[k])
+            before[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], models[k], None)
+            after[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], models[k], result.parameters[k])
         flagged = {(pid, k) for pid, k, r, o in zip(obs["id"], obs["image"], obs["role"], result.outlier,
                                                     strict=True) if r == "check" and o}
         check_only["outlier"] = [int((pid, k) in flagged) for pid, k in zip(check_only["id"], check_only["image"],
@@ -428,9 +467,11 @@ def refine_images(
     settings = {"sigma_px": sigma_px, "sigma_ground_m": sigma_ground_m, "loss": loss, "loss_scale_sigma": loss_scale,
                 "outlier_probability": outlier_probability,
                 "outlier_threshold_sigma": float(np.sqrt(-2.0 * np.log(1.0 - outlier_probability)))}
-    return Refinement(model=model, image_names=labels, images=images, parameter_names=stacked, result=result,
-                      observations=obs, adjusted=adjusted, settings=settings, check_residuals_before=ck_before,
-                      check_residuals_after=ck_after, check_ground=check_ground, extra=extra)
+    summary = models[0] if len(set(models)) == 1 else ",".join(models)
+    return Refinement(model=summary, models=models, image_names=labels, images=images, parameter_names=stacked,
+                      result=result, observations=obs, adjusted=adjusted, settings=settings,
+                      check_residuals_before=ck_before, check_residuals_after=ck_after, check_ground=check_ground,
+                      extra=extra)
 
 
 def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleResult,

@@ -49,6 +49,10 @@ WGS84_AXES = (6378137.0, 6356752.314245179)
 
 #: Robust losses by name.
 LOSSES = ("huber", "cauchy", "linear")
+#: The robust pass of :func:`bundle_adjust` stops when an iteration lowers the cost by less than this (half a
+#: chi-square: a hundredth of a sigma^2 over all observations), far below what moves a residual across the
+#: outlier threshold; the least-squares pass that gives the estimate converges to rounding.
+ROBUST_COST_TOLERANCE = 1e-2
 
 
 class Projector(Protocol):
@@ -352,8 +356,11 @@ def _check_determined(problem: BundleProblem, s: np.ndarray, names: list[str]) -
 
 def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _State, use: np.ndarray,
         free: np.ndarray, prior_weight: np.ndarray, loss: str, loss_scale: float, max_iterations: int,
-        names: list[str], history: list[float]) -> tuple[_State, int, bool]:
-    """Levenberg-Marquardt from ``state`` on the observations ``use``; returns the state, iterations, converged."""
+        names: list[str], history: list[float], cost_tolerance: float = 0.0) -> tuple[_State, int, bool]:
+    """Levenberg-Marquardt from ``state`` on the observations ``use``; returns the state, iterations, converged.
+
+    It stops when an iteration lowers the cost by no more than ``1e-12`` of it or ``cost_tolerance`` (in units of
+    the whitened cost, half a chi-square), or when the step is below rounding."""
     damping = 1e-4
     _, lin = _evaluate(problem, scale, state, True)
     assert lin is not None
@@ -391,7 +398,7 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
         history.append(cost)
         small_step = float(np.max(np.abs(step_theta) * np.sqrt(np.clip(np.diag(u), 0, None))
                                   , initial=0.0)) < 1e-8 and float(np.max(np.abs(step_x), initial=0.0)) < 1e-7
-        if decrease <= 1e-12 * max(cost, 1e-300) or small_step:
+        if decrease <= max(1e-12 * max(cost, 1e-300), cost_tolerance) or small_step:
             return state, iteration, True
     return state, max_iterations, False
 
@@ -478,8 +485,11 @@ def bundle_adjust(problem: BundleProblem, *, loss: str = "huber", loss_scale: fl
     before, _ = _evaluate(problem, scale, state, False)
     residuals_before = problem.measured - before
     history: list[float] = []
+    # the robust pass only has to find the outliers (the estimate is the least-squares pass below): it stops when
+    # an iteration lowers the cost by less than ROBUST_COST_TOLERANCE -- reweighting a robust loss converges
+    # linearly, crawling over tens of iterations where position and attitude offsets are nearly collinear
     state, it1, ok1 = _lm(problem, scale, state, use, active, prior_weight, loss, loss_scale, max_iterations,
-                          names, history)
+                          names, history, ROBUST_COST_TOLERANCE if loss != "linear" else 0.0)
     projected, _ = _evaluate(problem, scale, state, False)
     e = (problem.measured - projected) / problem.sigma_px[:, None]
     s2 = (e**2).sum(axis=1)

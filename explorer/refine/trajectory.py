@@ -138,7 +138,8 @@ def refinement_trajectory(ref: Refinement, image: int = 0, n: int = 25) -> Traje
         raise ValueError(f"an {adapter.what} has no trajectory: the 3D view needs a sensor with scanlines")
     make = getattr(adapter, "adjusted_sensor", None)
     # the adapter's adjusted sensor for these parameters, else the one it kept from the adjustment
-    adjusted = make(ref.model, ref.result.parameters[image]) if make is not None else getattr(adapter, "adjusted", None)
+    adjusted = (make(ref.models[image], ref.result.parameters[image]) if make is not None
+                else getattr(adapter, "adjusted", None))
     if adjusted is None:
         raise ValueError(f"the {adapter.what} adapter keeps no adjusted sensor: no trajectory")
     return trajectory_comparison(adapter.sensor, adjusted, n)

@@ -35,7 +35,7 @@ def test_refine_writes_the_report(gcps, tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, message", [
     (["--model", "poly2"], "too few control points: the poly2 model has 12 parameters"),
-    (["--model", "attitude"], "not valid JSON"),  # attitude models refine MPC scene files
+    (["--model", "attitude"], "unknown RPC correction model 'attitude'"),  # an RPC has image-space models
     (["--ties", "{gcps}"], "--ties needs two images"),
 ])
 def test_refine_bad_input_is_one_line(gcps, tmp_path, capsys, extra, message):
