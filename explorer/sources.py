@@ -341,6 +341,8 @@ def load_source(
         info.update(sensor=f"RPC {rpc.source_format}",
                     model="the RPC itself (rational function model; it has no scanlines: the search methods are "
                           "unavailable, --as-mpc runs them on its resected MPC, a stand-in)")
+        if rpc.metadata.get("validity_note"):  # a declared domain that cannot be the model's (read as stated)
+            info.update(validity_note=rpc.metadata["validity_note"])
     elif kind in ("dimap", "dg"):
         if kind == "dimap":
             from explorer.real.dimap import rigorous_scene_from_dimap

@@ -267,3 +267,41 @@ def test_rpc_export_measures_the_learned_methods_against_the_rpc_and_says_why_se
         m = summary["methods"][name]
         assert m["n_valid"] == summary["settings"]["scps_used"] and m["ce_per_point"] == 0.0
         assert m["max_col_px"] < 0.01  # the column from the pairs (cubic in X, Y: 50 SCOPs), 0 CE
+
+
+def test_rpc_with_a_swapped_ground_box_exports_every_check_point(tmp_path, capsys):
+    """rpcm's rpc_SPOT6.xml declares its ground box with longitude and latitude swapped.  Read as declared, the
+    RPC rejected every point and the export had 0 check points and null RMSEs without a word; now the box is read
+    swapped, the check points are all there (as many as on the consistent Pleiades RPC's grid, which lies inside
+    its box), the learned methods are measured, and the page says what was done with the file's box."""
+    files = _export(tmp_path, "spot6", ["--rpc", str(RPC_DIR / "rpc_SPOT6.xml")], capsys, methods="lrm,prm")
+    summary = json.loads(files["summary.json"])
+    n = summary["settings"]["scps_used"]
+    assert n >= 0.9 * 4000
+    for name in ("lrm", "prm"):
+        m = summary["methods"][name]
+        assert m["n_valid"] == n and math.isfinite(m["rmse_row_px"]) and math.isfinite(m["rmse_col_px"])
+    assert "swapped" in summary["source"]["validity_note"]
+    assert "read swapped" in files["panels.html"].decode()
+
+
+def test_a_sensor_that_rejects_every_check_point_is_an_error_not_an_empty_map():
+    """No valid check point is a one-line InputError naming the sensor, never maps of 0 points with null RMSEs."""
+    from explorer.app.model import sensor_truth
+    from explorer.errors import InputError
+    from explorer.points import simulate_points
+    from explorer.presets import build_scene
+
+    scene = build_scene("WSU")
+    scps = simulate_points(scene, 500, kind="scp")
+
+    class Rejecting:
+        name = "rejecting sensor"
+
+        def project(self, ground):
+            p = scene.project(ground)
+            return p._replace(valid=np.zeros_like(p.valid))
+
+    assert len(sensor_truth(scene, scps)) == len(scps)
+    with pytest.raises(InputError, match=f"none of the {len(scps):,} check points .* 'rejecting sensor'"):
+        sensor_truth(Rejecting(), scps)

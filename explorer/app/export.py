@@ -282,6 +282,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         notes.append(f"DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}")
     if source.get("table_coverage"):
         notes.append(table_coverage_text(source["table_coverage"]))
+    if source.get("validity_note"):
+        notes.append(f"RPC file: {source['validity_note']}")
     notes.append(f"Every file of this export is the same on every run with the same settings except "
                  f"{TIMING_JSON} and {TIMING_JS} (the measured times).")
     files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes, scripts=[TIMING_JS]).encode()

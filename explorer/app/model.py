@@ -583,6 +583,13 @@ def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
     residual is measured against); points the sensor does not project onto its image are left out."""
     proj = scene.project(scps.ground)
     keep = np.flatnonzero(proj.valid)
+    if len(scps) and not keep.size:
+        from explorer.errors import InputError
+
+        raise InputError(f"none of the {len(scps):,} check points simulated on the terrain of "
+                         f"{getattr(scene, 'name', 'the sensor')!r} projects validly onto its image by the sensor's "
+                         "own ground to image (its declared validity domain or image size rejects them all): "
+                         "nothing can be measured")
     return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
 
 

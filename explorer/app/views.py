@@ -356,6 +356,8 @@ class Views:
                 notes.append(f"The DEM covers {100 * coverage['fraction']:.1f} % of the image; {coverage['note']}.")
             if src.info.get("table_coverage"):
                 notes.append(table_coverage_text(src.info["table_coverage"]).capitalize() + ".")
+            if src.info.get("validity_note"):
+                notes.append(f"RPC file: {src.info['validity_note']}.")
         self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
         text = summary_markdown(runs, len(scps))
         if pending:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -368,6 +369,9 @@ def _dimap_v2_from_root(path: str | Path, root: ElementTree.Element) -> Rational
     domain, size = _dimap_validity(path, validity)
     profile = root.find("Metadata_Identification/METADATA_PROFILE")
     meta = {"dimap_version": version, "profile": None if profile is None else profile.text}
+    domain, note = _reconcile_ground_domain(path, domain, values)
+    if note:
+        meta["validity_note"] = note
     return _from_dict(
         path, values, source_format="dimap_v2", one_based=True, inverse=image_to_ground,
         validity=domain, image_size=size, metadata=meta,
@@ -398,6 +402,41 @@ def _dimap_validity(
             lat_max=_to_float(path, "LAST_LAT", _xml_text(path, ground_dom, "LAST_LAT")),
         )
     return ValidityDomain(**kwargs), size
+
+
+def _reconcile_ground_domain(path: str | Path, domain: ValidityDomain,
+                             values: Mapping[str, Any]) -> tuple[ValidityDomain, str | None]:
+    """The declared ground validity box, checked against the model's own centre (``LONG_OFF``, ``LAT_OFF``).
+
+    A box that does not contain the centre cannot be the model's domain: every ground point would be
+    declared invalid.  Some SPOT 6/7 files (rpcm's ``rpc_SPOT6.xml``) write ``FIRST_LON``/``LAST_LON``
+    with latitudes and ``FIRST_LAT``/``LAST_LAT`` with longitudes: when the swapped box contains the
+    centre it is read swapped; otherwise the declared box is dropped (the domain is then offset +- scale,
+    :attr:`RationalFunctionModel.domain`).  Either way the returned note says what was done.
+    """
+    declared_bounds = (domain.lon_min, domain.lon_max, domain.lat_min, domain.lat_max)
+    if any(b is None for b in declared_bounds):
+        return domain, None
+    bounds = [float(b) for b in declared_bounds if b is not None]
+    lon_off = _to_float(path, "LONG_OFF", str(values["LONG_OFF"]))
+    lat_off = _to_float(path, "LAT_OFF", str(values["LAT_OFF"]))
+    lon_lo, lon_hi = sorted(bounds[:2])
+    lat_lo, lat_hi = sorted(bounds[2:])
+
+    def contains(lo: float, hi: float, v: float) -> bool:
+        return lo <= v <= hi
+
+    if contains(lon_lo, lon_hi, lon_off) and contains(lat_lo, lat_hi, lat_off):
+        return domain, None
+    declared = (f"the declared ground validity box (FIRST_LON/LAST_LON {lon_lo:g}..{lon_hi:g}, FIRST_LAT/"
+                f"LAST_LAT {lat_lo:g}..{lat_hi:g}) does not contain the model's centre (LONG_OFF {lon_off:g}, "
+                f"LAT_OFF {lat_off:g})")
+    if contains(lat_lo, lat_hi, lon_off) and contains(lon_lo, lon_hi, lat_off):
+        return replace(domain, lon_min=lat_lo, lon_max=lat_hi, lat_min=lon_lo, lat_max=lon_hi), (
+            f"{declared}; its longitudes and latitudes are swapped in the file and are read swapped "
+            f"(longitude {lat_lo:g}..{lat_hi:g}, latitude {lon_lo:g}..{lon_hi:g})")
+    return replace(domain, lon_min=None, lon_max=None, lat_min=None, lat_max=None), (
+        f"{declared}; it is not used (the domain is LONG_OFF/LAT_OFF +- LONG_SCALE/LAT_SCALE)")
 
 
 def read_dimap_v2(path: str | Path) -> RationalFunctionModel:

@@ -374,3 +374,43 @@ def test_cli_project_prints_the_validity_flag(capsys, tmp_path):
     assert main(["rpc", "project", str(path), "--points", str(src), "--out", str(tmp_path / "out.csv")]) == 0
     lines = (tmp_path / "out.csv").read_text().splitlines()
     assert lines[0].endswith(",valid") and lines[1].endswith(",True") and lines[2].endswith(",False")
+
+
+def _with_ground_box(tmp_path, name, box):
+    """A copy of the PLEIADES DIMAP v2 file with FIRST_LON, FIRST_LAT, LAST_LON, LAST_LAT replaced."""
+    text = (RPC_DIR / "rpc_PLEIADES.xml").read_text()
+    for key, value in zip(("FIRST_LON", "FIRST_LAT", "LAST_LON", "LAST_LAT"), box, strict=True):
+        start = text.index(f"<{key}>") + len(f"<{key}>")
+        text = text[:start] + repr(float(value)) + text[text.index(f"</{key}>"):]
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_declared_ground_box_that_misses_the_centre_is_read_as_stated(tmp_path):
+    """rpcm's rpc_SPOT6.xml writes latitudes in FIRST_LON/LAST_LON and longitudes in FIRST_LAT/LAST_LAT: as
+    declared, no ground point of the image is valid (the explorer drew 0 check points).  The box is read
+    swapped, with a note; a box that contains the centre neither way is dropped, with a note."""
+    spot = read_rpc(RPC_DIR / "rpc_SPOT6.xml")
+    d = spot.domain
+    assert d.lon_min <= spot.lon_offset <= d.lon_max and d.lat_min <= spot.lat_offset <= d.lat_max
+    assert (d.lon_min, d.lon_max, d.lat_min, d.lat_max) == (-72.4395036093, -72.0984267043, 18.3932164171,
+                                                            18.7570975666)  # the file's numbers, swapped
+    assert "swapped" in spot.metadata["validity_note"] and "LONG_OFF -72.269" in spot.metadata["validity_note"]
+    lon, lat, h = normalisation_grid(spot, 5, 5, 3)
+    inside = spot.in_domain(lon, lat, h)
+    assert inside.sum() >= 27  # the inner 3 x 3 x 3 nodes of the normalisation cube lie in the (swapped) box
+    _, _, valid = spot.projection(lon[inside], lat[inside], h[inside], return_valid=True)
+    assert valid.all()
+    # a consistent file: no note, the declared box kept
+    ple = read_rpc(RPC_DIR / "rpc_PLEIADES.xml")
+    assert "validity_note" not in ple.metadata
+    box = (ple.domain.lon_min, ple.domain.lat_min, ple.domain.lon_max, ple.domain.lat_max)
+    # the same box written swapped is read back as the original
+    swapped = read_rpc(_with_ground_box(tmp_path, "RPC_swapped.XML", (box[1], box[0], box[3], box[2])))
+    assert (swapped.domain.lon_min, swapped.domain.lat_min, swapped.domain.lon_max, swapped.domain.lat_max) == box
+    # a box 10 degrees away is not the model's: dropped, the domain is offset +- scale
+    away = read_rpc(_with_ground_box(tmp_path, "RPC_away.XML", (box[0] + 10, box[1], box[2] + 10, box[3])))
+    assert "not used" in away.metadata["validity_note"]
+    assert away.domain.lon_min == pytest.approx(away.lon_offset - abs(away.lon_scale))
+    assert away.domain.lat_max == pytest.approx(away.lat_offset + abs(away.lat_scale))
