@@ -48,6 +48,20 @@ def test_csv_bytes_and_exact_round_trip():
     for native in (False, True):
         text = residuals_csv(evs, status, scps, xyz, native_pixels=native)
         assert text == _column_wise(evs, status, scps, xyz, native)
+    # non-finite shared columns (a check point's body-fixed coordinates, its row) and runs of non-finite fields
+    xyz2, row2 = xyz.copy(), scps.row.copy()
+    xyz2[3] = np.nan
+    xyz2[11, 1:] = [np.inf, -np.inf]
+    row2[4] = np.nan
+    scps2 = SimpleNamespace(row=row2, col=scps.col)
+    evs2 = {}
+    for name, ev in evs.items():
+        r, c = ev.residual_row.copy(), ev.residual_col.copy()
+        r[:3], c[:3] = [np.nan, -np.inf, np.inf], np.nan
+        evs2[name] = SimpleNamespace(evaluated_index=ev.evaluated_index, residual_row=r, residual_col=c)
+    for native in (False, True):
+        assert residuals_csv(evs2, status, scps2, xyz2, native_pixels=native) == _column_wise(evs2, status, scps2,
+                                                                                              xyz2, native)
     rows = list(csv.DictReader(io.StringIO(text.decode())))
     assert len(rows) == sum(e.evaluated_index.size for e in evs.values())
     first = evs["lrm"]

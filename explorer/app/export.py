@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -71,8 +70,6 @@ RUN_DEPENDENT = {
 # STAND_IN_METHOD (explorer.evaluate): the method name of the stand-in's rows and map
 
 
-_NOT_FINITE = re.compile(r"(?<=,)(?:nan|-?inf)(?=,|\n|$)")
-"""A non-finite number in a CSV line formatted with ``%.17g`` (written as an empty field)."""
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -91,21 +88,50 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     lines = [",".join(columns)]
     names = STATUS_NAMES
     xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
+    row, col = np.asarray(scps.row, dtype=np.float64), np.asarray(scps.col, dtype=np.float64)
     # one %-format per line (17 significant digits, exact round trip); a non-finite number becomes an empty field.
-    # Formatting the columns with np.char and joining them with np.char.add took 3.3x as long (same bytes).
+    # The columns every method shares (the check point's row, col and body-fixed x, y, z) are formatted once per
+    # check point, not once per method and point (3x faster for 5 maps); formatting the columns with np.char and
+    # joining them with np.char.add took 3.3x as long as %-formatting (same bytes).
+    used = np.unique(np.concatenate([np.asarray(ev.evaluated_index, dtype=np.int64) for ev in evaluations.values()]
+                                    or [np.zeros(0, np.int64)]))
+    shared = [row[used], col[used], xyz[used, 0], xyz[used, 1], xyz[used, 2]]
+    if native_pixels:
+        shared += [row[used] + 0.5, col[used] + 0.5]
+    tail_fmt = ",".join(["%.17g"] * (len(shared) - 2))
+    at = np.full(len(row), -1, dtype=np.int64)  # check point index -> position in ``used``
+    at[used] = np.arange(used.size)
+    head_fmt = "%.17g,%.17g"
+    heads = [head_fmt % rc for rc in zip(shared[0].tolist(), shared[1].tolist(), strict=True)]
+    tails = [tail_fmt % v for v in zip(*(c.tolist() for c in shared[2:]), strict=True)]
+    finite = all(bool(np.isfinite(c).all()) for c in shared)
     for name, ev in evaluations.items():
         idx = np.asarray(ev.evaluated_index)
-        floats = [scps.row[idx], scps.col[idx], ev.residual_row, ev.residual_col]
-        tail = [xyz[idx, 0], xyz[idx, 1], xyz[idx, 2]]
-        if native_pixels:
-            tail += [scps.row[idx] + 0.5, scps.col[idx] + 0.5]
-        fmt = (name.replace("%", "%%") + ",%d," + ",".join(["%.17g"] * len(floats)) + ",%s,"
-               + ",".join(["%.17g"] * len(tail)))
+        pos = at[idx].tolist()
+        rr = np.asarray(ev.residual_row, dtype=np.float64)
+        rc_ = np.asarray(ev.residual_col, dtype=np.float64)
+        finite = finite and bool(np.isfinite(rr).all()) and bool(np.isfinite(rc_).all())
+        fmt = name.replace("%", "%%") + ",%d,%s,%.17g,%.17g,%s,%s"
         labels = [names[k] for k in np.asarray(status[name]).tolist()]
-        columns_ = [np.asarray(c, dtype=np.float64).tolist() for c in floats]
-        tails = [np.asarray(c, dtype=np.float64).tolist() for c in tail]
-        lines.extend(fmt % row for row in zip(idx.tolist(), *columns_, labels, *tails, strict=True))
-    return _NOT_FINITE.sub("", "\n".join(lines) + "\n").encode()
+        lines.extend(fmt % line for line in zip(idx.tolist(), [heads[p] for p in pos], rr.tolist(), rc_.tolist(),
+                                                labels, [tails[p] for p in pos], strict=True))
+    text = "\n".join(lines) + "\n"
+    if not finite:
+        text = _empty_non_finite(text)
+    return text.encode()
+
+
+def _empty_non_finite(text: str) -> str:
+    """``nan``, ``inf`` and ``-inf`` fields of CSV text (after a comma, before a comma or a line end) made empty;
+    the regular expression ``(?<=,)(?:nan|-?inf)(?=,|\n)`` 10x faster (``str.replace`` runs in C).  Each pass
+    replaces every other field of a run of non-finite fields (a match takes the comma the next one starts with),
+    so each pattern is replaced until it is gone."""
+    for token in ("nan", "inf", "-inf"):
+        for end in (",", "\n"):
+            pattern = f",{token}{end}"
+            while pattern in text:
+                text = text.replace(pattern, "," + end)
+    return text
 
 
 def method_summary(ev: Evaluation | None, status: np.ndarray | None, fit: FitRecord, error: str | None) -> dict:
