@@ -86,9 +86,18 @@ def _focal_plane_loop(ground, t, eph_t, eph_p, eph_v, eph_order, att_t, att_q, a
     n_refr, scale_h, c_light = geo[3], geo[4], geo[5]
     for i in prange(ground.shape[0]):
         ti = t[i]
-        # ---- ephemeris: position (and velocity) in ECEF
+        # ---- ephemeris: position minus the frame's origin (ECEF axes) and velocity, interpolated about the
+        # tangent line of the window's middle sample (linescan.lagrange_position_from: no 7,000 km round-off)
         s0 = _lagrange_start_c(eph_t, ti, eph_order)
         m = min(eph_order, eph_t.shape[0])
+        jm = s0 + m // 2
+        tr = eph_t[jm]
+        prx = eph_p[jm, 0]
+        pry = eph_p[jm, 1]
+        prz = eph_p[jm, 2]
+        vrx = eph_v[jm, 0]
+        vry = eph_v[jm, 1]
+        vrz = eph_v[jm, 2]
         px = 0.0
         py = 0.0
         pz = 0.0
@@ -97,12 +106,26 @@ def _focal_plane_loop(ground, t, eph_t, eph_p, eph_v, eph_order, att_t, att_q, a
         vz = 0.0
         for j in range(m):
             wj = _lagrange_weight_c(eph_t, ti, s0, m, j)
-            px += wj * eph_p[s0 + j, 0]
-            py += wj * eph_p[s0 + j, 1]
-            pz += wj * eph_p[s0 + j, 2]
+            dtj = eph_t[s0 + j] - tr
+            if j == 0:
+                px = wj * ((eph_p[s0, 0] - prx) - vrx * dtj)
+                py = wj * ((eph_p[s0, 1] - pry) - vry * dtj)
+                pz = wj * ((eph_p[s0, 2] - prz) - vrz * dtj)
+            else:
+                px += wj * ((eph_p[s0 + j, 0] - prx) - vrx * dtj)
+                py += wj * ((eph_p[s0 + j, 1] - pry) - vry * dtj)
+                pz += wj * ((eph_p[s0 + j, 2] - prz) - vrz * dtj)
             vx += wj * eph_v[s0 + j, 0]
             vy += wj * eph_v[s0 + j, 1]
             vz += wj * eph_v[s0 + j, 2]
+        # the window's middle sample (fixed within the window) and the motion from it, kept apart
+        dtr = ti - tr
+        px = vrx * dtr + px
+        py = vry * dtr + py
+        pz = vrz * dtr + pz
+        fx0 = prx - origin[0]
+        fy0 = pry - origin[1]
+        fz0 = prz - origin[2]
         # ---- attitude: body -> ECEF quaternion
         if att_method == ATTITUDE_LAGRANGE:
             s1 = _lagrange_start_c(att_t, ti, att_order)
@@ -167,13 +190,16 @@ def _focal_plane_loop(ground, t, eph_t, eph_p, eph_v, eph_order, att_t, att_q, a
             px += q00 * offset[0] + q01 * offset[1] + q02 * offset[2]
             py += q10 * offset[0] + q11 * offset[1] + q12 * offset[2]
             pz += q20 * offset[0] + q21 * offset[1] + q22 * offset[2]
-        # ---- perspective centre in ENU: E^T (p - origin)
-        dx0 = px - origin[0]
-        dy0 = py - origin[1]
-        dz0 = pz - origin[2]
-        cx = e[0, 0] * dx0 + e[1, 0] * dy0 + e[2, 0] * dz0
-        cy = e[0, 1] * dx0 + e[1, 1] * dy0 + e[2, 1] * dz0
-        cz = e[0, 2] * dx0 + e[1, 2] * dy0 + e[2, 2] * dz0
+        # ---- perspective centre in ENU: E^T (p - origin), as fixed + moving
+        fcx = e[0, 0] * fx0 + e[1, 0] * fy0 + e[2, 0] * fz0
+        fcy = e[0, 1] * fx0 + e[1, 1] * fy0 + e[2, 1] * fz0
+        fcz = e[0, 2] * fx0 + e[1, 2] * fy0 + e[2, 2] * fz0
+        mcx = e[0, 0] * px + e[1, 0] * py + e[2, 0] * pz
+        mcy = e[0, 1] * px + e[1, 1] * py + e[2, 1] * pz
+        mcz = e[0, 2] * px + e[1, 2] * py + e[2, 2] * pz
+        cx = fcx + mcx
+        cy = fcy + mcy
+        cz = fcz + mcz
         gx = ground[i, 0]
         gy = ground[i, 1]
         gz = ground[i, 2]
@@ -232,9 +258,10 @@ def _focal_plane_loop(ground, t, eph_t, eph_p, eph_v, eph_order, att_t, att_q, a
             tx = gx + shift * ax_
             ty = gy + shift * ay_
             tz = gz + shift * az_
-        dx = tx - cx
-        dy = ty - cy
-        dz = tz - cz
+        # the line of sight without the round-off of its 700 km length that varies with t
+        dx = (tx - fcx) - mcx
+        dy = (ty - fcy) - mcy
+        dz = (tz - fcz) - mcz
         if aberration:
             rho = math.sqrt(dx * dx + dy * dy + dz * dz)
             # velocity in ENU (v @ E) plus omega x (centre - ground)

@@ -55,6 +55,7 @@ __all__ = [
     "LineScanExterior",
     "RigorousLineScanScene",
     "lagrange_interpolate",
+    "lagrange_position_from",
     "load_scene",
     "matrix_to_quaternion",
     "quaternion_to_matrix",
@@ -186,6 +187,66 @@ def lagrange_interpolate(ts: np.ndarray, values: np.ndarray, t: np.ndarray, orde
     return np.einsum("mj,mjk->mk", w, values[idx])
 
 
+def lagrange_position_from(ts: np.ndarray, positions: np.ndarray, velocities: np.ndarray, t: np.ndarray,
+                           point: np.ndarray, order: int = 8, parts: bool = False) -> Any:
+    """Lagrange-interpolated positions minus ``point``, (M, 3), computed without planetary-size round-off.
+
+    :func:`lagrange_interpolate` of ``positions`` at ``t``, minus ``point``, formed as ``(p_r - point) + (v_r (t -
+    t_r) + sum_j w_j (p_j - p_r - v_r (t_j - t_r)))`` with ``(t_r, p_r, v_r)`` the middle sample of each window:
+    Lagrange interpolation reproduces the tangent line exactly, so this equals the interpolated position, but the
+    weights (rounded to ~1e-16 relative) multiply the samples' departures from that line (tens of kilometres for
+    a Pleiades table, metres for a densely sampled one) instead of ECEF positions of 7,000 km.  Summing ECEF
+    positions makes the interpolated position wobble by ~3e-9 m from one time to the next, which a 1e-6 rad
+    pixel 700 km away sees as a +-3e-9 px non-monotonic line residual; here it is ~1e-10 m.  The compiled line
+    geometry (:mod:`explorer.real._linescan_kernel`) and the differentiable model
+    (:mod:`explorer.refine.torch_linescan`) form the same sums.
+
+    Parameters
+    ----------
+    ts : ndarray, shape (N,)
+        Increasing sample times, seconds.
+    positions, velocities : ndarray, shape (N, 3)
+        Samples (metres, metres per second; the velocities only choose the tangent line, any values are exact).
+    t : ndarray, shape (M,)
+    point : ndarray, shape (3,)
+        Subtracted from every position (e.g. a local frame's origin), metres.
+    order : int
+        Samples per window, as :func:`lagrange_interpolate`.
+    parts : bool
+        Return the two terms apart: ``p_r - point``, which does not vary within a window, and the rest (the
+        motion since ``t_r``, kilometres); a line of sight formed as ``(ground - fixed) - moving`` then varies
+        with ``t`` without the round-off of its 700 km length.
+
+    Returns
+    -------
+    ndarray, shape (M, 3), or (fixed, moving), each (M, 3)
+    """
+    ts = np.asarray(ts, dtype=np.float64)
+    positions = np.asarray(positions, dtype=np.float64)
+    velocities = np.asarray(velocities, dtype=np.float64)
+    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    n = ts.size
+    m = min(order, n)
+    start = np.clip(np.searchsorted(ts, t) - m // 2, 0, n - m)
+    idx = start[:, None] + np.arange(m)[None, :]  # (M, m)
+    mid = start + m // 2
+    tw = ts[idx]
+    dt = t[:, None] - tw
+    w = np.ones_like(dt)
+    for j in range(m):
+        for k in range(m):
+            if k != j:
+                w[:, j] *= dt[:, k] / (tw[:, j] - tw[:, k])
+    t_r, p_r, v_r = ts[mid], positions[mid], velocities[mid]
+    departure = (positions[idx] - p_r[:, None, :]) - v_r[:, None, :] * (tw - t_r[:, None])[:, :, None]
+    total = w[:, 0, None] * departure[:, 0]
+    for j in range(1, m):  # in the compiled loop's order
+        total = total + w[:, j, None] * departure[:, j]
+    fixed = p_r - np.asarray(point, dtype=np.float64)
+    moving = v_r * (t - t_r)[:, None] + total
+    return (fixed, moving) if parts else fixed + moving
+
+
 @dataclass
 class Ephemeris:
     """ECEF position and velocity samples of the perspective centre (or the satellite).
@@ -219,6 +280,11 @@ class Ephemeris:
     def position(self, t: np.ndarray) -> np.ndarray:
         """ECEF position (M, 3), metres."""
         return lagrange_interpolate(self.time_s, self.position_m, t, self.order)
+
+    def position_from(self, t: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """ECEF position minus ``point`` (M, 3), metres, without the round-off of 7,000 km coordinates
+        (:func:`lagrange_position_from`)."""
+        return lagrange_position_from(self.time_s, self.position_m, self.velocity_m_s, t, point, self.order)
 
     def velocity(self, t: np.ndarray) -> np.ndarray:
         """ECEF velocity (M, 3), m/s (interpolated velocity samples)."""
@@ -351,8 +417,25 @@ class LineScanExterior:
         return p
 
     def position(self, t: np.ndarray) -> np.ndarray:
-        """Perspective centre S(t) in the local ENU frame, shape (N, 3), metres."""
-        return self.frame.ecef_to_enu(self.position_ecef(t))
+        """Perspective centre S(t) in the local ENU frame, shape (N, 3), metres (interpolated relative to the
+        frame's origin: :meth:`Ephemeris.position_from`)."""
+        fixed, moving = self.position_parts(t)
+        return fixed + moving
+
+    def position_parts(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The perspective centre (N, 3) in the local ENU frame as two terms, ``fixed + moving``: the Lagrange
+        window's middle sample (constant within a window) and the motion from it, lever arm included
+        (:func:`lagrange_position_from`); a line of sight ``(ground - fixed) - moving`` then carries no round-off of
+        the 700 km distance that varies with ``t``."""
+        t = self._t(t)
+        eph = self.ephemeris
+        fixed, moving = lagrange_position_from(eph.time_s, eph.position_m, eph.velocity_m_s, t, self.frame.origin_ecef,
+                                               eph.order, parts=True)
+        if np.any(self.centre_offset_body_m):
+            moving = moving + np.einsum("nij,j->ni", self.attitude.rotation(t), self.centre_offset_body_m)
+        e = self._e  # E^T p per component, in the compiled loop's order
+        return tuple(np.stack([e[0, k] * p[:, 0] + e[1, k] * p[:, 1] + e[2, k] * p[:, 2] for k in range(3)], axis=-1)
+                     for p in (fixed, moving))  # type: ignore[return-value]
 
     def velocity(self, t: np.ndarray) -> np.ndarray:
         """dS/dt in the local frame (Earth-fixed), shape (N, 3), m/s."""
@@ -422,9 +505,10 @@ class RigorousLineScanScene(Scene):
 
     #: Capability: interpolated ephemeris and attitude tables, not MPC polynomials (no compiled kernels).
     has_polynomial_exterior: ClassVar[bool] = False
-    #: Rows to which this model's residual defines a root: its round-off (the interpolated 7,000 km positions and
-    #: the scanline time) makes the residual wobble by +-3e-9 px within +-5e-9 rows of a root (2017 DIMAP, measured
-    #: in both the compiled and the numpy path), so a search asking for a smaller step only spends evaluations.
+    #: Rows to which this model's residual defines a root: its round-off made the residual wobble by +-3e-9 px within
+    #: +-5e-9 rows of a root while the 7,000 km ECEF positions were summed (2017 DIMAP); interpolated about the
+    #: window's tangent line (:func:`lagrange_position_from`) it stays below 1e-9 px, and a search asking for a
+    #: smaller step than this still only spends evaluations.
     root_resolution_rows: ClassVar[float] = 1e-8
 
     # ------------------------------------------------------------ corrections
@@ -489,11 +573,12 @@ class RigorousLineScanScene(Scene):
         """:meth:`focal_plane` in numpy (the reference of the compiled path; used without numba)."""
         ground = np.asarray(ground, dtype=np.float64)
         t = np.broadcast_to(np.asarray(t, dtype=np.float64), ground.shape[:1])
-        centre = self.exterior.position(t)
+        fixed, moving = self.exterior.position_parts(t)
+        centre = fixed + moving
         target = ground
         if self.refraction:
             target = ground + self._refraction_shift(ground, centre)
-        d = target - centre
+        d = (target - fixed) - moving  # (linescan.lagrange_position_from)
         if self.aberration:
             rho = np.linalg.norm(d, axis=1, keepdims=True)
             d = d / rho + self._relative_velocity(t, centre, ground) / C_LIGHT

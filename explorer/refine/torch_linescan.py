@@ -21,8 +21,9 @@ closed form of an along-track position offset).  Distortions solved by Newton in
 form with its autograd Jacobian from the compiled solution.
 
 Points where the compiled path finds no line (behind the sensor, outside the window, outside the ISD's tables)
-come out NaN.  Agreement with the compiled path: 1e-10 px on CSM cameras, 2.5-3.5e-9 px on the rigorous models
-(their float64 floor, docs/refine.md).  torch is imported by this module only.
+come out NaN.  Agreement with the compiled path: 1e-10 px on CSM cameras, 1e-9 px on the rigorous models (the
+perspective centre interpolated about each window's tangent line, :func:`explorer.real.linescan.lagrange_position_from`,
+and the compiled loop's operations in its order; docs/refine.md).  torch is imported by this module only.
 """
 
 from __future__ import annotations
@@ -80,6 +81,46 @@ def _quat_matrix(q: torch.Tensor) -> torch.Tensor:
 
 def _normalise(q: torch.Tensor) -> torch.Tensor:
     return q / torch.sqrt(torch.sum(q * q, dim=-1, keepdim=True))
+
+
+def _sqrt(x: torch.Tensor) -> torch.Tensor:
+    """Square root with the correctly rounded value of the compiled path (numpy's; torch's CPU ``sqrt`` rounds
+    ``sqrt(1 - 2^-53)`` up to 1, which turns a rotation matrix by 7e-16) and torch's derivative."""
+    root = torch.sqrt(x)
+    return torch.from_numpy(np.sqrt(x.detach().numpy())) + (root - root.detach())
+
+
+def _normalise_ordered(q: torch.Tensor) -> torch.Tensor:
+    """Unit quaternions (N, 4), the norm summed in the compiled loop's order."""
+    n = _sqrt(q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2] + q[:, 3] * q[:, 3])
+    return q / n[:, None]
+
+
+def _gradient_only(x: torch.Tensor, like: torch.Tensor | None = None) -> torch.Tensor:
+    """Zero with the derivatives of ``x`` (a correction whose value a table already holds); with ``like``, the
+    sign of each quaternion (last axis) of ``x`` matched to ``like``'s (a table's sign continuity)."""
+    if like is not None:
+        x = x * torch.sign(torch.sum(x.detach() * like.detach(), dim=-1, keepdim=True))
+    return x - x.detach()
+
+
+def _base_of(q: torch.Tensor, dq: torch.Tensor) -> torch.Tensor:
+    """``q dq^-1`` (N, 4) of unit quaternions (N, 4)."""
+    return quaternion_multiply(q, dq * _t([1.0, -1.0, -1.0, -1.0]))
+
+
+def _rotate(m: torch.Tensor, v: torch.Tensor | np.ndarray) -> torch.Tensor:
+    """``m v`` (N, 3) of matrices (3, 3) or (N, 3, 3) and vectors (N, 3) or (3,), per component in order."""
+    m = m if m.ndim == 3 else m[None]
+    v = v if isinstance(v, torch.Tensor) else _t(v)
+    v = v if v.ndim == 2 else v[None]
+    return torch.stack([m[:, k, 0] * v[:, 0] + m[:, k, 1] * v[:, 1] + m[:, k, 2] * v[:, 2] for k in range(3)], dim=1)
+
+
+def _rotate_transposed(m: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``m^T v`` (N, 3) of matrices (3, 3) or (N, 3, 3) and vectors (N, 3), per component in order."""
+    m = m if m.ndim == 3 else m[None]
+    return torch.stack([m[:, 0, k] * v[:, 0] + m[:, 1, k] * v[:, 1] + m[:, 2, k] * v[:, 2] for k in range(3)], dim=1)
 
 
 class _Projector:
@@ -182,46 +223,65 @@ class TorchRigorous(_Projector):
         start = np.clip(np.searchsorted(times, t) - m // 2, 0, n - m)
         return start[:, None] + np.arange(m)[None, :]
 
-    def exterior(self, t: torch.Tensor, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Perspective centres (N, 3) ENU, sensor -> ENU rotations (N, 3, 3), velocities (N, 3) ENU at times
-        ``t`` (N,) with corrections ``theta`` (N, P)."""
+    def exterior(self, t: torch.Tensor, theta: torch.Tensor) -> tuple[tuple[torch.Tensor, torch.Tensor], torch.Tensor,
+                                                                     torch.Tensor]:
+        """Perspective centres (N, 3) ENU as (fixed, moving) parts (``centre = fixed + moving``,
+        :meth:`explorer.real.linescan.LineScanExterior.position_parts`), body -> ECEF rotations (N, 3, 3), velocities
+        (N, 3) ENU at times ``t`` (N,) with corrections ``theta`` (N, P) (the sensor -> ENU rotation is ``E^T Q S``,
+        ``S`` the sensor to body axes)."""
         corr = self.correction
         t_ref = corr.reference_time_s
-        eph, att = self._eph, self._att
+        att = self._att
+        # the values of the adjusted sensor's own (corrected, rounded) tables, as the compiled path reads them; the
+        # derivatives by the parameters from the correction below
+        adjusted = self.adjusted(theta.detach()[0].numpy() if theta.shape[0] else
+                                 np.zeros(len(self.parameter_names)))
+        eph = adjusted.exterior.ephemeris
         t_np = t.detach().numpy()
         idx = self._window(eph.time_s, t_np, eph.order)
         w = self._lagrange_weights_compiled_order(eph.time_s, idx, t)
-        # offsets from the middle sample (the weights sum to one): the round-off of the weighted sum stays at the
-        # offsets' scale instead of the Earth's radius (the compiled path sums the ECEF positions themselves)
-        ref = eph.position_m[eph.position_m.shape[0] // 2]
-        pos = _weighted_sum(w, _t(eph.position_m[idx] - ref)) + _t(ref)
+        # position minus the frame's origin about the tangent line of the window's middle sample, in the order of
+        # linescan.lagrange_position_from and the compiled loop (no round-off of 7,000 km coordinates)
+        mid = idx[:, idx.shape[1] // 2]
+        t_r, p_r, v_r = eph.time_s[mid], eph.position_m[mid], eph.velocity_m_s[mid]
+        departure = (eph.position_m[idx] - p_r[:, None, :]) - v_r[:, None, :] * (eph.time_s[idx] - t_r[:, None])[
+            :, :, None]
+        fixed = _t(p_r - self._origin)
+        pos = _t(v_r) * (t - _t(t_r))[:, None] + _weighted_sum(w, _t(departure))  # the motion from the fixed part
         vel = _weighted_sum(w, _t(eph.velocity_m_s[idx]))
         if corr.has_position:
-            tau = torch.sum(w * _t(eph.time_s[idx] - t_ref), dim=1)
-            pos = pos + corr.position_offset(tau, theta)
-            vel = vel + (corr.position_offset(tau + 1.0, theta) - corr.position_offset(tau, theta))
-        # attitude samples corrected (q_i dq(t_i)), then interpolated as the table is (a constant dq after)
+            tau = torch.sum(w.detach() * _t(eph.time_s[idx] - t_ref), dim=1)
+            off = corr.position_offset(tau, theta)
+            vel_off = corr.position_offset(tau + 1.0, theta) - off
+            pos = pos + _gradient_only(off)  # the value is in the table already
+            vel = vel + _gradient_only(vel_off)
+        # attitude: the values of the adjusted sensor's (corrected, normalised) quaternion table, interpolated in
+        # the compiled loop's order; the derivatives by the parameters from the corrected base samples (q_i dq(t_i);
+        # a constant dq applied once per point after the interpolation)
+        adj = adjusted.exterior.attitude
         constant = _constant_attitude(corr)
         if att.method == "lagrange":
             aidx = self._window(att.time_s, t_np, att.order)
-            q = _t(att.quaternion[aidx]) if constant else self._corrected_quaternions(aidx, theta)
+            q = _t(adj.quaternion[aidx])
+            if not constant:
+                q = q + _gradient_only(self._corrected_quaternions(aidx, theta), q)
             wa = self._lagrange_weights_compiled_order(att.time_s, aidx, t)
-            qt = _normalise(torch.einsum("nm,nmk->nk", wa, q))
+            qt = _normalise_ordered(_normalise_ordered(_weighted_sum(wa, q)))  # quaternion_to_matrix normalises again
         else:
             i = np.clip(np.searchsorted(att.time_s, t_np) - 1, 0, att.time_s.size - 2)
             pair = np.stack([i, i + 1], axis=1)
-            q = _t(att.quaternion[pair]) if constant else self._corrected_quaternions(pair, theta)
+            q = _t(adj.quaternion[pair])
+            if not constant:
+                q = q + _gradient_only(self._corrected_quaternions(pair, theta), q)
             s = (t - _t(att.time_s[i])) / _t(att.time_s[i + 1] - att.time_s[i])
-            qt = _slerp(q[:, 0], q[:, 1], s, flip=True)
-        if constant:
-            qt = _normalise(quaternion_multiply(qt, corr.rotation_quaternion(torch.zeros_like(t), theta, self._b)))
+            qt = _normalise_ordered(_slerp(q[:, 0], q[:, 1], s, flip=True, normalise=False))
+        if constant and corr.n_parameters:
+            dq = corr.rotation_quaternion(torch.zeros_like(t), theta, self._b)
+            qt = qt + _gradient_only(_normalise(quaternion_multiply(_base_of(qt.detach(), dq.detach()), dq)), qt)
         rot_body = _quat_matrix(qt)  # body -> ECEF
         if np.any(self._lever):
-            pos = pos + rot_body @ _t(self._lever)
-        e = _t(self._e)
-        centre = _to_enu(pos - _t(self._origin), self._e)
-        rotation = torch.einsum("ji,njk,kl->nil", e, rot_body, _t(self._b))
-        return centre, rotation, vel @ e
+            pos = pos + _rotate(rot_body, self._lever)
+        return (_to_enu(fixed, self._e), _to_enu(pos, self._e)), rot_body, _to_enu(vel, self._e)
 
     def _corrected_quaternions(self, idx: np.ndarray, theta: torch.Tensor) -> torch.Tensor:
         corr = self.correction
@@ -235,18 +295,21 @@ class TorchRigorous(_Projector):
                     theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Distorted focal-plane (x, y) (N,) metres of ENU ``ground`` (N, 3) at times ``t`` (N,)."""
         scene = self.sensor
-        centre, rotation, velocity = self.exterior(t, theta)
+        (fixed, moving), rot_body, velocity = self.exterior(t, theta)
+        centre = fixed + moving
         target = ground
         if scene.refraction:
             target = ground + self._refraction_shift(ground, geodetic, centre)
-        d = target - centre
+        d = (target - fixed) - moving
         if scene.aberration:
             from explorer.real.linescan import C_LIGHT, OMEGA_EARTH
 
             omega = _t(OMEGA_EARTH * self._e[2]).expand_as(centre)
             rel = velocity + torch.linalg.cross(omega, centre - ground, dim=1)
-            d = d / torch.linalg.norm(d, dim=1, keepdim=True) + rel / C_LIGHT
-        v = torch.einsum("nji,nj->ni", rotation, d)
+            rho = _sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+            d = d / rho[:, None] + rel / C_LIGHT
+        # v = S^T Q^T E d, one factor at a time in the compiled loop's order
+        v = _rotate_transposed(_t(self._b), _rotate_transposed(rot_body, _rotate(_t(self._e), d)))
         interior = scene.interior
         scale = -interior.focal_length_m / v[:, 2]
         x, y = v[:, 0] * scale, v[:, 1] * scale
@@ -332,7 +395,7 @@ class TorchRigorous(_Projector):
         return self.adjusted(p_np)
 
 
-def _slerp(q0: torch.Tensor, q1: torch.Tensor, s: torch.Tensor, flip: bool) -> torch.Tensor:
+def _slerp(q0: torch.Tensor, q1: torch.Tensor, s: torch.Tensor, flip: bool, normalise: bool = True) -> torch.Tensor:
     """Slerp (N, 4) between unit quaternions (N, 4) at fractions (N,): ``flip`` as
     :func:`explorer.real.linescan.slerp` (the shorter arc), else as the CSM kernel (dot clipped at 1)."""
     dot = torch.sum(q0 * q1, dim=1)
@@ -347,7 +410,8 @@ def _slerp(q0: torch.Tensor, q1: torch.Tensor, s: torch.Tensor, flip: bool) -> t
     safe = torch.where(small, torch.ones_like(st), st)
     w0 = torch.where(small, 1.0 - s, torch.sin((1.0 - s) * theta) / safe)
     w1 = torch.where(small, s, torch.sin(s * theta) / safe)
-    return _normalise(w0[:, None] * q0 + w1[:, None] * q1)
+    q = w0[:, None] * q0 + w1[:, None] * q1
+    return _normalise(q) if normalise else q
 
 
 # ------------------------------------------------------------------------------------------- CSM
