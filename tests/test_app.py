@@ -188,13 +188,14 @@ def test_scene_nodes_and_counts(server):
     s = app.settings()
     names = set(app.nodes)
     for n in ("/ground/surface", "/ground/outline", "/orbit/track", "/orbit/sensor_frames",
-              "/orbit/direction", "/orbit/flight_label", "/scanlines/planes", "/scanlines/edges",
+              "/orbit/direction", "/orbit/flight_label", "/scanlines/planes/0", "/scanlines/edges",
               "/scanlines/labels/0", "/scanlines/labels/2", "/points/scops", "/points/scps",
               "/selected/point", "/selected/ray", "/selected/label"):
         assert n in names, n
-    # first / middle / last / selected scanline planes: 4 triangles in ONE mesh
-    planes = app.nodes["/scanlines/planes"]
-    assert planes.faces.shape == (4, 3) and planes.vertices.shape == (12, 3)
+    # first / middle / last / selected scanline planes: 4 unlit triangle images, their outlines 12 segments
+    assert sorted(n for n in names if n.startswith("/scanlines/planes/")) == [f"/scanlines/planes/{i}"
+                                                                              for i in range(4)]
+    assert app.nodes["/scanlines/edges"].points.shape == (12, 2, 3)
     assert app.nodes["/scanlines/labels/0"].text.startswith("first scanline")
     assert app.nodes["/scanlines/labels/2"].text.startswith("last scanline")
     scops = app.model.scops(s)

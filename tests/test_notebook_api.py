@@ -143,7 +143,7 @@ def test_scene_view_holds_the_explorer_scene_and_the_search_trace():
     scene = build_scene("linear")
     point = (0.1 * scene.n_rows, 0.2 * scene.n_columns)
     view = scene_view(scene, point=point, method="bws")
-    for node in ("/ground/surface", "/orbit/track", "/scanlines/planes", "/selected/point", "/selected/ray",
+    for node in ("/ground/surface", "/orbit/track", "/scanlines/planes/0", "/selected/point", "/selected/ray",
                  "/selected/trace"):
         assert node in view.nodes
     ground = scene.image_to_ground(np.array([point[0]]), np.array([point[1]]))

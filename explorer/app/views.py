@@ -380,10 +380,15 @@ class Views:
         names = ["first scanline (row 0)", "middle scanline", f"last scanline (row {scene.n_rows - 1})", ""]
         drawn = self._drawn_scene(s)
         with self.server.atomic():
-            self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights, names))
-            # a scanline's label may stand at either end of its ground trace (whichever keeps it clear)
-            ends = self.frame.ground(B.scanline_footprints(drawn, rows, heights).reshape(-1, 3)).reshape(-1, 2, 3)
-            self.label_alternatives.update({f"/scanlines/labels/{i}": (ends[i, 1],) for i, n in enumerate(names) if n})
+            # the planes depend on the selected point's scanline only: a new method result (a SCOP change)
+            # leaves them as they are (no new textures for the browser to upload and draw)
+            if self._changed("scanlines", (self._frame_key(s), rows.tobytes(), heights.tobytes())):
+                self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights,
+                                                              names))
+                # a scanline's label may stand at either end of its ground trace (whichever keeps it clear)
+                ends = self.frame.ground(B.scanline_footprints(drawn, rows, heights).reshape(-1, 3)).reshape(-1, 2, 3)
+                self.label_alternatives.update({f"/scanlines/labels/{i}": (ends[i, 1],)
+                                                for i, n in enumerate(names) if n})
             self._put("/selected", B.add_selection(
                 self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
                 label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))

@@ -479,6 +479,65 @@ def add_orbit(api: viser.SceneApi, scene: Scene, frame: DisplayFrame, *, n_frame
     return out
 
 
+PLANE_TEXTURE_PX = 256
+"""Texels along the longer side of a scanline plane's texture (its edges are drawn as lines on top)."""
+
+
+def triangle_texture(
+    triangle: np.ndarray, rgb: tuple[int, int, int], opacity: float, px: int = PLANE_TEXTURE_PX
+) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
+    """A flat triangle as an image in its own plane: what viser's ``add_image`` draws unlit.
+
+    viser draws an image as a rectangle ``render_width`` x ``render_height`` centred on its node, image
+    column ``c`` along the node's +x and image row ``r`` along its +y (row 0 at -y: the client turns the
+    plane half a turn about x), texel ``(r, c)`` at ``(-w/2 + (c + 1/2) w / W, -h/2 + (r + 1/2) h / H, 0)``.
+
+    Parameters
+    ----------
+    triangle : ndarray, shape (3, 3)
+        Vertices in the display frame (km); not degenerate.
+    rgb : (int, int, int)
+        Colour inside the triangle.
+    opacity : float
+        Alpha inside the triangle (0..1); outside the texels are fully transparent.
+    px : int
+        Texels along the rectangle's longer side.
+
+    Returns
+    -------
+    rgba : ndarray of uint8, shape (H, W, 4)
+    width, height : float
+        The rectangle's size in the display frame (km): the triangle's bounding box in its plane.
+    position : ndarray, shape (3,)
+        The rectangle's centre (km).
+    rotation : ndarray, shape (3, 3)
+        Node -> display frame: columns x (along the triangle's last edge, vertex 1 to 2), y, and the
+        plane's normal.
+    """
+    tri = np.asarray(triangle, dtype=np.float64).reshape(3, 3)
+    u = tri[2] - tri[1]
+    normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    if np.linalg.norm(u) == 0 or np.linalg.norm(normal) == 0:
+        raise ValueError("degenerate triangle")
+    u /= np.linalg.norm(u)
+    normal /= np.linalg.norm(normal)
+    rot = np.stack([u, np.cross(normal, u), normal], axis=1)
+    uv = (tri - tri[0]) @ rot[:, :2]
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    w, h = hi - lo
+    n_w = max(2, int(round(px * min(1.0, w / h))))
+    n_h = max(2, int(round(px * min(1.0, h / w))))
+    x, y = np.meshgrid(lo[0] + (np.arange(n_w) + 0.5) * w / n_w, lo[1] + (np.arange(n_h) + 0.5) * h / n_h)
+    cross = [(b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0])
+             for a, b in ((uv[0], uv[1]), (uv[1], uv[2]), (uv[2], uv[0]))]
+    inside = np.all([c >= 0 for c in cross], axis=0) | np.all([c <= 0 for c in cross], axis=0)
+    rgba = np.zeros((n_h, n_w, 4), np.uint8)
+    rgba[inside, :3] = np.asarray(rgb, np.uint8)
+    rgba[inside, 3] = int(round(255 * float(np.clip(opacity, 0.0, 1.0))))
+    centre = tri[0] + rot[:, :2] @ ((lo + hi) / 2.0)
+    return rgba, float(w), float(h), centre, rot
+
+
 def add_scanline_planes(
     api: viser.SceneApi,
     scene: Scene,
@@ -489,7 +548,11 @@ def add_scanline_planes(
     *,
     opacity: float = 0.22,
 ) -> Handles:
-    """The central perspective planes of several scanlines, translucent, in ONE mesh.
+    """The central perspective planes of several scanlines, translucent.
+
+    Each plane is filled by an unlit image of its triangle (:func:`triangle_texture`): a lit translucent
+    mesh cost a browser's software WebGL ~10x more per frame (the planes reach the sensor and cover much of
+    the view) and every frame of the explorer paid it.
 
     Parameters
     ----------
@@ -499,20 +562,19 @@ def add_scanline_planes(
     names : list of str, length K
         Label text for each plane (shown at its first-column ground end; "" for none).
 
-    Nodes: ``/scanlines/planes`` (one mesh of K triangles, double-sided),
-    ``/scanlines/edges`` (the triangles' outlines), ``/scanlines/labels/<k>``.
+    Nodes: ``/scanlines/planes/<k>`` (plane k's image, double-sided), ``/scanlines/edges`` (the triangles'
+    outlines), ``/scanlines/labels/<k>``.
     """
     centres, ends = scanline_planes(scene, rows, heights)
     c = frame.sensor(centres)
     e = frame.ground(ends.reshape(-1, 3)).reshape(-1, 2, 3)
-    verts = np.concatenate([c[:, None, :], e], axis=1).reshape(-1, 3)
-    k = len(rows)
-    faces = np.arange(3 * k).reshape(k, 3)
+    tri = np.concatenate([c[:, None, :], e], axis=1)
     out: Handles = {}
-    out["/scanlines/planes"] = api.add_mesh_simple(
-        "/scanlines/planes", verts, faces, color=PLANE_RGB, opacity=opacity, side="double",
-        cast_shadow=False, receive_shadow=False)
-    tri = verts.reshape(k, 3, 3)
+    for k in range(len(tri)):
+        rgba, w, h, centre, rot = triangle_texture(tri[k], PLANE_RGB, opacity)
+        key = f"/scanlines/planes/{k}"
+        out[key] = api.add_image(key, rgba, w, h, format="png", position=centre, wxyz=quaternion_wxyz(rot)[0],
+                                 cast_shadow=False, receive_shadow=False)
     seg = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=0)
     out["/scanlines/edges"] = api.add_line_segments(
         "/scanlines/edges", seg, EDGE_RGB, thickness=1.5, thickness_units="screen")
@@ -613,7 +675,8 @@ __all__ = [
     "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "SCP_COVER", "VISER_POINT_SCALE",
     "DisplayFrame", "add_ground", "add_orbit", "add_points",
     "ground_mesh_nodes",
-    "add_scanline_planes", "add_scops", "add_selection", "attitude_samples", "footprint_mesh",
+    "add_scanline_planes", "add_scops", "triangle_texture", "PLANE_TEXTURE_PX", "add_selection", "attitude_samples",
+    "footprint_mesh",
     "footprint_corners", "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
     "scanline_planes", "scene_centre", "track_positions", "vertex_normals", "auto_height_exaggeration",
 ]

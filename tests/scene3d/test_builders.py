@@ -149,12 +149,71 @@ def test_orbit_and_planes_nodes(api, scene):
     assert orbit["/orbit/flight_label"].text == "flight direction"
     rows = np.array([0.0, 2000.0, scene.n_rows - 1.0, 1500.0])
     planes = B.add_scanline_planes(api, scene, f, rows, 60.0, ["first", "mid", "last", ""])
-    mesh = planes["/scanlines/planes"]
-    assert mesh.faces.shape == (4, 3) and mesh.opacity < 1 and mesh.side == "double"
-    assert planes["/scanlines/edges"].points.shape == (12, 2, 3)
+    assert sorted(k for k in planes if k.startswith("/scanlines/planes/")) == [f"/scanlines/planes/{i}"
+                                                                              for i in range(4)]
+    edges = planes["/scanlines/edges"].points
+    assert edges.shape == (12, 2, 3)
     assert sorted(k for k in planes if "labels" in k) == [f"/scanlines/labels/{i}" for i in range(3)]
-    np.testing.assert_allclose(mesh.vertices[0], f.sensor(scene.exterior.position(scene.scanline_time(rows[:1])))[0],
+    # the first triangle's apex is the perspective centre of row 0 (displayed), its base the row's ground trace
+    np.testing.assert_allclose(edges[0, 0], f.sensor(scene.exterior.position(scene.scanline_time(rows[:1])))[0],
                                atol=1e-5)
+    ends = f.ground(B.scanline_footprints(scene, rows[:1], 60.0).reshape(-1, 3))
+    np.testing.assert_allclose(edges[0, 1], ends[0], atol=1e-5)
+    np.testing.assert_allclose(edges[4, 1], ends[1], atol=1e-5)  # segment 4: vertex 1 -> 2 of triangle 0
+    # each plane's image is its triangle (texel centres inside it are opaque-ish, outside transparent)
+    img = planes["/scanlines/planes/0"]
+    assert float(img.render_width) > 0 and float(img.render_height) > 0
+
+
+def _texel_points(rgba, width, height, position, rotation):
+    """Display-frame position (H, W, 3) of every texel centre, by viser's image convention: the plane is
+    turned half a turn about x (ViserImage: ``rotation={new Euler(PI, 0, 0)}``) so texture row 0 (its top,
+    three.js flips textures on upload) lies at local -y and column 0 at local -x."""
+    n_h, n_w = rgba.shape[:2]
+    x = -width / 2 + (np.arange(n_w) + 0.5) * width / n_w
+    y = -height / 2 + (np.arange(n_h) + 0.5) * height / n_h
+    xx, yy = np.meshgrid(x, y)
+    local = np.stack([xx, yy, np.zeros_like(xx)], axis=-1)
+    return position + local @ rotation.T
+
+
+@pytest.mark.parametrize("triangle", [
+    np.array([[0.0, 0.0, 20.0], [-3.0, -1.0, 0.0], [4.0, 1.5, 0.2]]),       # a scanline plane: tall, thin
+    np.array([[1.0, 2.0, 3.0], [2.0, 2.5, 2.0], [0.5, 4.0, 2.5]]),          # an oblique one
+    np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),          # seen from below (normal -z)
+])
+def test_triangle_texture_covers_exactly_its_triangle(triangle):
+    rgba, w, h, pos, rot = B.triangle_texture(triangle, (90, 160, 255), 0.22, px=128)
+    assert rgba.dtype == np.uint8 and rgba.shape[2] == 4 and max(rgba.shape[:2]) == 128
+    np.testing.assert_allclose(rot.T @ rot, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rot) > 0  # a proper rotation (viser takes it as a quaternion)
+    pts = _texel_points(rgba, w, h, pos, rot)
+    # every texel lies in the triangle's plane
+    normal = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
+    normal /= np.linalg.norm(normal)
+    assert np.abs((pts - triangle[0]) @ normal).max() < 1e-9
+    # barycentric coordinates of each texel centre (least squares in the plane): inside <=> all >= 0
+    m = np.stack([triangle[1] - triangle[0], triangle[2] - triangle[0]], axis=1)
+    ab = np.linalg.lstsq(m, (pts - triangle[0]).reshape(-1, 3).T, rcond=None)[0]
+    bary = np.stack([1 - ab[0] - ab[1], ab[0], ab[1]]).T.reshape(rgba.shape[0], rgba.shape[1], 3)
+    texel = max(w / rgba.shape[1], h / rgba.shape[0])
+    edge = np.min(bary, axis=2) * np.linalg.norm(m, axis=0).min()  # ~ distance to the nearest edge (scaled)
+    alpha = rgba[..., 3]
+    clear_in, clear_out = edge > 2 * texel, np.min(bary, axis=2) < -0.02
+    assert (alpha[clear_in] == round(0.22 * 255)).all() and (rgba[clear_in, :3] == (90, 160, 255)).all()
+    assert (alpha[clear_out] == 0).all()
+    # the rectangle is the triangle's bounding box in its plane: every vertex within half a texel of its edge
+    local = (triangle - pos) @ rot
+    assert np.all(np.abs(local[:, 0]) <= w / 2 + 1e-9) and np.all(np.abs(local[:, 1]) <= h / 2 + 1e-9)
+    assert np.isclose(np.abs(local[:, 0]).max(), w / 2) and np.isclose(np.abs(local[:, 1]).max(), h / 2)
+    # and the triangle covers about half of it (area ratio, within the texel rounding)
+    area = 0.5 * np.linalg.norm(np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0]))
+    assert abs((alpha > 0).mean() - area / (w * h)) < 0.03
+
+
+def test_triangle_texture_refuses_a_degenerate_triangle():
+    with pytest.raises(ValueError, match="degenerate"):
+        B.triangle_texture(np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]), (1, 2, 3), 0.5)
 
 
 def test_selection_trace_is_coloured_first_to_last(api, scene):
