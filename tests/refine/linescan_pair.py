@@ -1,11 +1,13 @@
-"""A stereo pair of rigorous line scanners with a known truth, for the bundle-adjustment tests.
+"""Stereo pairs of line scanners with a known truth, for the bundle-adjustment tests.
 
-Image A is the rigorous model of the 2017 Pleiades DIMAP file (tests/data/rpc/PROVENANCE.md), seen ~5 degrees
-off nadir.  Image B is a copy of it whose ephemeris is moved 250 km along the orbit (a constant offset of every
-position sample in the orbital frame at mid-exposure) and whose attitude is turned (a constant rotation of every
-attitude sample, on the sensor side) so that B's central pixel sees the ground A's central pixel sees: the same
-ground from ~20 degrees away (base / height ~0.36), ~80 % of A's footprint inside B.  Both are built with
-:func:`explorer.refine.line_adjust.adjusted_sensor`, the same compiled model as the file's.
+Image A is a line scanner read from a file of tests/data: the rigorous model of the 2017 Pleiades DIMAP file or
+of the WorldView-1 DG file (tests/data/rpc/PROVENANCE.md), or the USGS CSM camera of the MRO CTX ISD
+(tests/data/usgscsm).  Image B is a copy of it whose ephemeris is moved ``base_m`` along the orbit (a constant
+offset of every position sample in the orbital frame at mid-exposure) and whose attitude is turned (a constant
+rotation of every attitude sample, on the sensor side) so that B's central pixel sees the ground A's central
+pixel sees: the same ground from 17-22 degrees away (:data:`PAIRS`: 250 km from Pleiades' 700 km, 200 km from
+WorldView-1's ~550 km slant range, 100 km from CTX's ~300 km), 80-90 % of A's footprint inside B.  Both are built
+with :func:`explorer.refine.line_adjust.adjusted_sensor`, the same class and compiled model as the file's.
 
 The truth: each image biased by known position / attitude offsets (``TRUE_BIAS``); ground points seen by the
 biased (true) sensors at random pixels and heights, their pixels measured by them with 0.3 px of seeded Gaussian
@@ -23,17 +25,32 @@ from explorer.refine.line_adjust import adjusted_sensor, correction_for
 from explorer.refine.points_io import PointTable
 from explorer.sources import load_source
 
-DIMAP_2017 = Path(__file__).resolve().parents[1] / "data" / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
+DATA = Path(__file__).resolve().parents[1] / "data"
+DIMAP_2017 = DATA / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
 NOISE_PX = 0.3
 BASE_M = 250e3
-#: Known biases (along, cross, radial metres; roll, pitch, yaw radians) of images A and B: tens to a hundred
-#: pixels each (a Pleiades pixel is ~1e-6 rad, ~0.7 m).
+#: Known biases (along, cross, radial metres; roll, pitch, yaw radians) of images A and B of the Pleiades and
+#: WorldView pairs: tens to a hundred pixels each (a pixel is ~1e-6 rad, 0.5-0.7 m).
 TRUE_BIAS = (np.array([60.0, -40.0, 25.0, 3e-5, -2e-5, 4e-5]),
              np.array([-90.0, 50.0, -30.0, -4e-5, 3e-5, -2e-5]))
+#: The CTX pair's (a pixel is ~2e-5 rad, ~6 m): 20-80 pixels.
+TRUE_BIAS_CTX = (np.array([300.0, -200.0, 150.0, 4e-4, -3e-4, 5e-4]),
+                 np.array([-250.0, 150.0, -100.0, -3e-4, 2e-4, -4e-4]))
+#: kind -> (file, base in metres, biases)
+PAIRS = {"dimap": (DIMAP_2017, BASE_M, TRUE_BIAS),
+         "dg": (DATA / "rpc" / "rpc_WV1.xml", 200e3, TRUE_BIAS),
+         "isd": (DATA / "usgscsm" / "ctxLineScan.json", 100e3, TRUE_BIAS_CTX)}
 
 
 def load_dimap_2017():
     return load_source("dimap", str(DIMAP_2017), stand_in=False).scene
+
+
+def load_pair(kind: str):
+    """(A, B, biases) of the pair of a kind of :data:`PAIRS`."""
+    path, base_m, bias = PAIRS[kind]
+    a = load_source(kind, str(path), stand_in=False).scene
+    return a, off_nadir_copy(a, base_m), bias
 
 
 def off_nadir_copy(sensor, base_m: float = BASE_M):
@@ -78,7 +95,10 @@ def simulate(truths, frame, n: int, rng: np.random.Generator, prefix: str, *, gr
         ok = np.isfinite(g).all(axis=1)
         rc = []
         for t in truths:
-            r, c = t.ground_to_image(np.where(ok[:, None], g, 0.0))
+            gt = np.where(ok[:, None], g, 0.0)
+            if t.frame is not first.frame:  # (a sensor read from its own file has its own local frame)
+                gt = t.frame.geodetic_to_enu(*first.frame.enu_to_geodetic(gt))
+            r, c = t.ground_to_image(gt)
             ok &= (np.isfinite(r) & (r >= margin * (t.n_rows - 1)) & (r <= (1 - margin) * (t.n_rows - 1))
                    & (c >= margin * (t.n_columns - 1)) & (c <= (1 - margin) * (t.n_columns - 1)))
             rc.append((r, c))

@@ -165,3 +165,64 @@ def test_bad_input_is_one_line(mixed, tmp_path, capsys):
                      str(ties), "--gcps", str(files["gcps"]), "--out", str(tmp_path / "o")])
         err = capsys.readouterr().err
         assert code == 2 and message in err and len(err.strip().splitlines()) == 1, (ties, err)
+
+
+def write_isd_copy(isd_path, camera, path):
+    """The ISD of ``isd_path`` carrying the state of ``camera`` (a CsmCamera read from it, then corrected): the
+    reader's usgscsm state -- body-fixed positions on even nodes, sensor pointing quaternions with an identity body
+    rotation -- written back as such (positions in the body frame, km; one identity body-rotation sample), so that
+    reading it gives the same tables."""
+    d = json.loads(isd_path.read_text())
+    centre = float(d["center_ephemeris_time"])
+    body_frame = d["body_rotation"]["time_dependent_frames"][0]
+    d["instrument_position"] = {"ephemeris_times": (camera.position_times + centre).tolist(),
+                                "positions": (camera.positions_m / 1000.0).tolist(), "reference_frame": body_frame}
+    d["instrument_pointing"] = {"ephemeris_times": (camera.pointing_times + centre).tolist(),
+                                "quaternions": camera.pointing_quaternions.tolist(),
+                                "constant_rotation": np.eye(3).ravel().tolist(), "reference_frame": 1}
+    d["body_rotation"] = {"ephemeris_times": [float(camera.pointing_times[0] + centre)],
+                          "quaternions": [[1.0, 0.0, 0.0, 0.0]], "constant_rotation": np.eye(3).ravel().tolist(),
+                          "time_dependent_frames": [body_frame], "reference_frame": 1}
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_isd_pair_found_by_auto_kinds(tmp_path):
+    """Two ISD files (the CTX ISD and a copy written with the tables of its off-nadir copy, 100 km along the
+    orbit), kinds found by ``auto`` (an ISD .json), default model attitude on both, attitude biases recovered
+    within 3 sigmas, triangulated checks within 1.5x the propagated error, one sidecar per image."""
+    from explorer.sources import load_source
+    from tests.refine.linescan_pair import PAIRS
+
+    isd_a = PAIRS["isd"][0]
+    a = load_source("isd", str(isd_a), stand_in=False).scene
+    b_mem = off_nadir_copy(a, PAIRS["isd"][1])
+    isd_b = write_isd_copy(isd_a, b_mem.camera, tmp_path / "ctx_b.json")
+    b = load_source("isd", str(isd_b), stand_in=False).scene
+    g = a.image_to_ground(np.array([1000.0, 5600.0, 10000.0]), np.array([1200.0, 2500.0, 3800.0]))
+    np.testing.assert_allclose(np.stack(b.ground_to_image(b.frame.geodetic_to_enu(*a.frame.enu_to_geodetic(g)))),
+                               np.stack(b_mem.ground_to_image(g)), atol=1e-6)
+    bias = (np.array([2e-4, -1.5e-4, 6e-4]), np.array([-2e-4, 1e-4, -5e-4]))  # (yaw: sigma ~1e-4 on CTX)
+    truths = [adjusted_sensor(s, correction_for(s, "attitude"), p) for s, p in zip((a, b), bias, strict=True)]
+    rng = np.random.default_rng(2813)
+    names = [isd_a.name, isd_b.name]
+    ties = write_table(tmp_path / "ties.csv", simulate(truths, a.frame, 100, rng, "t", ground_known=False), names,
+                       False)
+    gcps = write_table(tmp_path / "gcps.csv", simulate(truths, a.frame, 6, rng, "g", ground_known=True), names, True)
+    check = write_table(tmp_path / "check.csv", simulate(truths, a.frame, 30, rng, "c", ground_known=True), names,
+                        True)
+    out = tmp_path / "out"
+    assert main(["refine", "--images", str(isd_a), str(isd_b), "--ties", str(ties), "--gcps", str(gcps), "--check",
+                 str(check), "--sigma-px", str(NOISE_PX), "--no-panels", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["model"] == "attitude" and [im["kind"] for im in report["images"]] == ["linescan", "linescan"]
+    values = np.array([p["value"] for p in report["parameters"]])
+    sigmas = np.array([p["sigma"] for p in report["parameters"]])
+    z = (values - np.concatenate(bias)) / sigmas
+    assert np.all(np.abs(z) < 3.0), z
+    assert np.abs(np.concatenate(bias) / sigmas).min() > 3.0
+    ground = report["check_ground"]
+    assert ground["rmse_3d_m"] <= 1.5 * ground["predicted_rmse_3d_m"], ground
+    for k, path in enumerate((isd_a, isd_b)):
+        sidecar = json.loads((out / f"adjusted_model_{k}.json").read_text())
+        assert sidecar["source_kind"] == "isd" and sidecar["base_file"] == path.name
