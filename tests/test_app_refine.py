@@ -158,7 +158,9 @@ def test_the_apps_3d_view_redraws_the_trajectories_in_its_frame_and_hides_them_o
         app.handles["preset"].value = "ISB"
         assert app.scene.name == "ISB" and not any(h.visible for h in view._nodes.values())
         app.handles["preset"].value = "WSU"
-        assert all(h.visible for h in view._nodes.values())
+        # (at the true distance the label's points are far outside the framed view: the label layout hides it)
+        assert all(h.visible for k, h in view._nodes.items() if k != "/refine/label")
+        assert view._nodes["/refine/label"].visible == (app.label_layout["/refine/label"] is not None)
         drawn(app.frame)
 
 
@@ -249,3 +251,73 @@ def test_gui_changes_readjust_in_the_background_and_the_newest_change_wins(serve
     view.drop.value = "nope"
     view.thread.join(60)
     assert view.error == "no control point nope" and view.refinement.model == "poly2"
+
+
+@pytest.mark.parametrize("preset", ["WSU", "agile"])
+def test_the_default_view_holds_the_trajectories_and_their_label(server, tmp_path, preset):
+    """Issue 28: with ``--gcps`` the framed default view holds both trajectories (every drawn point of the tracks
+    inside the view, closed-form projection through viser's camera model) with the footprint still at least half
+    of it; the sensor side is drawn nearer (a stated compressed distance) instead; the trajectories' label is laid
+    out with the others (inside the view, clear of every other label); without --gcps the default distance."""
+    from argparse import Namespace
+
+    import numpy as np
+
+    from explorer.app.server import _refine_folder
+    from explorer.presets import build_scene
+    from explorer.scene3d.builders import COMPRESSED_DISTANCE_FACTOR
+    from explorer.scene3d.camera import DEFAULT_ASPECT, DEFAULT_CANVAS_PX, VIEW_FOV_Y, footprint_share, view_ndc
+    from explorer.scene3d.labels import boxes_overlap
+    from explorer.sources import load_source
+    from tests.refine.cases import write_points_csv
+    from tests.test_app import make_app, toy_registry
+
+    scene = build_scene(preset)
+    gcps = write_points_csv(tmp_path / "g.csv", _scene_control(scene, np.array([30.0, -20.0, 10.0, 2e-5, -1e-5, 1e-5]),
+                                                                noise_px=0.3))
+    ready = _refine_folder(Namespace(gcps=str(gcps), check=None, sigma_px=0.3), load_source("preset", preset))
+    with toy_registry():
+        app = make_app(server, preset=preset)
+        diagonal = app.frame.diagonal_km
+        track_km = float(np.linalg.norm(app.nodes["/orbit/track"].points.mean(axis=0)))
+        assert track_km == pytest.approx(COMPRESSED_DISTANCE_FACTOR * diagonal, rel=0.02)  # no refinement: default
+        pos, look, _ = app.camera_pose
+        drawn = np.asarray(app.nodes["/orbit/track"].points, dtype=np.float64)
+        ndc, _ = view_ndc(drawn, np.array(pos), np.array(look))
+        assert np.abs(ndc).max() > 1.0  # (the problem: the track above the framed view)
+        ready(app)
+        view = app.refine_view
+        assert app._framing[2] is not None
+        pos, look, _ = app.camera_pose
+        for key in ("/refine/original/track", "/refine/adjusted/track"):
+            pts = np.asarray(view._nodes[key].points, dtype=np.float64).reshape(-1, 3)
+            ndc, depth = view_ndc(pts, np.array(pos), np.array(look), fov_y=VIEW_FOV_Y, aspect=DEFAULT_ASPECT)
+            assert np.all(depth > 0) and np.abs(ndc).max() <= 0.85 + 1e-9, (key, np.abs(ndc).max())
+        corners = app.frame.ground(np.asarray(app.scene.footprint(), dtype=np.float64))
+        ndc, depth = view_ndc(corners, np.array(pos), np.array(look))
+        assert np.all(depth > 0) and np.abs(ndc).max() < 1.0
+
+        class Pose:
+            position, look_at, fov_y, aspect = np.array(pos), np.array(look), VIEW_FOV_Y, DEFAULT_ASPECT
+
+        assert max(footprint_share(corners, Pose)) >= 0.5 - 1e-9
+        # the sensor side drawn nearer, stated with the true distance
+        shown_km = view.trajectory_3d["display_distance_km"]
+        assert shown_km < COMPRESSED_DISTANCE_FACTOR * diagonal and view.trajectory_3d["true_distance_km"] > 400
+        assert f"drawn {shown_km:.3g} km from the scene centre" in view.trajectory_text.content
+        # the label: laid out, inside the default canvas, clear of every other label shown
+        placed = app.label_layout["/refine/label"]
+        assert placed is not None and view._nodes["/refine/label"].visible
+        assert view._nodes["/refine/label"].anchor == placed[0]
+        box = placed[1]
+        w, h = DEFAULT_CANVAS_PX
+        assert box[0] >= 0 and box[1] >= 0 and box[2] <= w and box[3] <= h
+        others = [v[1] for k, v in app.label_layout.items() if v is not None and k != "/refine/label"]
+        assert others and not any(boxes_overlap(box, o) for o in others)
+        # a re-adjustment redraws the label (a new node): it is laid out again
+        old = view._nodes["/refine/label"]
+        view.drop.value = "g0"
+        view.update()
+        assert view._nodes["/refine/label"] is not old
+        assert app.label_layout["/refine/label"] is not None
+        assert view._nodes["/refine/label"].anchor == app.label_layout["/refine/label"][0]

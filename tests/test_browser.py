@@ -407,10 +407,16 @@ HIDE_TOASTS = "() => { for (const el of document.querySelectorAll('.mantine-Noti
               "[class*=Notification]')) el.style.display = 'none'; }"
 
 
+def _scene_nodes(app) -> dict:
+    """Every 3D node of the app: its own and those of its Refinement folder (``explore --gcps``)."""
+    view = getattr(app, "refine_view", None)
+    return {**app.nodes, **(dict(view._nodes) if view is not None else {})}
+
+
 def _show_only(app, keep: tuple[str, ...]) -> dict:
     """Hide every 3D node except those whose name starts with one of ``keep``; returns what to restore."""
     was = {}
-    for name, node in app.nodes.items():
+    for name, node in _scene_nodes(app).items():
         with contextlib.suppress(Exception):
             was[name] = bool(node.visible)
             node.visible = name.startswith(keep)
@@ -418,9 +424,10 @@ def _show_only(app, keep: tuple[str, ...]) -> dict:
 
 
 def _restore(app, was: dict) -> None:
+    nodes = _scene_nodes(app)
     for name, vis in was.items():
         with contextlib.suppress(Exception):
-            app.nodes[name].visible = vis
+            nodes[name].visible = vis
 
 
 def _drawn_box(page, rect, *, dark: bool = False, wait_ms: int = 2500) -> np.ndarray | None:

@@ -35,7 +35,7 @@ from explorer.refine.points_io import PointTable  # noqa: E402
 from explorer.scene3d.refine import ADJUSTED_RGB  # noqa: E402
 from explorer.sources import load_source  # noqa: E402
 from tests.refine.cases import write_points_csv  # noqa: E402
-from tests.test_browser import RECT_3D  # noqa: E402
+from tests.test_browser import RECT_3D, _check_framing_and_labels, _restore, _show_only  # noqa: E402
 
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-quic",
         "--no-first-run", "--disable-component-update", "--disable-sync"]
@@ -91,7 +91,7 @@ def browser():
 
 
 def _open(browser, url: str):
-    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    context = browser.new_context(viewport={"width": 1400, "height": 900})  # the default canvas: labels laid out
     context.route("**/*", lambda route: route.continue_() if route.request.url.startswith(url)
                   or route.request.url.startswith(url.replace("http", "ws")) else route.abort())
     page = context.new_page()
@@ -105,10 +105,14 @@ def _open(browser, url: str):
 
 
 def _near(page, rgb, tol: int = 60) -> int:
-    """Pixels of the 3D canvas within ``tol`` (sum of |channel differences|) of ``rgb``."""
-    png = page.screenshot(clip=page.evaluate(RECT_3D))
+    """Pixels of the 3D canvas within ``tol`` (sum of |channel differences|) of ``rgb``, the axes gizmo in the
+    bottom-left corner left out (its x axis is red)."""
+    rect = page.evaluate(RECT_3D)
+    png = page.screenshot(clip=rect)
     px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
-    return int((np.abs(px - np.array(rgb)).sum(axis=2) < tol).sum())
+    near = np.abs(px - np.array(rgb)).sum(axis=2) < tol
+    near[int(rect["height"]) - 110:, :110] = False
+    return int(near.sum())
 
 
 def _plot_texts(page) -> str:
@@ -116,40 +120,47 @@ def _plot_texts(page) -> str:
                          ".join('\\n')")
 
 
-def _wait_for_the_canvas_to_settle(app, timeout_s: float = 120.0) -> None:
-    """Wait until every browser is past the app's canvas-settling window (``CANVAS_SETTLE_S`` after it
-    connected): within it the app reframes a browser whose canvas changes shape (its panels docking), which would
-    undo a camera the test sets; on a loaded machine the docking comes late."""
-    from explorer.app.views import CANVAS_SETTLE_S
+def _red_on_screen(app, view, page, shot: Path) -> None:
+    """In the default framed view (no camera moved): the adjusted (red) trajectory is drawn on the canvas, where
+    viser's camera model puts it.  Only the trajectories shown (the SCPs' residual red would count), then none."""
+    from explorer.scene3d.camera import view_ndc
 
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        since = [app._client_since.get(cid) for cid in app.server.get_clients()]
-        if since and all(t is not None and time.monotonic() - t > CANVAS_SETTLE_S + 0.5 for t in since):
-            return
-        time.sleep(0.2)
-    raise AssertionError("the browsers' canvases did not settle")
-
-
-def _look_at_the_trajectories(app, view) -> None:
-    """Point every browser's camera at the drawn trajectories, from the app's viewing direction, far enough back
-    to see both whole; hide the app's nodes but the orbit (after the app's canvas-settling window)."""
-    _wait_for_the_canvas_to_settle(app)
-    pts = np.concatenate([np.asarray(view._nodes[f"/refine/{k}/track"].points).reshape(-1, 3)
-                          for k in ("original", "adjusted")])
-    mid = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-    extent = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) + 0.5 * app.frame.diagonal_km
-    for name, handle in app.nodes.items():  # only the orbit stays beside them (the SCPs' residual red would count)
-        if not name.startswith("/orbit"):
-            handle.visible = False
-    pos, look, _ = app.camera_pose
-    direction = (np.asarray(pos) - np.asarray(look)) / np.linalg.norm(np.asarray(pos) - np.asarray(look))
-    for client in app.server.get_clients().values():
-        with client.atomic():
-            client.camera.far = 100.0 * extent
-            client.camera.near = 1e-3 * extent
-            client.camera.position = tuple(mid + 1.5 * extent * direction)
-            client.camera.look_at = tuple(mid)
+    rect = page.evaluate(RECT_3D)
+    w, h = rect["width"], rect["height"]
+    (cid, client), = app.server.get_clients().items()
+    pos, look = np.array(app.client_poses[cid][0]), np.array(app.client_poses[cid][1])
+    # closed form: every point of both tracks is inside this browser's view
+    for key in ("/refine/original/track", "/refine/adjusted/track"):
+        pts = np.asarray(view._nodes[key].points, dtype=np.float64).reshape(-1, 3)
+        ndc, depth = view_ndc(pts, pos, look, fov_y=client.camera.fov, aspect=w / h)
+        assert np.all(depth > 0) and np.abs(ndc).max() < 1.0, (key, np.abs(ndc).max())
+    was = _show_only(app, ("/refine/",))
+    try:
+        page.wait_for_timeout(2500)
+        png = page.screenshot(clip=rect)
+        Image.open(io.BytesIO(png)).save(shot)
+        px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+        red_mask = np.abs(px - np.array(ADJUSTED_RGB)).sum(axis=2) < 60
+        red_mask[int(h) - 110:, :110] = False  # the axes gizmo in the bottom-left corner (its x axis is red)
+        _show_only(app, ())
+        page.wait_for_timeout(1500)
+        hidden = _near(page, ADJUSTED_RGB)
+    finally:
+        _restore(app, was)
+    red = int(red_mask.sum())
+    assert red > hidden + 50, (red, hidden)  # the adjusted trajectory is drawn in the default view
+    # where the camera model puts it: the red pixels lie within the projected box of the red track and camera
+    # axes (+ the 4 px line width)
+    segs = np.concatenate([np.asarray(view._nodes[k].points, dtype=np.float64).reshape(-1, 3)
+                           for k in ("/refine/adjusted/track", "/refine/adjusted/attitude")])
+    ndc, _ = view_ndc(segs, pos, look, fov_y=client.camera.fov, aspect=w / h)
+    x, y = (ndc[:, 0] + 1) * w / 2, (1 - ndc[:, 1]) * h / 2
+    ys, xs = np.nonzero(red_mask)
+    pad = 4
+    assert xs.min() >= max(x.min() - pad, 0) and xs.max() <= x.max() + pad, (xs.min(), xs.max(), x.min(), x.max())
+    assert ys.min() >= max(y.min() - pad, 0) and ys.max() <= y.max() + pad, (ys.min(), ys.max(), y.min(), y.max())
+    # and over most of that box (the grey original, drawn over it where the two coincide, may hide its ends)
+    assert xs.max() - xs.min() >= 0.5 * np.ptp(x) and ys.max() - ys.min() >= 0.5 * np.ptp(y), (xs, ys, x, y)
 
 
 @pytest.mark.parametrize("kind", ["scene", "dimap"])
@@ -181,15 +192,9 @@ def test_explore_gcps_in_the_browser(kind, browser, tmp_path):
         assert view.target.is_stand_in == ("The stand-in is" in body)
         assert (kind == "scene") <= (view.target.label == "the Scene itself")
         assert "adjusted trajectory (red) vs original (grey)" in body  # the folder states the 3D factors
-        _look_at_the_trajectories(app, view)  # (the app frames the footprint; the track is above it)
-        page.wait_for_timeout(2500)
-        red = _near(page, ADJUSTED_RGB)
-        page.screenshot(path=str(tmp_path / f"refine_{kind}.png"))
-        view.draw_3d(visible=False)
-        page.wait_for_timeout(1500)
-        hidden = _near(page, ADJUSTED_RGB)
-        view.draw_3d(visible=True)
-        assert red > hidden + 50, (red, hidden)  # the adjusted trajectory is drawn in 3D
+        _check_framing_and_labels(app, page)  # the footprint framed, every label inside the view and apart
+        assert app.label_layout.get("/refine/label") is not None  # the trajectories' label among them
+        _red_on_screen(app, view, page, tmp_path / f"refine_{kind}.png")  # the red trajectory in that default view
 
         # drop a point in the browser: the adjustment re-runs and the parameters change
         before = view.refinement.parameters.copy()

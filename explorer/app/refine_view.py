@@ -78,11 +78,15 @@ class RefineView:
     display_frame : callable, optional
         Returns the 3D view's current :class:`~explorer.scene3d.builders.DisplayFrame` (None before the
         first scene is drawn); the app calls :meth:`draw_3d` again when it changes.
+    on_drawn : callable, optional
+        Called after every (re)draw of the 3D trajectories, outside the view's locks: the app lays its labels
+        out again (the trajectories' label among them, :meth:`label_nodes`).
     """
 
     def __init__(self, gui: Any, sensor: Any, control: PointTable, check: PointTable | None = None,
                  sigma_px: float = 0.5, *, scene_api: Any = None,
-                 display_frame: Callable[[], Any] | None = None) -> None:
+                 display_frame: Callable[[], Any] | None = None,
+                 on_drawn: Callable[[], None] | None = None) -> None:
         from explorer.refine.images import image_adapter
 
         self.target = sensor if isinstance(sensor, RefineTarget) else RefineTarget(sensor, "the sensor itself")
@@ -94,9 +98,10 @@ class RefineView:
         self.has_trajectory = has_line_geometry(self.sensor)
         self.is_scene = adapter.kind == "scene"
         self.stand_in_px = self.target.stand_in_error_px(control, check)
-        self.scene_api, self.display_frame = scene_api, display_frame
+        self.scene_api, self.display_frame, self.on_drawn = scene_api, display_frame, on_drawn
         self.refinement: Any = None
         self.trajectory_3d: dict[str, Any] | None = None
+        self.shown = True  # the 3D trajectories are visible (the app hides them while another scene is shown)
         self._nodes: dict[str, Any] = {}
         self.error: str | None = None
         with gui.add_folder("Refinement"):
@@ -200,9 +205,10 @@ class RefineView:
             self.trajectory.figure = trajectory_figure(ref, height=380)
             self.draw_3d()
 
-    def draw_3d(self, visible: bool = True) -> None:
+    def draw_3d(self, visible: bool | None = None) -> None:
         """Draw (or redraw) the original and adjusted trajectories of the last adjustment in the 3D scene, in
-        the app's current display frame; ``visible`` False hides them (another scene is shown)."""
+        the app's current display frame; ``visible`` False hides them (another scene is shown), None keeps them
+        as the app last asked (a re-adjustment)."""
         if not self.has_trajectory or self.refinement is None or self.scene_api is None:
             return
         frame = self.display_frame() if self.display_frame is not None else None
@@ -216,7 +222,21 @@ class RefineView:
             for handle in self._nodes.values():
                 handle.remove()
             self._nodes, info = add_refined_trajectories(self.scene_api, comparison, frame)
+            if visible is not None:
+                self.shown = bool(visible)
             for handle in self._nodes.values():
-                handle.visible = visible
+                handle.visible = self.shown
             self.trajectory_3d = info
             self.trajectory_text.content = f"3D: {info['text']}."
+        if self.on_drawn is not None:
+            self.on_drawn()
+
+    def label_nodes(self) -> dict[str, tuple[Any, tuple[np.ndarray, ...]]]:
+        """The 3D labels drawn and shown now, ``{node name: (handle, alternative points (3,) display km)}``
+        (the label may stand at any of them instead of its own: :mod:`explorer.scene3d.labels`); empty while the
+        trajectories are hidden or not drawn."""
+        with self._draw_lock:
+            if not self.shown or self.trajectory_3d is None:
+                return {}
+            alternatives = tuple(np.asarray(p, dtype=np.float64) for p in self.trajectory_3d["label_alternatives"])
+            return {k: (h, alternatives) for k, h in self._nodes.items() if k == "/refine/label"}

@@ -341,8 +341,10 @@ def _refine_folder(args: Any, source: Any) -> Callable[[Any], None]:
 
     def ready(app: Any) -> None:
         app.refine_view = RefineView(app.server.gui, target, control, check, sigma_px=getattr(args, "sigma_px", 0.5),
-                                     scene_api=app.server.scene, display_frame=lambda: getattr(app, "frame", None))
+                                     scene_api=app.server.scene, display_frame=lambda: getattr(app, "frame", None),
+                                     on_drawn=app._layout_labels)
         app.refine_label = source.label
+        app.request_update(debounce=False)  # the view framed again, the trajectories inside it
 
     return ready
 

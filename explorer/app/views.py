@@ -95,7 +95,7 @@ class Views:
         label_alternatives: dict[str, tuple]
         _framed_clients: dict[Any, tuple]
         _client_since: dict[Any, float]
-        _framing: tuple[np.ndarray, np.ndarray]
+        _framing: tuple[np.ndarray, np.ndarray, np.ndarray | None]
         exports: int
         fits: Any
         methods_ready: threading.Event
@@ -132,7 +132,14 @@ class Views:
         return True
 
     def _frame_key(self, s: Settings) -> tuple:
-        return (s.scene_key, s.sensor_distance, "auto" if s.auto_exaggeration else s.height_exaggeration)
+        return (s.scene_key, s.sensor_distance, "auto" if s.auto_exaggeration else s.height_exaggeration,
+                self._shows_refinement(s))
+
+    def _shows_refinement(self, s: Settings) -> bool:
+        """True when ``s`` shows the scene of ``explore --gcps`` (its Refinement folder draws trajectories) at the
+        compressed sensor distance: the view is then framed to hold them (:meth:`_update_scene`)."""
+        return (getattr(self, "refine_view", None) is not None and s.preset == getattr(self, "refine_label", None)
+                and s.sensor_distance == "compressed")
 
     # ----------------------------------------------------------------- update
     def update(self, s: Settings, gen: int | None = None) -> dict[str, float]:
@@ -192,8 +199,13 @@ class Views:
             drawn = self._drawn_scene(s)  # the sensor, or for one without scanlines (an RPC) an MPC fitted to it
             auto, relief = B.auto_height_exaggeration(scene)
             factor = auto if s.auto_exaggeration else s.height_exaggeration
+            distance: dict[str, float] = {}
+            if self._shows_refinement(s):  # the trajectories inside the framed view: the track drawn nearer
+                from explorer.scene3d.refine import framed_distance_factor
+
+                distance["factor"] = framed_distance_factor(drawn, height_exaggeration=factor)
             self.frame = B.DisplayFrame.for_scene(drawn, sensor_distance=s.sensor_distance,
-                                                  height_exaggeration=factor)
+                                                  height_exaggeration=factor, **distance)
             n, dem_cells = B.ground_mesh_nodes(drawn)
             self.ground_text = ("Ground: the check points on the terrain (the footprint outlined in black)"
                                 + ("; DEM heights" if dem_cells is not None else ""))
@@ -221,7 +233,8 @@ class Views:
             refine_view = getattr(self, "refine_view", None)  # explore --gcps: its trajectories, in the new frame
             if refine_view is not None:
                 refine_view.draw_3d(visible=s.preset == getattr(self, "refine_label", None))
-            self._frame_camera(drawn, (s.preset, s.sensor_distance))
+            refined = self._shows_refinement(s)
+            self._frame_camera(drawn, (s.preset, s.sensor_distance, refined), refined=refined)
             fixed = s.preset in m.fixed_scenes
             with self.quiet():
                 self.handles["sel_row"].max = float(scene.n_rows - 1)
@@ -464,14 +477,21 @@ class Views:
         self.handles["sel_text"].content = "  \n".join(lines)
 
     # ----------------------------------------------------------------- labels
-    LABEL_PRIORITY = ("/ground/note", "/selected/label", "/scanlines/labels/", "/orbit/flight_label",
+    LABEL_PRIORITY = ("/ground/note", "/selected/label", "/refine/label", "/scanlines/labels/", "/orbit/flight_label",
                       "/orbit/track_label", "/selected/trace_labels/")
     """Which labels yield to which when they would overlap (earlier wins)."""
 
     def _layout_labels(self) -> None:
         """Anchor every 3D label so that, in the framed view of the default canvas, none is clipped by the
         view's edge or stacked on another (:func:`explorer.scene3d.labels.place_labels`); a label that fits
-        nowhere is hidden.  Each keeps its builder's anchor when that fits."""
+        nowhere is hidden.  Each keeps its builder's anchor when that fits.  The label of a refinement's
+        trajectories (:meth:`explorer.app.refine_view.RefineView.label_nodes`, while they are shown) is laid out
+        with the others; its view calls this again when it redraws them (from its own thread: one layout at a
+        time)."""
+        with self.__dict__.setdefault("_layout_lock", threading.Lock()):
+            self._layout_labels_now()
+
+    def _layout_labels_now(self) -> None:
         from explorer.scene3d.camera import DEFAULT_CANVAS_PX, VIEW_FOV_Y
         from explorer.scene3d.labels import Label, place_labels
 
@@ -479,7 +499,13 @@ class Views:
             return
         prefs = self.__dict__.setdefault("_label_prefs", {})
         found = []
-        for key, handle in self.nodes.items():
+        nodes = dict(self.nodes)
+        alternatives = dict(getattr(self, "label_alternatives", {}))
+        refine_view = getattr(self, "refine_view", None)
+        if refine_view is not None:
+            for key, (handle, points) in refine_view.label_nodes().items():
+                nodes[key], alternatives[key] = handle, points
+        for key, handle in nodes.items():
             if not (hasattr(handle, "anchor") and hasattr(handle, "text")):
                 continue
             if prefs.get(key, (None,))[0] is not handle:  # a new label: its builder's anchor and point come first
@@ -487,11 +513,12 @@ class Views:
             rank = next((i for i, p in enumerate(self.LABEL_PRIORITY) if key.startswith(p)), len(self.LABEL_PRIORITY))
             found.append((rank, key, handle))
         found.sort(key=lambda t: (t[0], t[1]))
-        alternatives = getattr(self, "label_alternatives", {})
         labels = [Label(key, str(h.text), prefs[key][2], (prefs[key][1],), float(getattr(h, "font_screen_scale", 1.0)),
                         tuple(alternatives.get(key, ()))) for _, key, h in found]
         pos, look, _ = self.camera_pose
-        layout_key = (pos, look, tuple((lab.key, lab.text, lab.point.tobytes()) for lab in labels))
+        # (a label redrawn with the same text and point is a new handle: it needs the layout's anchor too)
+        layout_key = (pos, look, tuple((lab.key, lab.text, lab.point.tobytes(), id(h)) for lab, (_, _, h)
+                                       in zip(labels, found, strict=True)))
         if not self._changed("labels", layout_key):
             return
         width, height = DEFAULT_CANVAS_PX
@@ -512,23 +539,42 @@ class Views:
                         handle.visible = True
 
     # ----------------------------------------------------------------- camera
-    def _camera_for(self, scene: Scene) -> tuple[tuple, tuple, float]:
+    def _camera_for(self, scene: Scene, refined: bool = False) -> tuple[tuple, tuple, float]:
         """(position, look_at, far) framing the footprint (and as much of the displayed track as fits) for
         the default canvas (:func:`explorer.scene3d.camera.frame_footprint`); a browser that reported its
-        canvas gets a pose for its own aspect (:meth:`_pose_for_client`)."""
-        from explorer.scene3d.camera import frame_footprint
-
+        canvas gets a pose for its own aspect (:meth:`_pose_for_client`).  ``refined``: the view also holds
+        the trajectories a refinement draws around the track (:func:`explorer.scene3d.refine.trajectory_envelope`,
+        the track drawn near enough by :func:`explorer.scene3d.refine.framed_distance_factor`)."""
         frame, B = self.frame, self._B  # noqa: N806
         ground = frame.ground(B.footprint_outline(scene, per_edge=16).reshape(-1, 3))
         _, pos = B.track_positions(scene, 9)
-        self._framing = (ground, frame.sensor(pos))
-        pose = frame_footprint(*self._framing)
+        include = None
+        if refined:  # explore --gcps: the trajectories in the view too
+            from explorer.scene3d.refine import trajectory_envelope
+
+            include = trajectory_envelope(frame.sensor(pos), frame.diagonal_km)
+        self._framing = (ground, frame.sensor(pos), include)
+        pose = self._frame_pose()
         return tuple(float(v) for v in pose.position), tuple(float(v) for v in pose.look_at), pose.far
+
+    def _frame_pose(self, aspect: float | None = None, fov_y: float | None = None) -> Any:
+        """:func:`explorer.scene3d.camera.frame_footprint` of the current framing for a canvas (default: the
+        default canvas): with the points it must include (a refinement's trajectories) where the footprint keeps
+        at least half of the view with them, else the footprint alone."""
+        from explorer.scene3d.camera import DEFAULT_ASPECT, VIEW_FOV_Y, frame_footprint
+
+        ground, track, include = self._framing
+        a = DEFAULT_ASPECT if aspect is None else float(aspect)
+        f = VIEW_FOV_Y if fov_y is None else float(fov_y)
+        if include is not None:
+            with contextlib.suppress(ValueError):
+                return frame_footprint(ground, track, include=include, aspect=a, fov_y=f)
+        return frame_footprint(ground, track, aspect=a, fov_y=f)
 
     def _pose_for_client(self, client: Any) -> tuple[tuple, tuple, float, float]:
         """(position, look_at, far, near) framing the footprint in ``client``'s canvas (its reported aspect
         and field of view; the default canvas until it reported one)."""
-        from explorer.scene3d.camera import DEFAULT_ASPECT, VIEW_FOV_Y, frame_footprint
+        from explorer.scene3d.camera import DEFAULT_ASPECT, VIEW_FOV_Y
 
         cam = client.camera
         aspect, fov = DEFAULT_ASPECT, VIEW_FOV_Y
@@ -536,7 +582,7 @@ class Views:
             w, h, f = float(cam.image_width), float(cam.image_height), float(cam.fov)
             if w > 0 and h > 0 and 0 < f < np.pi:
                 aspect, fov = w / h, f
-        pose = frame_footprint(*self._framing, aspect=aspect, fov_y=fov)
+        pose = self._frame_pose(aspect=aspect, fov_y=fov)
         out = (tuple(float(v) for v in pose.position), tuple(float(v) for v in pose.look_at), pose.far, pose.near)
         self.client_poses[getattr(client, "client_id", id(client))] = out
         return out
@@ -578,9 +624,10 @@ class Views:
             self._framed_clients[client.client_id] = (key, w / h)
             self._apply_camera([client])
 
-    def _frame_camera(self, scene: Scene, key: Hashable) -> None:
-        """Point the initial camera at the footprint and, on a new scene, every open browser's."""
-        pos, look, far = self._camera_for(scene)
+    def _frame_camera(self, scene: Scene, key: Hashable, *, refined: bool = False) -> None:
+        """Point the initial camera at the footprint and, on a new scene, every open browser's; ``refined``: the
+        view holds a refinement's trajectories too (:meth:`_camera_for`)."""
+        pos, look, far = self._camera_for(scene, refined)
         self.camera_pose = (pos, look, far)
         self.server.initial_camera.far = far
         self.server.initial_camera.look_at = look

@@ -120,11 +120,19 @@ def _distance_for_fill(ground: np.ndarray, look: np.ndarray, w: np.ndarray, fov_
                        fill: float, scale: float) -> float:
     """Camera distance at which the ground points span ``fill`` of the view along the binding axis."""
 
+    # the camera's axes do not depend on its distance along w: project once, move along the axis per distance
+    axes = camera_axes(look + w, look)
+    rel = (ground - look) @ axes.T
+    step = np.asarray(w, dtype=np.float64) @ axes.T
+    t = np.tan(0.5 * fov_y)
+
     def span(d: float) -> float:
-        ndc, depth = view_ndc(ground, look + d * w, look, fov_y=fov_y, aspect=aspect)
+        v = rel - d * step
+        depth = v[:, 2]
         if np.any(depth <= 1e-9 * scale):
             return np.inf
-        return float(np.max(np.ptp(ndc, axis=0)) / 2.0)
+        ndc_x, ndc_y = v[:, 0] / (depth * t * aspect), v[:, 1] / (depth * t)
+        return float(max(np.ptp(ndc_x), np.ptp(ndc_y)) / 2.0)
 
     lo, hi = 1e-3 * scale, 1e3 * scale
     for _ in range(36):  # the span shrinks as the camera backs away: bisect on log distance
@@ -138,7 +146,7 @@ def _distance_for_fill(ground: np.ndarray, look: np.ndarray, w: np.ndarray, fov_
 
 def frame_footprint(ground: np.ndarray, track: np.ndarray, *, fov_y: float = VIEW_FOV_Y,
                     aspect: float = DEFAULT_ASPECT, fill: float = FOOTPRINT_FILL,
-                    margin: float = VIEW_MARGIN) -> CameraPose:
+                    margin: float = VIEW_MARGIN, include: np.ndarray | None = None) -> CameraPose:
     """A camera pose in which the footprint fills ``fill`` of the view.
 
     Parameters
@@ -153,6 +161,10 @@ def frame_footprint(ground: np.ndarray, track: np.ndarray, *, fov_y: float = VIE
         Share of the view spanned by the footprint along the binding axis (in (0, margin]).
     margin : float
         The footprint stays inside this share of the view's half-extent on both axes.
+    include : ndarray, shape (L, 3), optional
+        Points that must be inside the view too (within ``margin``, in front of the camera): for example what
+        is drawn around the track (a refinement's trajectories, :func:`explorer.scene3d.refine.trajectory_envelope`).
+        The footprint still spans at least half of the view; where that cannot hold them as well, ValueError.
 
     Returns
     -------
@@ -172,11 +184,18 @@ def frame_footprint(ground: np.ndarray, track: np.ndarray, *, fov_y: float = VIE
     scale = float(np.max(np.ptp(ground, axis=0))) or 1.0
     w = view_direction(track[-1] - track[0])
     mid = track[len(track) // 2]
+    extra = None if include is None else np.asarray(include, dtype=np.float64).reshape(-1, 3)
     def fits(lam: float, share: float) -> tuple[np.ndarray, float] | None:
         look = centre + lam * (mid - centre)
         d = _distance_for_fill(ground, look, w, fov_y, aspect, share, scale)
         ndc, depth = view_ndc(ground, look + d * w, look, fov_y=fov_y, aspect=aspect)
-        return (look, d) if np.all(depth > 0) and np.all(np.abs(ndc) <= margin) else None
+        if not (np.all(depth > 0) and np.all(np.abs(ndc) <= margin)):
+            return None
+        if extra is not None:
+            ndc, depth = view_ndc(extra, look + d * w, look, fov_y=fov_y, aspect=aspect)
+            if not (np.all(depth > 0) and np.all(np.abs(ndc) <= margin)):
+                return None
+        return look, d
 
     best = None
     for share in np.arange(fill, 0.5 - 1e-9, -0.05):  # the fill asked for, less only if it cannot fit
@@ -201,10 +220,14 @@ def frame_footprint(ground: np.ndarray, track: np.ndarray, *, fov_y: float = VIE
                     hi = m
         break
     if best is None:
+        if extra is not None:
+            raise ValueError("the footprint and the points to include cannot be framed with the footprint at half "
+                             "of the view")
         raise ValueError("the footprint cannot be framed at half of the view (a degenerate footprint?)")
     look, d = best
     position = look + d * w
-    reach = float(np.max(np.linalg.norm(np.concatenate([ground, track]) - position, axis=1)))
+    drawn = np.concatenate([ground, track] + ([] if extra is None else [extra]))
+    reach = float(np.max(np.linalg.norm(drawn - position, axis=1)))
     near = float(np.clip(1e-3 * d, 1e-4, 0.05))
     return CameraPose(position, look, float(fov_y), float(aspect), near, max(10.0 * reach, 5000.0))
 
