@@ -46,6 +46,8 @@ SENSOR_KINDS = ("auto", "rpc", "scene", "dimap", "dg", "isd")
 """What :func:`load_sensor` reads a file as (``stereo --left-kind``); ``auto``: :func:`sensor_kind`."""
 DEM_KINDS = ("rpc", "dimap", "dg")
 """Sources that take ``--dem``."""
+ADJUSTED_KINDS = ("dimap", "dg", "isd")
+"""Sources that take ``--adjusted`` (the sidecar of a refined line scanner, ``pushbroom refine``)."""
 MPC_DEGREE = 3
 """Degree of the MPC fitted to an RPC (``scene from-rpc --degree 3``) or to a rigorous DIMAP / DG model
 (as ``scene from-dimap --degree``)."""
@@ -249,7 +251,7 @@ def _dimap_sensor(path: Path) -> str:
 # ---------------------------------------------------------------------- loading
 def load_source(
     kind: str, value: str, *, dem: str | None = None, dem_datum: str | None = None, degree: int = MPC_DEGREE,
-    n_gcps: int = 100, as_mpc: bool = False, stand_in: bool = True,
+    n_gcps: int = 100, as_mpc: bool = False, stand_in: bool = True, adjusted: str | None = None,
 ) -> Source:
     """Resolve and load one explorer source (see the module docstring).
 
@@ -275,6 +277,12 @@ def load_source(
     stand_in : bool
         Also build the stand-in model of the sensor (the MPC fit of a CSM camera, the vendor RPC of a rigorous
         model); False: the sensor alone (:func:`load_sensor`).
+    adjusted : str, optional
+        ``dimap`` / ``dg`` / ``isd`` (``explore --adjusted``): the sidecar ``adjusted_model.json`` that
+        ``pushbroom refine`` wrote for this file; the source is then the adjusted sensor
+        (:func:`explorer.refine.line_adjust.apply_sidecar`: the same class, the corrected tables), every map
+        measured against it.  The file's SHA-256 must be the one the sidecar records and its kind the
+        sidecar's (:func:`explorer.refine.line_adjust.read_sidecar`).
 
     Raises
     ------
@@ -290,6 +298,9 @@ def load_source(
         raise InputError(f"--dem goes with --rpc, --dimap or --dg, not --{kind}")
     if as_mpc and kind != "rpc":
         raise InputError(f"--as-mpc goes with --rpc (the MPC resected from an RPC), not --{kind}")
+    if adjusted is not None and kind not in ADJUSTED_KINDS:
+        raise InputError(f"--adjusted goes with --dimap, --dg or --isd (a refined line scanner's sidecar), not "
+                         f"--{kind}: an adjusted RPC or scene is a file of its own (pass it as --rpc / --scene)")
     if kind == "preset":
         return Source("preset", resolve_preset(value))
     path = readable_file(value, {"scene": "scene file", "rpc": "RPC file", "dimap": "DIMAP file",
@@ -354,8 +365,10 @@ def load_source(
 
             rigorous = rigorous_scene_from_dg(path)
             sensor = str(read_dg_metadata(path).get("sat_id", "DigitalGlobe")) + " DG"
-        scene = rigorous  # the truth: the rigorous model itself (its line geometry runs every search method)
         info.update(sensor=sensor, model=f"rigorous line-scan model of the {kind.upper()} metadata")
+        if adjusted is not None:
+            rigorous = _adjusted(rigorous, kind, path, adjusted, info)
+        scene = rigorous  # the truth: the rigorous model itself (its line geometry runs every search method)
         if rigorous.rpc is not None and stand_in:
             from explorer.rpc.sensor import RPCSensor
 
@@ -370,6 +383,9 @@ def load_source(
         scene = csm_scene(camera)  # the truth: the camera itself (usgscsm's model)
         info.update(sensor=f"CSM {camera.metadata.get('sensor') or 'line scan'}",
                     model="USGS CSM line-scan camera (usgscsm's model)", body=scene.body.to_dict())
+        if adjusted is not None:
+            scene = _adjusted(scene, kind, path, adjusted, info)
+            camera = scene.camera  # (its stand-in is fitted to the adjusted camera)
         if camera.covered_fraction() < 1.0:  # lines outside the ephemeris tables: flagged, measured nowhere
             info.update(table_coverage={"fraction": camera.covered_fraction(),
                                         "lines": camera.covered_line_ranges()})
@@ -389,11 +405,47 @@ def load_source(
     if isinstance(scene, Scene):  # the physical checks of a scene file, on the scene built here (an RPC itself
         # is checked by its reader, RationalFunctionModel.validate; docs/validation.md)
         check_scene_physics(scene, str(path) if dem is None else f"{path} with DEM {dem}")
-    label = f"{path.name} ({info['sensor']}" + (", resected MPC: a stand-in)" if as_mpc else ")")
+    label = f"{path.name} ({info['sensor']}" + (", resected MPC: a stand-in)" if as_mpc else
+                                              ", adjusted)" if adjusted is not None else ")")
     info.update(image_rows=int(scene.n_rows), image_columns=int(scene.n_columns), truth=info["model"])
     if stand_in_model is not None:
         info.update(stand_in=stand_in_model.label)
     return Source(kind, label, scene, str(path), dem, info, report, stand_in_model)
+
+
+def _adjusted(sensor: Any, kind: str, path: Path, sidecar: str, info: dict[str, Any]) -> Any:
+    """``sensor`` (read from ``path``) adjusted by the refinement ``sidecar`` (its hash and kind checked); what
+    was applied recorded in ``info`` (``adjusted``, and the ``model`` text says so)."""
+    from explorer.refine.line_adjust import apply_sidecar, read_sidecar
+
+    side = readable_file(sidecar, "adjusted-model sidecar")
+    d, _ = read_sidecar(side, path, kind)
+    adjusted = apply_sidecar(sensor, d, str(side))
+    model = str(d["correction"].get("model", "?")) if isinstance(d.get("correction"), dict) else "?"
+    info.update(model=f"{info['model']}, adjusted by {side.name} (the {model} correction of 'pushbroom refine')",
+                adjusted={"sidecar": str(side), "correction": model, "base_file": path.name,
+                          "base_sha256": d.get("base_sha256"),
+                          "parameters": {str(p.get("name")): p.get("value") for p in d.get("parameters", [])
+                                         if isinstance(p, dict)}})
+    return adjusted
+
+
+def sidecar_source(sidecar: str) -> tuple[str, str]:
+    """(kind, base file) of a refinement sidecar given alone (``explore --adjusted SIDECAR``): its recorded source
+    kind and the base file it names, beside it (its hash is checked when the source loads).
+
+    Raises
+    ------
+    SceneFileError
+        Not a sidecar, no base file named or not there, or not the file the adjustment was made on.
+    """
+    from explorer.refine.line_adjust import read_sidecar
+
+    d, base = read_sidecar(readable_file(sidecar, "adjusted-model sidecar"))
+    kind = str(d.get("source_kind"))
+    if kind not in ADJUSTED_KINDS:
+        raise SceneFileError(f"{sidecar}: unknown source kind {kind!r} in the sidecar (dimap, dg or isd)")
+    return kind, str(base)
 
 
 def sensor_kind(path: str | os.PathLike, kind: str = "auto") -> str:
@@ -430,6 +482,9 @@ def source_from_args(args: Any, **options: Any) -> Source:
     """The one source of parsed ``explore`` arguments (attributes named as :data:`SOURCE_KINDS`;
     none given: the default preset).
 
+    ``--adjusted SIDECAR`` with ``--dimap`` / ``--dg`` / ``--isd FILE``: that file adjusted by the sidecar; alone:
+    the file the sidecar names, beside it (:func:`sidecar_source`); either way its SHA-256 checked.
+
     Raises
     ------
     InputError
@@ -438,6 +493,11 @@ def source_from_args(args: Any, **options: Any) -> Source:
     given = [(k, getattr(args, k)) for k in SOURCE_KINDS if getattr(args, k, None) is not None]
     if len(given) > 1:
         raise InputError("give one source: " + " and ".join(f"--{k}" for k, _ in given) + " were both given")
+    adjusted = getattr(args, "adjusted", None)
+    if adjusted is not None:
+        if not given:  # the sidecar alone: its base file beside it, by the name it records
+            given = [sidecar_source(adjusted)]
+        options = {**options, "adjusted": adjusted}
     dem = getattr(args, "dem", None)
     dem_datum = getattr(args, "dem_datum", None)
     as_mpc = bool(getattr(args, "as_mpc", False))
@@ -459,6 +519,6 @@ def source_from_args(args: Any, **options: Any) -> Source:
     return load_source(kind, value, dem=dem, dem_datum=dem_datum, **options)
 
 
-__all__ = ["DEM_KINDS", "DISPLAY_LINE_PERIOD_S", "SENSOR_KINDS", "SOURCE_KINDS", "Source", "check_dem_covers",
-           "display_scene_of", "load_sensor", "load_source", "readable_file", "resolve_preset", "sensor_kind",
-           "source_from_args", "stand_in_truth", "table_coverage_text"]
+__all__ = ["ADJUSTED_KINDS", "DEM_KINDS", "DISPLAY_LINE_PERIOD_S", "SENSOR_KINDS", "SOURCE_KINDS", "Source",
+           "check_dem_covers", "display_scene_of", "load_sensor", "load_source", "readable_file", "resolve_preset",
+           "sensor_kind", "sidecar_source", "source_from_args", "stand_in_truth", "table_coverage_text"]

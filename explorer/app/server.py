@@ -296,6 +296,10 @@ def run_explore(args: Any) -> int:
     # a progress line on stderr while numba compiles kernels (loading a real source may compile some too);
     # its total: what the source kind and the methods need and numba's cache lacks
     kind = next((k for k in SOURCE_KINDS if k != "preset" and getattr(args, k, None)), "preset")
+    if kind == "preset" and getattr(args, "adjusted", None):  # a sidecar alone: the kind it records
+        from explorer.sources import sidecar_source
+
+        kind = sidecar_source(args.adjusted)[0]
     units = needed_units("explore", source=kind, methods=methods if methods is not None else DEFAULT_METHODS,
                          dem=bool(getattr(args, "dem", None)))
     progress = CompileProgress(expected_compiles(units), [TerminalLine()]).install()

@@ -1,7 +1,8 @@
 """``pushbroom explore``: serve the interactive explorer, or export what it shows (``docs/explorer.md``).
 
 One source: ``--preset ID | --scene FILE | --rpc FILE | --dimap FILE | --dg FILE | --isd FILE``
-(``--dem`` with the last three), checked before anything is served; ``--export DIR`` writes
+(``--dem`` with ``--rpc``, ``--dimap``, ``--dg``; ``--adjusted SIDECAR`` with the last three or alone: the
+sensor ``pushbroom refine`` adjusted), checked before anything is served; ``--export DIR`` writes
 ``summary.json``, ``residuals.csv``, ``panels.html``, ``timing.json`` and ``timing.js`` and exits.  Only the
 standard library is imported here; the explorer (viser, plotly, the methods) loads inside :func:`cmd_explore`.
 """
@@ -12,6 +13,7 @@ import argparse
 
 from explorer.commands._args import (
     add_dem_datum_argument,
+    existing_file,
     method_list,
     name_text,
     port_number,
@@ -28,6 +30,8 @@ def _check_refine_options(args: argparse.Namespace) -> None:
     gcps = getattr(args, "gcps", None)
     if getattr(args, "check", None) is not None and gcps is None:
         raise InputError("--check goes with --gcps (the check points of the refinement)")
+    if getattr(args, "adjusted", None) is not None and getattr(args, "pair", None):
+        raise InputError("--adjusted goes with one image (--dimap, --dg, --isd or alone), not a --pair")
     if gcps is not None and getattr(args, "pair", None):
         raise InputError("--gcps refines one image, not a --pair (adjust a pair to tie points with "
                          "'pushbroom refine --images A B --ties ties.csv')")
@@ -91,6 +95,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(f"--{side}-kind", choices=("auto", "rpc", "scene", "dimap", "dg", "isd"), default="auto",
                        help=f"with --pair: what the {side} file is (default auto: scene/ISD JSON by content, else an "
                             "RPC; dimap / dg: the rigorous model of the metadata rather than its vendor RPC)")
+    p.add_argument("--adjusted", default=None, metavar="SIDECAR", type=existing_file,
+                   help="the adjusted_model.json that 'pushbroom refine --dimap/--dg/--isd' wrote: explore the "
+                        "adjusted sensor (every map against it); with --dimap/--dg/--isd FILE that file, alone the "
+                        "file the sidecar names beside it; its SHA-256 must match the sidecar's (docs/refine.md)")
     p.add_argument("--as-mpc", action="store_true",
                    help="with --rpc: the MPC resected from the RPC instead of the RPC (a stand-in, labelled so; every "
                         "method runs on it, and the RPC against it is the stand-in map)")

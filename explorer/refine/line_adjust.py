@@ -32,7 +32,7 @@ from explorer.refine.line_corrections import (
 )
 
 __all__ = ["SIDECAR_FORMAT", "adjusted_sensor", "apply_sidecar", "correction_for", "is_line_scanner",
-           "load_adjusted", "sidecar_dict", "trajectories", "write_sidecar"]
+           "load_adjusted", "read_sidecar", "sidecar_dict", "trajectories", "write_sidecar"]
 
 SIDECAR_FORMAT = "pushbroom-explorer adjusted line scanner v1"
 
@@ -213,12 +213,33 @@ def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None)
     SceneFileError
         Not a sidecar, malformed, or a base file whose hash differs from the one the sidecar names.
     """
+    d, base = read_sidecar(sidecar_path, base_path)
+    return apply_sidecar(_load_base(str(d.get("source_kind")), base), d, str(sidecar_path))
+
+
+def read_sidecar(sidecar_path: str | Path, base_path: str | Path | None = None,
+                 kind: str | None = None) -> tuple[dict[str, Any], Path]:
+    """A sidecar's dict and its base file: ``base_path``, else the file it names beside the sidecar; the base
+    file's SHA-256 checked against the one the sidecar records (what :func:`load_adjusted` and
+    ``pushbroom explore --adjusted`` read); ``kind`` (``"dimap"``, ``"dg"``, ``"isd"``): the kind of source the
+    base file is read as, which must be the sidecar's.
+
+    Raises
+    ------
+    SceneFileError
+        Not a sidecar, malformed, no base file named nor given, the base file missing, or its hash not the one
+        the sidecar records (one line naming both files).
+    InputError
+        ``kind`` is not the sidecar's source kind.
+    """
     from explorer.io_input import load_json_file
 
     path = Path(sidecar_path)
     d = load_json_file(path, "sidecar")
     if not isinstance(d, dict) or d.get("format") != SIDECAR_FORMAT:
         raise SceneFileError(f"{path}: not an adjusted line-scanner sidecar (format {SIDECAR_FORMAT!r})")
+    if kind is not None and d.get("source_kind") != kind:
+        raise InputError(f"{path} adjusts a --{d.get('source_kind')} file, not a --{kind} one")
     if base_path is None and not d.get("base_file"):
         raise SceneFileError(f"{path}: the sidecar names no base file (give its path)")
     base = Path(base_path) if base_path is not None else path.parent / str(d.get("base_file"))
@@ -226,7 +247,7 @@ def load_adjusted(sidecar_path: str | Path, base_path: str | Path | None = None)
         raise SceneFileError(f"{path}: its base file {str(base)!r} is not there (give its path)")
     if d.get("base_sha256") is not None and file_sha256(base) != d.get("base_sha256"):
         raise SceneFileError(f"{path}: {base} is not the file this adjustment was made on (SHA-256 differs)")
-    return apply_sidecar(_load_base(str(d.get("source_kind")), base), d, str(path))
+    return d, base
 
 
 def write_sidecar(path: str | Path, sidecar: dict[str, Any]) -> Path:
