@@ -127,6 +127,19 @@ class ToySlow(ToyPoly):
         super()._fit(control)
 
 
+class ToyLong(ToyPoly):
+    """Test-only learned method declaring a long training (``long_fit``, like an MLP); records when it starts."""
+
+    name = "toy_long"
+    label = "toy long"
+    long_fit = True
+    started: list[float] = []
+
+    def _fit(self, control: PointSet) -> None:
+        ToyLong.started.append(time.monotonic())
+        super()._fit(control)
+
+
 class ToyBroken(ToyPoly):
     """Test-only learned method whose training fails."""
 
@@ -149,7 +162,7 @@ class ToyUnconverged(ToyPoly):
         warnings.warn("toy_unconverged: training did not converge", RuntimeWarning, stacklevel=2)
 
 
-TOYS = (ToyPoly, ToyBisect, ToySlow, ToyBroken, ToyUnconverged)
+TOYS = (ToyPoly, ToyBisect, ToySlow, ToyLong, ToyBroken, ToyUnconverged)
 
 
 @contextlib.contextmanager
@@ -407,6 +420,33 @@ def test_slow_method_shows_a_named_preview_then_every_point(server):
         app.close()
 
 
+def test_the_cost_probe_leaves_one_time_costs_out(server):
+    """A method whose first call pays a one-time cost (loading its compiled kernels: here 1 s) and is fast per
+    point is projected fast from one probe (after an untimed 2-point call), not probed a second time on 8x the
+    points; the projection is the per-point cost times the points."""
+    calls: list[int] = []
+
+    class FirstCallSlow(ToyBisect):
+        def _locate(self, ground, **kw):
+            if not calls:
+                time.sleep(1.0)
+            calls.append(len(ground))
+            return super()._locate(ground, **kw)
+
+    model = ExplorerModel(preview_after_s=1.0, preview_points=500, probe_points=200)
+    s = Settings(preset="linear", scp_count=1000, methods=("toy_bisect",))
+    rec = model.fit("toy_bisect", s)
+    rec.method.__class__ = FirstCallSlow
+    t0 = time.perf_counter()
+    rec.method.ground_to_image(model.scps(s).ground[:200])
+    per_point = (time.perf_counter() - t0) / 200
+    calls.clear()
+    projected = model._projection("toy_bisect", rec, s, model.scps(s))
+    assert calls == [2, 200]
+    assert projected < 1.0 and projected < 20 * per_point * 1000
+    assert not model.needs_preview("toy_bisect", s, rec)
+
+
 def test_foreground_app_always_evaluates_every_point(server):
     model = ExplorerModel(preview_after_s=1e-9, preview_points=500, probe_points=200)
     app = make_app(server, model=model)
@@ -444,6 +484,48 @@ def test_background_worker_shows_fast_methods_while_a_slow_one_trains(server):
     finally:
         app.close()
     assert not app._worker.is_alive()
+
+
+def test_long_trainings_start_once_the_first_maps_are_on_screen(server):
+    """A ``long_fit`` method (an MLP: seconds of training, torch to import) trains only after the first update that
+    drew the other methods' maps: beside it, it took the CPU from them.  It then trains and is drawn."""
+    ToyLong.started.clear()
+    shown: list[tuple[float, tuple]] = []
+    app = make_app(server, methods=("toy_poly", "toy_long"), background=True, fit_wait_s=0.2)
+    real = app._maps_shown
+
+    def spy(s):
+        shown.append((time.monotonic(), tuple(app.runs), app.handles["summary"].content))
+        real(s)
+
+    app._maps_shown = spy
+    try:
+        assert app.wait_idle(timeout=60)
+        assert app.runs["toy_long"].ok and app.runs["toy_poly"].ok and not app.pending
+        first = next(i for i, (_, runs, _) in enumerate(shown) if "toy_poly" in runs)
+        t_first, runs, summary = shown[first]
+        assert "toy_long" not in runs and "toy_long" in summary and "starts once the other maps are drawn" in summary
+        assert len(ToyLong.started) == 1 and ToyLong.started[0] > t_first
+        assert not app.fits.held and not app.hold_long_fits
+    finally:
+        app.close()
+
+
+def test_fit_pool_holds_jobs_until_released():
+    cond = threading.Condition()
+    pool = FitPool(cond, lambda key, prio: None, threads=2)
+    order: list = []
+    try:
+        pool.submit("held", lambda: order.append("held"), 0, cost=0.0, hold=True)
+        pool.submit("free", lambda: order.append("free"), 0, cost=1.0)
+        pool.wait_for(["free"], time.monotonic() + 10)
+        time.sleep(0.2)
+        assert order == ["free"] and pool.is_pending("held") and pool.busy
+        pool.release()
+        pool.wait_for(["held"], time.monotonic() + 10)
+    finally:
+        pool.close()
+    assert order == ["free", "held"] and not pool.busy and not pool.held
 
 
 def _port_free(port: int) -> bool:

@@ -158,6 +158,9 @@ class ExplorerApp(Views):
         self._last_request = 0.0
         self._worker: threading.Thread | None = None
         self.fits: FitPool | None = None
+        self.hold_long_fits = True
+        """Until the first maps are on screen, long trainings (``long_fit`` methods: an MLP, torch imported) wait
+        in the fit pool: running beside the first update they took the CPU (and the interpreter) from it."""
         self.trimmer: Any = None
         """Set by :func:`explorer.app.server.serve`: hands freed memory back after browsers leave."""
         self.compile_progress = compile_progress
@@ -472,11 +475,12 @@ class ExplorerApp(Views):
                 key = m.fit_key(name, s, d)
                 cost = m.fit_seconds.get(name, 1.0) * (d or s.scop_density) / 100.0
                 purpose = SWEEP_PURPOSE if priority > 0 else None  # its log lines name the sweep
+                hold = self.hold_long_fits and registry()[name].long_fit
                 fits.submit(key, lambda n=name, dd=d, why=purpose: m.fit(n, s, dd, purpose=why),  # type: ignore[misc]
-                            priority, cost)
+                            priority, cost, hold=hold)
                 missing.append((name, d, key))
         if missing and wait_s > 0 and fits is not None:
-            keys = [k for _, _, k in missing]
+            keys = [k for _, _, k in missing if k not in fits.held]  # a held fit cannot land meanwhile
             with self._lock:
                 self._waiting_for = set(keys)
             try:
@@ -494,5 +498,14 @@ class ExplorerApp(Views):
         started = self.fits.running.get(key) if self.fits is not None else None
         if started is not None:
             return f"training on {s.scop_density} SCOPs ({time.monotonic() - started:.0f} s so far)"
+        if self.fits is not None and key in self.fits.held:
+            return f"training on {s.scop_density} SCOPs starts once the other maps are drawn"
         return f"queued for training on {s.scop_density} SCOPs"
+
+    def _maps_shown(self, s: Settings) -> None:
+        """After an update put its maps on screen: the first time with methods checked, let the long trainings
+        (held until then) start."""
+        if self.hold_long_fits and s.methods and self.fits is not None:
+            self.hold_long_fits = False
+            self.fits.release()
 

@@ -19,7 +19,9 @@ class FitPool:
     jobs (priority > 0) only ever run on the first thread.  :meth:`keep`
     drops queued jobs the current settings no longer need (a running fit finishes and
     stays cached).  ``on_done(key, priority)`` is called after each job while holding
-    ``cond``, so waiters see "job done" and its consequence at once.
+    ``cond``, so waiters see "job done" and its consequence at once.  A job submitted with
+    ``hold=True`` waits (queued, pending) until :meth:`release` -- the explorer holds the long
+    trainings until its first maps are on screen: on a shared CPU they would otherwise slow them.
     """
 
     def __init__(self, cond: threading.Condition, on_done: Callable[[Hashable, int], None],
@@ -27,6 +29,8 @@ class FitPool:
         self._cond = cond
         self._on_done = on_done
         self._jobs: dict[Hashable, tuple[int, float, int, Callable[[], Any]]] = {}
+        self.held: set[Hashable] = set()
+        """Queued jobs that wait for :meth:`release`."""
         self._counter = 0
         self.running: dict[Hashable, float] = {}
         self._closing = False
@@ -35,18 +39,31 @@ class FitPool:
         for t in self._threads:
             t.start()
 
-    def submit(self, key: Hashable, job: Callable[[], Any], priority: int = 0, cost: float = 1.0) -> None:
+    def submit(self, key: Hashable, job: Callable[[], Any], priority: int = 0, cost: float = 1.0,
+               hold: bool = False) -> None:
+        """Queue ``job`` under ``key`` (nothing if that key is queued or running); ``hold``: it waits for
+        :meth:`release`."""
         with self._cond:
             if key in self._jobs or key in self.running:
                 return
             self._counter += 1
             self._jobs[key] = (priority, cost, self._counter, job)
+            if hold:
+                self.held.add(key)
             self._cond.notify_all()
+
+    def release(self) -> None:
+        """Let the held jobs run."""
+        with self._cond:
+            if self.held:
+                self.held.clear()
+                self._cond.notify_all()
 
     def keep(self, keys: set) -> None:
         with self._cond:
             for k in [k for k in self._jobs if k not in keys]:
                 del self._jobs[k]
+                self.held.discard(k)
 
     def is_pending(self, key: Hashable) -> bool:
         with self._cond:
@@ -74,6 +91,7 @@ class FitPool:
         with self._cond:
             self._closing = True
             self._jobs.clear()
+            self.held.clear()
             self._cond.notify_all()
         for t in self._threads:
             t.join(timeout=60)
@@ -82,7 +100,7 @@ class FitPool:
         # thread 0 takes any job; the others only priority-0 ones, so background work (the
         # accuracy sweep) never occupies more than one thread
         def ready() -> list:
-            return [k for k, j in self._jobs.items() if index == 0 or j[0] == 0]
+            return [k for k, j in self._jobs.items() if (index == 0 or j[0] == 0) and k not in self.held]
 
         while True:
             with self._cond:

@@ -440,7 +440,8 @@ class ExplorerModel:
         """Projected seconds of ground-to-image on all the SCPs.
 
         Uses the per-point time measured by an earlier full evaluation of the method when there
-        is one; else times ``probe_points`` points and, if the naive projection exceeds
+        is one; else (after an untimed call on 2 points: one-time costs such as loading compiled
+        kernels are no per-point cost) times ``probe_points`` points and, if the naive projection exceeds
         ``preview_after_s``, 8x as many to separate the fixed overhead from the per-point cost.
         (Only whether a preview is shown first depends on it, never a shown number.)
         """
@@ -461,6 +462,9 @@ class ExplorerModel:
         def make() -> float:
             n_all = len(scps)
             n1 = min(self.probe_points, n_all)
+            # a first call loads the method's compiled kernels from numba's cache (0.1-1 s, once per process):
+            # timed, it made a fast method look slow (a preview first, the maps complete seconds later)
+            timed(min(2, n_all))
             t1 = timed(n1)
             est = t1 * n_all / max(n1, 1)
             if est <= limit or n1 == n_all:

@@ -112,6 +112,7 @@ class Views:
         _check: Callable[[int | None], None]
         _get_fits: Callable[..., dict]
         _pending_text: Callable[[str, Settings], str]
+        _maps_shown: Callable[[Settings], None]
         settings: Callable[[], Settings]
         quiet: Callable[[], Any]
 
@@ -175,6 +176,7 @@ class Views:
             previews = any(r.preview for r in self.runs.values())
             if (gen is None or self._gen == gen) and not self.pending and not previews:
                 self.request_started = None  # the whole update is on screen
+        self._maps_shown(s)
         self._check(gen)
         t0 = time.perf_counter()
         self._update_sweep(s, gen)

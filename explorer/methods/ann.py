@@ -59,6 +59,7 @@ class ThreeStageMethod(BestScanlineMethod):
     family = "learned"
     needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
+    long_fit = True
     exactness = "approximate"
     COMMON = {
         "use_height": None, "seed": 0, "train_fraction": 0.7, "domain_margin": 0.05,

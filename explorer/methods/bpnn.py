@@ -664,6 +664,7 @@ class BPNNMethod(BestScanlineMethod):
     family = "generalized"
     needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
+    long_fit = True
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too
 

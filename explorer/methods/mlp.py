@@ -117,6 +117,7 @@ class MLPMethod(BestScanlineMethod):
     family = "learned"
     needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
+    long_fit = True
     exactness = "approximate"
 
     DEFAULTS = {

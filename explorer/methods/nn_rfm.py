@@ -353,6 +353,7 @@ class NNRFMMethod(BestScanlineMethod):
     family = "generalized"
     needs_line_geometry = False  # ground / image pairs only: runs on any sensor, an RPC included
     needs_fit = True
+    long_fit = True
     exactness = "approximate"
     column_source = "model"  # the network predicts the column too
     #: SCOPs are exact (simulated by the sensor): no validation split.  Held-out points guard against fitting the
