@@ -8,6 +8,7 @@ Conventions: ``docs/conventions.md``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -268,4 +269,32 @@ def simulate_points(
     """SCOPs (``kind='scop'``: grid through the image corners) or SCPs (``'scp'``: cell-centred grid)."""
     if kind not in ("scop", "scp"):
         raise InputError(f"kind must be 'scop' or 'scp', got {kind!r}")
-    return image_grid(scene, n, layers=layers, cell_centred=(kind == "scp"), seed=seed)
+    points = image_grid(scene, n, layers=layers, cell_centred=(kind == "scp"), seed=seed)
+    if kind == "scop" and layers == 1 and 0 < len(points) < n:
+        points = _scops_where_the_terrain_is(scene, n, points)
+    return points
+
+
+SCOP_GRID_TRIES = 12
+"""Denser grids :func:`_scops_where_the_terrain_is` tries before it reports fewer SCOPs than asked."""
+
+
+def _scops_where_the_terrain_is(scene: Scene, n: int, first: PointSet) -> PointSet:
+    """Exactly ``n`` SCOPs where the terrain has heights (a DEM covering part of the image).
+
+    The grid of ``n`` nodes lost the nodes over the DEM's holes or past its edge.  A denser grid, in
+    steps of the coverage found, is laid until at least ``n`` nodes land on the terrain; the surplus is
+    thinned evenly along the grid's row-major order (deterministic: the same SCOPs on every run).
+    Where no grid of up to :data:`SCOP_GRID_TRIES` densifications reaches ``n``, the densest is returned
+    (its count says so).
+    """
+    best, m = first, n
+    for _ in range(SCOP_GRID_TRIES):
+        if len(best) >= n:
+            break
+        m = max(m + 1, int(math.ceil(m * n / max(len(best), 1))))
+        best = image_grid(scene, m, cell_centred=False)
+    if len(best) <= n:
+        return best
+    keep = np.unique(np.round(np.linspace(0, len(best) - 1, n)).astype(np.int64))
+    return PointSet(best.row[keep], best.col[keep], best.ground[keep], best.time[keep], (0, 0, 1))

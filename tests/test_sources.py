@@ -175,6 +175,30 @@ def test_dem_covering_most_of_the_footprint_is_used_and_its_coverage_stated():
     np.testing.assert_allclose(col, scps.col, atol=1e-6)
 
 
+def test_scops_are_the_chosen_count_where_the_dem_misses_part_of_the_footprint():
+    """Issue 24: the SCOP count is the one chosen.  The 2018 DEM misses ~5 % of the footprint: the plain grid of 100
+    nodes kept 92 SCOPs; now every chosen count is met exactly, each SCOP on the DEM surface at the rigorous model's
+    own image point, the same SCOPs on every call, spread over the image (every quarter holds some)."""
+    from explorer.points import image_grid, simulate_points
+
+    src = load_source("dimap", str(PHR_2018), dem=str(DEM_DIR / "MNT_P1BP--2018122638935449CP.tif"), stand_in=False)
+    scene = src.scene
+    assert len(image_grid(scene, 100)) < 100  # the plain grid loses nodes here (the case under test)
+    for n in (50, 100, 300, 1000):
+        scops = simulate_points(scene, n, kind="scop")
+        assert len(scops) == n
+        z = scene.terrain.height(scops.ground[:, 0], scops.ground[:, 1])
+        np.testing.assert_allclose(scops.ground[:, 2], z, atol=1e-3)
+        row, col = scene.ground_to_image(scops.ground)
+        np.testing.assert_allclose(row, scops.row, atol=1e-6)
+        np.testing.assert_allclose(col, scops.col, atol=1e-6)
+        assert len(np.unique(np.c_[scops.row, scops.col], axis=0)) == n
+        top, left = scops.row < scene.n_rows / 2, scops.col < scene.n_columns / 2
+        assert all(np.any(a & b) for a in (top, ~top) for b in (left, ~left))
+    again = simulate_points(scene, 100, kind="scop")
+    np.testing.assert_array_equal(again.ground, simulate_points(scene, 100, kind="scop").ground)
+
+
 def test_isd_needs_the_csm_reader_or_loads_a_scene():
     isd_dir = RPC_DIR.parent / "usgscsm"
     try:

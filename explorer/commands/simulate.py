@@ -135,8 +135,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     print(summarize_scene(scene))
     gr, gc, gl = pts.grid_shape
-    print(f"simulated {len(pts)} {args.kind.upper()}s (grid {gr} x {gc} x {gl}; asked for about {args.n} "
-          f"per layer) in {dt:.3f} s")
+    layout = (f"grid {gr} x {gc} x {gl}" if gr else "a denser grid thinned evenly: the terrain has no height "
+              "under part of the image")
+    print(f"simulated {len(pts)} {args.kind.upper()}s ({layout}; asked for about {args.n} per layer) in {dt:.3f} s")
     if args.out:
         pts.save_npz(args.out, scene)
         print(f"wrote {args.out}")
