@@ -161,7 +161,8 @@ class OGPMethod(ThreeStageMethod):
         Fitness penalty per selected term, pixels (1e-4: a term must lower the
         validation RMSE by 1e-4 px to be kept).
     max_val_rmse_px : float
-        A model whose validation RMSE exceeds this is flagged not converged (1.0 px).
+        A model whose validation RMSE exceeds this missed its accuracy goal (1.0 px): ``fit_info["converged"]``
+        False, one log line, the map's title; its best model still answers (as ``mlp``).
     use_height, seed, train_fraction, domain_margin, height_tolerance_m
         See :class:`explorer.methods.ann.ThreeStageMethod`.
     """
@@ -213,7 +214,7 @@ class OGPMethod(ThreeStageMethod):
             "stop_reason": "generations" if np.isfinite(fit) else "non_finite",
             "epochs": int(p["generations"]),
         })
-        network_verdict(self.name, self.fit_info, float(p["max_val_rmse_px"]))
+        network_verdict(self.name, self.fit_info, float(p["max_val_rmse_px"]), "its best model is used")
 
     def _predict_error(self, u: np.ndarray) -> np.ndarray:
         if self.exponents.shape[0] == 0:

@@ -64,3 +64,24 @@ def test_enough_points_are_trusted_and_the_rule_is_the_weight_count(caplog):
             net.fit(row, col, z, 2.0 * row + 0.1 * z, 3.0 * col - 0.2 * z)
         assert net.fit_info["too_few_points"] is too_few
         assert net.n_parameters == 38 and MIN_EQUATIONS_PER_PARAMETER * 38 / 2 == 38
+
+
+@pytest.mark.parametrize("name", ["ann", "ogp", "mlp"])
+def test_a_goal_missed_with_enough_points_answers_with_the_best_model(wsu, name, caplog):
+    """Issue 24: a learned method that trained on enough points but missed its accuracy goal shows its best model,
+    never a map of NaN: the goal set unreachably low (1e-12 px) gives the same network and the same answers as the
+    default goal, valid, with fit_info["converged"] False and one log line saying the best model is used.  Truth:
+    the check points' exact rows."""
+    scops = simulate_points(wsu, 100, kind="scop")
+    check = simulate_points(wsu, 400, kind="scp")
+    reached = create(name, wsu, seed=0).fit(scops)
+    assert reached.fit_info["converged"] is True
+    with caplog.at_level(logging.WARNING, logger="explorer"):
+        missed = create(name, wsu, seed=0, max_val_rmse_px=1e-12).fit(scops)
+    lines = [r.getMessage() for r in caplog.records if r.name.startswith("explorer")]
+    assert len(lines) == 1 and "did not reach its accuracy goal" in lines[0] and "best model is used" in lines[0]
+    assert missed.fit_info["converged"] is False
+    a, b = reached.ground_to_image(check.ground), missed.ground_to_image(check.ground)
+    assert b.valid.all() and b.converged.all()
+    np.testing.assert_array_equal(a.row, b.row)
+    assert np.max(np.abs(b.row - check.row)) < 0.05
