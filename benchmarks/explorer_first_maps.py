@@ -10,7 +10,9 @@ and measures
    title ``<method> row: RMSE`` for every checked method that can run on the sensor, and no preview,
    "waiting" or "computing" text.  mlp's training is excluded (issue 24: it shows its progress while it
    runs): its map is not waited for;
-3. **command to maps**: the two together.
+3. **command to maps**: the two together;
+4. **CPU seconds** (user + system, all threads) the command used up to the URL and from the URL to the maps:
+   on a shared machine the wall times stretch with the load, these do not (much).
 
 The machine's load average (1 min) is recorded with every figure: the machine may be shared, say so
 when quoting them.  A first run after a change of the kernels compiles them (the progress line on
@@ -86,6 +88,13 @@ def expected_maps(methods: list[str], has_lines: bool, root: Path) -> list[str]:
     return [m for m in methods if m != "mlp" and (has_lines or not reg[m].needs_line_geometry)]
 
 
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) the process has used so far (its threads included): a figure the machine's
+    load does not inflate, unlike the wall times."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _reader(stream, q: queue.Queue) -> None:
     for line in iter(stream.readline, ""):
         q.put((time.perf_counter(), line))
@@ -121,6 +130,8 @@ def run_case(name: str, page, args: argparse.Namespace, port: int) -> dict:
                 t_url = t
         out["command_to_url_s"] = t_url - t0
         out["url_load"] = _load()
+        cpu_url = _cpu_s(proc.pid) if not args.prefix else float("nan")
+        out["cpu_to_url_s"] = cpu_url
         page.goto(url)
         while True:
             n = page.evaluate(MAPS_DONE, [expect])
@@ -130,6 +141,7 @@ def run_case(name: str, page, args: argparse.Namespace, port: int) -> dict:
                 raise TimeoutError(f"{name}: maps not complete after {args.timeout} s")
             time.sleep(0.02)
         t_maps = time.perf_counter()
+        out["cpu_url_to_maps_s"] = _cpu_s(proc.pid) - cpu_url if not args.prefix else float("nan")
         out["first_maps_s"] = t_maps - t_url
         out["command_to_maps_s"] = t_maps - t0
         out["maps_load"] = _load()
@@ -147,8 +159,9 @@ def run_case(name: str, page, args: argparse.Namespace, port: int) -> dict:
                 proc.wait()
     compiled = [e for e in err if "Compiling" in e or "compil" in e.lower()]
     out["compile_lines"] = len(compiled)
-    print(f"  {name:>14}: command->URL {out['command_to_url_s']:.2f} s (load {out['load_start']}), "
-          f"URL->maps {out['first_maps_s']:.2f} s (load {out['maps_load']}), whole {out['command_to_maps_s']:.2f} s"
+    print(f"  {name:>14}: command->URL {out['command_to_url_s']:.2f} s (load {out['load_start']}; CPU "
+          f"{out['cpu_to_url_s']:.2f} s), URL->maps {out['first_maps_s']:.2f} s (load {out['maps_load']}; the "
+          f"command's CPU {out['cpu_url_to_maps_s']:.2f} s), whole {out['command_to_maps_s']:.2f} s"
           + (f"  [compiled kernels: {len(compiled)} lines]" if compiled else ""), flush=True)
     return out
 

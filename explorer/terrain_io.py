@@ -326,7 +326,9 @@ def read_geotiff_dem(
     """
     import warnings
 
-    import rasterio
+    from explorer._lazy import import_rasterio
+
+    rasterio = import_rasterio()  # without boto3 (local files only)
     from rasterio._err import CPLE_BaseError
     from rasterio.errors import NotGeoreferencedWarning, RasterioError, RasterioIOError
 

@@ -305,3 +305,20 @@ def test_a_sensor_that_rejects_every_check_point_is_an_error_not_an_empty_map():
     assert len(sensor_truth(scene, scps)) == len(scps)
     with pytest.raises(InputError, match=f"none of the {len(scps):,} check points .* 'rejecting sensor'"):
         sensor_truth(Rejecting(), scps)
+
+
+def test_cli_and_an_export_without_torch_methods_never_import_torch(tmp_path):
+    """torch (seconds to import) loads only where a method or a refinement trains with it: not with the CLI,
+    not for an export of the DIMAP with its DEM whose methods need no torch (checked in a fresh process)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import explorer.cli; assert 'torch' not in sys.modules, 'explorer.cli imported torch'; "
+            "from explorer.cli import main; from explorer.methods import registry; "
+            f"rc = main(['explore', '--dimap', {str(PHR_2017)!r}, '--dem', {str(DEM_2017)!r}, '--dem-datum', "
+            f"'egm96', '--methods', 'lrm,prm,nr,exact', '--scps', '3000', '--export', {str(tmp_path / 'e')!r}]); "
+            "assert rc == 0 and len(registry()) > 10; print(sorted(m for m in ('torch', 'viser') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert (tmp_path / "e" / "residuals.csv").stat().st_size > 0

@@ -187,3 +187,19 @@ def test_pyproj_egm96_when_available():
 def test_geodem_rejects_rotation():
     with pytest.raises(ValueError, match="rotated"):
         GeoDEM(np.zeros((2, 2)), (1.0, 0.1, 0.0, 0.0, -1.0, 0.0))
+
+
+def test_reading_a_dem_does_not_import_boto3():
+    """rasterio imported for a DEM leaves boto3 (the AWS SDK, ~40 % of rasterio's import time) out, and
+    ``import boto3`` still works afterwards (fresh process; the DEM's values are tested above)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("boto3")
+    path = str(DEFAULT_ASSETS_DIR / DEMS[0])
+    code = ("import sys, numpy as np; from explorer.terrain_io import read_geotiff_dem; "
+            f"dem = read_geotiff_dem({path!r}); assert 'boto3' not in sys.modules and 'botocore' not in sys.modules; "
+            "assert np.isfinite(dem.heights).any(); import boto3; print(boto3.__name__, dem.heights.shape)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.split()[0] == "boto3"

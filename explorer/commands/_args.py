@@ -224,7 +224,9 @@ def raster_file(text: str) -> str:
         return text
     import warnings
 
-    import rasterio  # only when a raster argument is given
+    from explorer._lazy import import_rasterio
+
+    rasterio = import_rasterio()  # only when a raster argument is given (without boto3: local files only)
     from rasterio.errors import RasterioError
 
     try:

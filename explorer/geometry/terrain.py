@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from typing import Literal, Protocol, overload, runtime_checkable
 
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
 from explorer.errors import InputError
 from explorer.geometry.dem_intersection import NO_INTERSECTION, OK, HeightGrid, intersect_rays
@@ -268,6 +267,8 @@ def synthetic_relief(
                          f"{correlation_cells} cells (limit (0, 1000]): cell_m {cell_m} is too small for the extent")
     nx = int(np.ceil((xmax - xmin) / cell_m)) + 5
     ny = int(np.ceil((ymax - ymin) / cell_m)) + 5
+    from scipy.ndimage import gaussian_filter  # here: scipy.ndimage is 0.1-0.3 s to import, only this needs it
+
     rng = np.random.default_rng(seed)
     noise = gaussian_filter(rng.standard_normal((ny, nx)), correlation_cells, mode="reflect")
     noise -= noise.mean()
