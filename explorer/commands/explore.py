@@ -104,7 +104,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "method runs on it, and the RPC against it is the stand-in map)")
     p.add_argument("--dem", default=None, metavar="DEM",
                    help="DEM for --rpc / --dimap / --dg / --pair (GeoTIFF or SRTM .hgt; vertical datum: "
-                        "--dem-datum); must cover the image footprint")
+                        "--dem-datum); points where it has no height are left out and the covered share of the "
+                        "image is stated; refused below half of the image")
     add_dem_datum_argument(p)
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=port_number, default=8080,
