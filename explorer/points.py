@@ -20,7 +20,7 @@ from explorer.geometry.dem_intersection import OK
 from explorer.io_atomic import atomic_path
 from explorer.memory import check_allocation
 from explorer.scene import Scene
-from explorer.sensor import has_line_geometry, has_polynomial_exterior
+from explorer.sensor import has_geodetic_projection, has_line_geometry, has_polynomial_exterior
 
 
 @dataclass
@@ -44,6 +44,10 @@ class PointSet:
     ground: np.ndarray
     time: np.ndarray
     grid_shape: tuple[int, int, int] = (0, 0, 1)
+    geodetic: np.ndarray | None = None
+    """(N, 3) longitude, latitude (degrees), ellipsoidal height (metres) as a sensor defined on them (an RPC,
+    :class:`explorer.sensor.GeodeticSensor`) localised the points -- ``ground`` is converted from them -- so its
+    truth is evaluated on them (:meth:`explorer.sensor.Sensor.project_geodetic`); None for other sensors."""
 
     def __len__(self) -> int:
         return int(self.row.shape[0])
@@ -54,7 +58,8 @@ class PointSet:
 
     def subset(self, index: np.ndarray) -> PointSet:
         """Points selected by an integer or boolean index."""
-        return PointSet(self.row[index], self.col[index], self.ground[index], self.time[index], self.grid_shape)
+        return PointSet(self.row[index], self.col[index], self.ground[index], self.time[index], self.grid_shape,
+                        None if self.geodetic is None else self.geodetic[index])
 
     def split(self, fraction: float, seed: int) -> tuple[PointSet, PointSet]:
         """Seeded random split into (first, second) with ``round(fraction * N)`` points in the first."""
@@ -77,6 +82,8 @@ class PointSet:
         """
         arrays: dict[str, Any] = {"row": self.row, "col": self.col, "ground": self.ground, "time": self.time,
                   "grid_shape": np.array(self.grid_shape)}
+        if self.geodetic is not None:
+            arrays["geodetic"] = self.geodetic
         if scene is not None:
             arrays["scene_json"] = np.array(scene.to_json())
         with atomic_path(path) as tmp, open(tmp, "wb") as handle:
@@ -87,7 +94,8 @@ class PointSet:
         """Inverse of :meth:`save_npz` (the scene, if any, via ``Scene.from_dict(json.loads(...))``)."""
         with np.load(path) as z:
             rows, cols, layers = (int(v) for v in z["grid_shape"])
-            return cls(z["row"], z["col"], z["ground"], z["time"], (rows, cols, layers))
+            geodetic = z["geodetic"] if "geodetic" in z.files else None
+            return cls(z["row"], z["col"], z["ground"], z["time"], (rows, cols, layers), geodetic)
 
 
 def grid_shape_for(n: int, n_rows: int, n_columns: int) -> tuple[int, int]:
@@ -181,10 +189,24 @@ def image_grid(
         ok = flags == OK
         return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), (gr, gc, 1))
     if layers == 1:
-        ground = scene.image_to_ground(rr, cc)
+        ground, geodetic = _to_ground(scene, rr, cc)
         ok = np.isfinite(ground[:, 0])
-        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), (gr, gc, 1))
+        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), (gr, gc, 1), _kept(geodetic, ok))
     return _layers(scene, rr, cc, (gr, gc, layers), layers, height_range)
+
+
+def _to_ground(scene: Any, rr: np.ndarray, cc: np.ndarray, height: float | None = None
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The sensor's own image to ground (N, 3) and, for a sensor defined on geodetic coordinates (an RPC:
+    :func:`explorer.sensor.has_geodetic_projection`), the (lon, lat, h) (N, 3) its localisation found, else None."""
+    if has_geodetic_projection(scene):
+        ground, geodetic = scene.image_to_ground_geodetic(rr, cc, height=height)
+        return ground, geodetic
+    return scene.image_to_ground(rr, cc, height=height), None
+
+
+def _kept(geodetic: np.ndarray | None, ok: np.ndarray) -> np.ndarray | None:
+    return None if geodetic is None else geodetic[ok]
 
 
 def _ragged_grid(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int, int], layers: int,
@@ -195,9 +217,9 @@ def _ragged_grid(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int,
         rr = np.clip(rr + rng.uniform(-jitter_px, jitter_px, rr.shape), -0.5, scene.n_rows - 0.5)
         cc = np.clip(cc + rng.uniform(-jitter_px, jitter_px, cc.shape), -0.5, scene.n_columns - 0.5)
     if layers == 1:
-        ground = scene.image_to_ground(rr, cc)
+        ground, geodetic = _to_ground(scene, rr, cc)
         ok = np.isfinite(ground[:, 0])
-        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), shape)
+        return PointSet(rr[ok], cc[ok], ground[ok], scanline_times(scene, rr[ok]), shape, _kept(geodetic, ok))
     return _layers(scene, rr, cc, shape, layers, height_range)
 
 
@@ -210,6 +232,7 @@ def _layers(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int,
             lo, hi = lo - 500.0, hi + 500.0
         height_range = (lo, hi)
     heights = np.linspace(height_range[0], height_range[1], layers)
+    geodetic: np.ndarray | None = None
     if _lines_of_sight_are_the_scenes(scene):  # one set of lines of sight for every layer
         origin, direction = scene.rays(rr, cc)
         parts = []
@@ -217,13 +240,16 @@ def _layers(scene: Scene, rr: np.ndarray, cc: np.ndarray, shape: tuple[int, int,
             lam = (h - origin[:, 2]) / direction[:, 2]
             parts.append(origin + lam[:, None] * direction)
     else:  # lines of sight that depend on the height (aberration, refraction): the model's own, per layer
-        parts = [scene.image_to_ground(rr, cc, height=float(h)) for h in heights]
+        both = [_to_ground(scene, rr, cc, height=float(h)) for h in heights]
+        parts = [g for g, _ in both]
+        if all(geo is not None for _, geo in both):
+            geodetic = np.concatenate([geo for _, geo in both])  # type: ignore[misc]
     ground = np.concatenate(parts)
     r3, c3 = np.tile(rr, layers), np.tile(cc, layers)
     # image points the sensor flags (NaN: a ray that misses the body, a line outside a CSM camera's
     # ephemeris tables) are dropped, as on one layer
     ok = np.isfinite(ground).all(axis=1)
-    return PointSet(r3[ok], c3[ok], ground[ok], scanline_times(scene, r3[ok]), shape)
+    return PointSet(r3[ok], c3[ok], ground[ok], scanline_times(scene, r3[ok]), shape, _kept(geodetic, ok))
 
 
 def _grid_rays(scene: Scene, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -294,6 +294,14 @@ class GeodeticSensor(Sensor, Protocol):
         """Image points (N,) -> (lon, lat, h, found): first hit on a lon/lat DEM of ellipsoidal heights."""
         ...
 
+    def image_to_ground_geodetic(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`Sensor.image_to_ground` and the geodetic coordinates (N, 3) -- longitude, latitude degrees,
+        ellipsoidal height metres -- the model's own localisation found (the ENU points are converted from them):
+        simulated check points keep them, so the model's truth is its projection of those very coordinates."""
+        ...
+
 
 def has_geodetic_projection(sensor: object) -> bool:
     """True where ``sensor`` declares the :class:`GeodeticSensor` capability."""

@@ -343,8 +343,10 @@ def _warm_isd(path: Path) -> None:
     geometry (the camera's residual kernels) and its MPC stand-in's check points."""
     from explorer.real.csm import scene_from_isd
 
-    scene = _isd_scene(path)
+    scene: Any = _isd_scene(path)
     _warm_scene(scene)
+    centre = scene.image_to_ground(np.array([0.5 * scene.n_rows]), np.array([0.5 * scene.n_columns]), height=0.0)
+    scene.project_geodetic(*scene.frame.enu_to_geodetic(centre))  # the geodetic entry's compiled conversion
     _warm_scene(scene_from_isd(path))
     _warm_methods(scene, ["exact", "csm-secant", "nr"], n_scops=30, n_scps=2000)
 

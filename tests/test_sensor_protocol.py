@@ -77,7 +77,8 @@ def test_the_protocol_has_the_geodetic_entry_and_its_members_are_what_the_docs_s
                                                                         "attitude", "look_direction"}
     assert set(protocol_members(GeodeticSensor)) - set(members) == {"has_geodetic_projection",
                                                                     "geodetic_localization",
-                                                                    "geodetic_localization_on_dem"}
+                                                                    "geodetic_localization_on_dem",
+                                                                    "image_to_ground_geodetic"}
 
 
 # ------------------------------------------------------------------------------------------- discovery by source
@@ -338,3 +339,49 @@ def test_method_sensor_entries_agree(method):
     sensor = MethodSensor.create(build_scene("WSU"), method, scops=30)
     ground = _points(sensor, 200, 6, (-200.0, 600.0))
     assert _check_entries_agree(sensor, ground) > 100
+
+
+# ------------------------------------------------------------------- geodetic check points of an RPC
+@pytest.mark.parametrize("dem", [False, True])
+def test_rpc_check_points_keep_the_rpcs_own_geodetic_coordinates_and_the_truth_is_evaluated_on_them(dem):
+    """SCPs of an RPC keep the (lon, lat, h) the RPC's localisation found (on planes and on a DEM terrain):
+    truth = the RPC's own projection of those very numbers (rpc.projection called here directly), equal to the
+    image points they were localised from within the localisation's convergence; the ENU ground is their
+    conversion.  The explorer's truth (sensor_truth) is that projection bit for bit."""
+    from explorer.app.model import sensor_truth
+    from explorer.geometry.terrain import GridDEM
+    from explorer.points import image_grid, simulate_points
+    from explorer.rpc import read_rpc
+    from explorer.rpc.sensor import RPCSensor
+
+    rpc = read_rpc(DATA / "rpc" / "RPC_PHR1B_P_201709281038045_SEN_PRG_FC_178608-001.XML")
+    sensor = RPCSensor(rpc)
+    if dem:
+        fp = sensor.footprint()
+        x0, y0 = fp[:, 0].min() - 500.0, fp[:, 1].min() - 500.0
+        dx = (fp[:, 0].max() - x0 + 500.0) / 60
+        dy = (fp[:, 1].max() - y0 + 500.0) / 60
+        xx, yy = np.meshgrid(np.arange(61) * dx, np.arange(61) * dy)
+        heights = sensor.mean_height + 80.0 * np.sin(xx / 900.0) * np.cos(yy / 700.0)
+        sensor = sensor.with_terrain(GridDEM(float(x0), float(y0), dx, dy, heights))
+    for points in (simulate_points(sensor, 400, kind="scp"), image_grid(sensor, 100, layers=3)):
+        assert points.geodetic is not None and points.geodetic.shape == (len(points), 3)
+        lon, lat, h = points.geodetic.T
+        row, col, valid = rpc.projection(lon, lat, h, return_valid=True)
+        assert valid.mean() > 0.9
+        assert np.max(np.abs(row - points.row)) < 1e-6 and np.max(np.abs(col - points.col)) < 1e-6
+        np.testing.assert_allclose(points.ground, sensor.frame.geodetic_to_enu(lon, lat, h), rtol=0, atol=0)
+        truth = sensor_truth(sensor, points)
+        keep = valid & (row >= -0.5) & (row <= sensor.n_rows - 0.5) & (col >= -0.5) & (col <= sensor.n_columns - 0.5)
+        np.testing.assert_array_equal(truth.row, row[keep])
+        np.testing.assert_array_equal(truth.col, col[keep])
+        np.testing.assert_array_equal(truth.geodetic, points.geodetic[keep])
+        sub = points.subset(np.arange(0, len(points), 3))
+        np.testing.assert_array_equal(sub.geodetic, points.geodetic[::3])
+
+
+def test_check_points_of_a_scene_carry_no_geodetic_coordinates():
+    from explorer.points import simulate_points
+    from explorer.presets import build_scene
+
+    assert simulate_points(build_scene("WSU"), 50, kind="scp").geodetic is None

@@ -584,8 +584,13 @@ class ExplorerModel:
 
 def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
     """The check points with the sensor's own ground to image as their exact (row, col) (the truth every
-    residual is measured against); points the sensor does not project onto its image are left out."""
-    proj = scene.project(scps.ground)
+    residual is measured against); points the sensor does not project onto its image are left out.  Points that
+    carry the geodetic coordinates a sensor defined on them localised (an RPC: ``PointSet.geodetic``) are projected
+    from those (:meth:`explorer.sensor.Sensor.project_geodetic`), not from their local ENU conversion."""
+    if scps.geodetic is not None:
+        proj = scene.project_geodetic(scps.geodetic[:, 0], scps.geodetic[:, 1], scps.geodetic[:, 2])
+    else:
+        proj = scene.project(scps.ground)
     keep = np.flatnonzero(proj.valid)
     if len(scps) and not keep.size:
         from explorer.errors import InputError
@@ -594,7 +599,8 @@ def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
                          f"{getattr(scene, 'name', 'the sensor')!r} projects validly onto its image by the sensor's "
                          "own ground to image (its declared validity domain or image size rejects them all): "
                          "nothing can be measured")
-    return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape)
+    return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape,
+                    None if scps.geodetic is None else scps.geodetic[keep])
 
 
 class _Recording:

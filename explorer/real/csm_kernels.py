@@ -727,3 +727,22 @@ def residual_many(ground, lines, cam, rl, rt, rp, ext, dmodel, dc, res_out, samp
                                      dmodel, dc)
         res_out[i] = r if ok else np.nan
         sample_out[i] = s if ok else np.nan
+
+
+@njit(cache=True)
+def geodetic_to_body_fixed_nb(lon_deg, lat_deg, h, a, e2, out):
+    """Planetodetic (lon, lat degrees, height above the ellipsoid metres; each (N,)) -> body-fixed metres into
+    ``out`` (N, 3) on the ellipsoid of semi-major axis ``a`` and squared eccentricity ``e2``: the formulas of
+    :func:`explorer.geometry.frames.geodetic_to_ecef` in one loop (the camera's geodetic entry, at the cost of
+    four libm calls a point instead of numpy's separate passes; equal to it within an ulp)."""
+    d = np.pi / 180.0
+    for i in range(lon_deg.shape[0]):
+        la = lat_deg[i] * d
+        lo = lon_deg[i] * d
+        sl = np.sin(la)
+        cl = np.cos(la)
+        n = a / np.sqrt(1.0 - e2 * sl * sl)
+        r = (n + h[i]) * cl
+        out[i, 0] = r * np.cos(lo)
+        out[i, 1] = r * np.sin(lo)
+        out[i, 2] = (n * (1.0 - e2) + h[i]) * sl

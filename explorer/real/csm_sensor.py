@@ -229,6 +229,21 @@ class CsmScene(Scene):
         """Body-fixed metres (N, 3) -> local ENU metres (N, 3)."""
         return self.frame.ecef_to_enu(xyz)
 
+    def geodetic_to_body_fixed(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """Planetodetic longitude, latitude (N,) degrees and height above the body's ellipsoid (N,) metres -> the
+        ISD's body-fixed metres (N, 3) (:func:`explorer.geometry.frames.geodetic_to_ecef`, compiled: the
+        geodetic entry's only conversion; within an ulp of it)."""
+        from explorer._numba import NUMBA_AVAILABLE
+        from explorer.real import csm_kernels as K
+
+        body = self.frame.body
+        if not NUMBA_AVAILABLE:
+            return geodetic_to_ecef(lon, lat, h, body)
+        lon, lat, h = (kernel_array(np.ravel(a)) for a in np.broadcast_arrays(lon, lat, h))
+        out = np.empty((lon.shape[0], 3))
+        K.geodetic_to_body_fixed_nb(lon, lat, h, float(body.a_m), float(body.e2), out)  # type: ignore[call-arg]
+        return out
+
     # ------------------------------------------------------------ line geometry
     def rows_covered(self, row: np.ndarray) -> np.ndarray:
         """True (N,) where scene rows (N,) (CSM line - 0.5) lie on lines the ISD's tables cover
@@ -304,13 +319,13 @@ class CsmScene(Scene):
         """:meth:`ground_to_image` of planetodetic points on the camera's body -- longitude, latitude (N,) degrees,
         height above its ellipsoid (N,) metres -- converted straight to the body-fixed coordinates the camera is
         defined on (:meth:`explorer.sensor.Sensor.geodetic_to_image`)."""
-        g = self.camera.ground_to_image(geodetic_to_ecef(lon, lat, h, self.frame.body))
+        g = self.camera.ground_to_image(self.geodetic_to_body_fixed(lon, lat, h))
         solved = g.status == 0
         return np.where(solved, g.line - 0.5, np.nan), np.where(solved, g.sample - 0.5, np.nan)
 
     def project_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> Projection:
         """:meth:`geodetic_to_image` with the camera's validity flags (solved, and on the image)."""
-        g = self.camera.ground_to_image(geodetic_to_ecef(lon, lat, h, self.frame.body))
+        g = self.camera.ground_to_image(self.geodetic_to_body_fixed(lon, lat, h))
         return Projection(g.line - 0.5, g.sample - 0.5, g.valid)
 
     # ------------------------------------------------------------ description

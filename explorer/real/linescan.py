@@ -638,13 +638,25 @@ class RigorousLineScanScene(Scene):
         return super().ground_to_image(ground, row_guess=row_guess)
 
     def _rpc_rows(self, ground: np.ndarray) -> np.ndarray | None:
-        """Rows (N,) of the vendor RPC at ground points (N, 3), NaN outside its validity domain; None if it fails."""
+        """Rows (N,) of the vendor RPC at ground points (N, 3), NaN outside its validity domain; None if it fails.
+
+        The geodetic entry (``Scene.geodetic_to_image``) seeds from the local points too, not from the geodetic
+        coordinates it was given: the model's root is resolved only to a few 1e-9 px (the residual's float64
+        noise: seeds 1e-9 rows apart end 3.8e-9 px apart on WorldView-1), and the same seed makes both entries give
+        the same numbers for the same local points."""
         try:
             lon, lat, h = self.frame.enu_to_geodetic(np.asarray(ground, dtype=np.float64).reshape(-1, 3))
+        except Exception:  # a seed only: the search over the whole image remains
+            return None
+        return self._rpc_rows_geodetic(lon, lat, h)
+
+    def _rpc_rows_geodetic(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+        """:meth:`_rpc_rows` of geodetic points (N,) (degrees, ellipsoidal metres)."""
+        try:
             row, _, valid = self.rpc.projection(lon, lat, h, return_valid=True)
         except Exception:  # a seed only: the search over the whole image remains
             return None
-        return np.where(valid & np.isfinite(row), row, np.nan)
+        return np.ravel(np.where(valid & np.isfinite(row), row, np.nan))
 
     def intersect_terrain(
         self, row: np.ndarray, col: np.ndarray, terrain: Terrain | None = None, *,

@@ -149,7 +149,7 @@ class SceneImage(_SensorBackedImage):
         from explorer.refine.torch_scene import adjusted_scene
 
         scene = self.sensor if params is None else adjusted_scene(self.sensor, model, params)
-        row, col = scene.ground_to_image(self.sensor.frame.geodetic_to_enu(lon, lat, h))
+        row, col = scene.geodetic_to_image(lon, lat, h)  # the Sensor's geodetic entry (same frame)
         return np.stack([row, col], axis=1)
 
     def adjusted_sensor(self, model: str, params: np.ndarray) -> Scene:
@@ -209,7 +209,7 @@ class LineScanImage(_SensorBackedImage):
         from explorer.refine.line_adjust import adjusted_sensor
 
         sensor = self.sensor if params is None else adjusted_sensor(self.sensor, self.correction(model), params)
-        row, col = sensor.ground_to_image(self.sensor.frame.geodetic_to_enu(lon, lat, h))
+        row, col = sensor.geodetic_to_image(lon, lat, h)  # the Sensor's geodetic entry (same class and frame)
         return np.stack([row, col], axis=1)
 
     def adjust(self, model: str, params: np.ndarray, sigmas: np.ndarray | None = None) -> dict[str, Any]:

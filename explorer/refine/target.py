@@ -55,8 +55,8 @@ class RefineTarget:
             if table is None or not table.has_ground or not len(table):
                 continue
             assert table.lon is not None and table.lat is not None and table.h is not None
-            true = self.truth.project(self.truth.frame.geodetic_to_enu(table.lon, table.lat, table.h))
-            row, col = self.model.ground_to_image(self.model.frame.geodetic_to_enu(table.lon, table.lat, table.h))
+            true = self.truth.project_geodetic(table.lon, table.lat, table.h)
+            row, col = self.model.geodetic_to_image(table.lon, table.lat, table.h)
             ok = np.asarray(true.valid, dtype=bool) & np.isfinite(row) & np.isfinite(col)
             if ok.any():
                 err = float(np.max(np.abs(np.concatenate([row[ok] - true.row[ok], col[ok] - true.col[ok]]))))

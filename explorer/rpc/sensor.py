@@ -143,32 +143,48 @@ class RPCSensor:
         """:meth:`image_to_ground` with flags: 0 found; on the terrain the DEM's flags (1 outside the DEM,
         2 no-data, 3 no intersection); 3 where the RPC does not localise the point."""
         if height is None:
-            return self._on_terrain(row, col)
+            return self._on_terrain(row, col)[0]
         ground = self.image_to_ground(row, col, height=height)
         return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
 
-    def _on_terrain(self, row: np.ndarray, col: np.ndarray) -> Localization:
-        """First hit of the RPC's lines of sight with :attr:`terrain` (see the module docstring)."""
+    def image_to_ground_geodetic(
+        self, row: np.ndarray, col: np.ndarray, *, height: np.ndarray | float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`image_to_ground` and the geodetic coordinates the RPC's own localisation found there:
+        (ground (N, 3) local ENU metres, geodetic (N, 3) longitude, latitude degrees, ellipsoidal height metres),
+        NaN rows alike.  The ENU points are converted from the geodetic ones, so a caller that keeps both asks the
+        RPC again on the pairs it localised (:meth:`project_geodetic`), without a round trip through ENU."""
+        if height is None:
+            loc, geodetic = self._on_terrain(row, col)
+            return loc.ground, geodetic
+        return self._on_planes(row, col, height)
+
+    def _on_terrain(self, row: np.ndarray, col: np.ndarray) -> tuple[Localization, np.ndarray]:
+        """First hit of the RPC's lines of sight with :attr:`terrain` (see the module docstring), and the
+        geodetic coordinates (N, 3) of the hits (NaN rows where none)."""
         lo, hi = float(self.terrain.min_height), float(self.terrain.max_height)
         if not hi > lo:  # a plane: the exact localisation at its height
-            ground = self.image_to_ground(row, col, height=lo)
-            return Localization(ground, np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8))
+            ground, geodetic = self._on_planes(row, col, lo)
+            flags = np.where(np.isfinite(ground[:, 0]), FLAG_OK, FLAG_NO_HIT).astype(np.int8)
+            return Localization(ground, flags), geodetic
         pad = max(1.0, 0.01 * (hi - lo))
         top = self.image_to_ground(row, col, height=hi + pad)
         bottom = self.image_to_ground(row, col, height=lo - pad)
         ok = np.isfinite(top[:, 0]) & np.isfinite(bottom[:, 0])
         ground = np.full(top.shape, np.nan)
+        geodetic = np.full(top.shape, np.nan)
         flags = np.full(top.shape[0], FLAG_NO_HIT, dtype=np.int8)
         hit, hit_flags = self.terrain.intersect(top[ok], bottom[ok] - top[ok])
         flags[ok] = hit_flags
         found = np.flatnonzero(ok)[hit_flags == FLAG_OK]
         if found.size:  # on the RPC's own line of sight at the height of the hit (the chord is within mm of it)
             row_b, col_b = np.broadcast_arrays(np.asarray(row, dtype=np.float64), np.asarray(col, dtype=np.float64))
-            exact = self.image_to_ground(np.atleast_1d(row_b)[found], np.atleast_1d(col_b)[found],
-                                         height=hit[hit_flags == FLAG_OK, 2])
+            exact, exact_geo = self._on_planes(np.atleast_1d(row_b)[found], np.atleast_1d(col_b)[found],
+                                               hit[hit_flags == FLAG_OK, 2])
             ground[found] = exact
+            geodetic[found] = exact_geo
             flags[found[~np.isfinite(exact[:, 0])]] = FLAG_NO_HIT
-        return Localization(ground, flags)
+        return Localization(ground, flags), geodetic
 
     def geodetic_to_image(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lon, lat) degrees and ellipsoidal heights (N,) metres -> (row, col) (N,), the RPC's projection."""
@@ -198,7 +214,14 @@ class RPCSensor:
         :attr:`terrain` without a height (first hit); NaN rows where the RPC does not localise (or misses
         the terrain)."""
         if height is None:
-            return self._on_terrain(row, col).ground
+            return self._on_terrain(row, col)[0].ground
+        return self._on_planes(row, col, height)[0]
+
+    def _on_planes(
+        self, row: np.ndarray, col: np.ndarray, height: np.ndarray | float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`image_to_ground` on the plane(s) ``Z = height``: (ground (N, 3) local ENU, geodetic (N, 3)
+        longitude, latitude, ellipsoidal height of the RPC's localisation), NaN rows where it fails."""
         row = check_finite(np.atleast_1d(np.asarray(row, dtype=np.float64)), "row")
         col = check_finite(np.atleast_1d(np.asarray(col, dtype=np.float64)), "col")
         z = check_finite(np.asarray(height, dtype=np.float64), "height")
@@ -216,7 +239,9 @@ class RPCSensor:
         lon, lat, ok = self.rpc.localization(row, col, h)[:3]
         out = self.frame.geodetic_to_enu(lon, lat, h)
         out[~ok] = np.nan
-        return out
+        geodetic = np.stack(np.broadcast_arrays(lon, lat, h), axis=-1).astype(np.float64)
+        geodetic[~ok] = np.nan
+        return out, geodetic
 
     def footprint(self, height: float | None = None) -> np.ndarray:
         """Ground corners (4, 3) of the image (pixel edges) on the plane ``Z = height`` (default the terrain's
