@@ -83,8 +83,8 @@ def browser():
         b.close()
 
 
-def _open(browser, url: str):
-    page = browser.new_context(viewport={"width": 1400, "height": 900}).new_page()
+def _open(browser, url: str, viewport: tuple[int, int] = (1400, 900)):
+    page = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]}).new_page()
     page.set_default_timeout(TIMEOUT_MS)  # software WebGL on a busy machine is slow
     page.goto(url)
     page.wait_for_function(BIG_CANVAS)
@@ -505,6 +505,26 @@ def test_default_preset_is_framed_and_its_labels_are_apart(explorer, browser):
     try:
         _wait_drawn(page)
         _check_framing_and_labels(explorer, page)
+    finally:
+        page.context.close()
+
+
+@pytest.mark.parametrize("viewport", [(1150, 1300), (2300, 760)], ids=["narrow-tall", "wide"])
+def test_other_window_shapes_are_framed_and_their_labels_are_apart(explorer, browser, viewport):
+    """A narrow, tall 3D canvas (~260 x 1300 px between the docked panels) and a wide one (~1400 x 760 px): the
+    labels are laid out in the browser's own framed view (not the default canvas's), none clipped or stacked,
+    each inside its predicted box -- measured on the drawn text."""
+    from explorer.scene3d.camera import DEFAULT_ASPECT
+
+    page = _open(browser, explorer.url, viewport)
+    try:
+        _wait_drawn(page)
+        rect = page.evaluate(RECT_3D)
+        aspect = rect["width"] / rect["height"]
+        assert abs(np.log(aspect / DEFAULT_ASPECT)) > np.log(1.5)  # really another shape than the default
+        _check_framing_and_labels(explorer, page)
+        (cid, _), = explorer.server.get_clients().items()
+        assert set(explorer.label_boxes) == {cid}  # laid out in this browser's view
     finally:
         page.context.close()
 

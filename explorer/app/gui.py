@@ -140,7 +140,14 @@ class ExplorerApp(Views):
         self._framed_clients: dict[Any, tuple] = {}
         self._client_since: dict[Any, float] = {}
         self.label_layout: dict[str, Any] = {}
-        """Per 3D label: (anchor, box px, point) in the framed view of the default canvas, None when hidden."""
+        """Per 3D label: (anchor, box px, point), the box in the first view laid out (the first open browser's,
+        else the default canvas's; :meth:`_label_views`), None when hidden."""
+        self.label_boxes: dict[Any, dict[str, Any]] = {}
+        """Per view laid out (a browser's client id, or "default"): each label's box (x0, y0, x1, y1) px, None
+        when hidden."""
+        self.client_canvases: dict[Any, tuple[float, float, float]] = {}
+        """Per browser: (fov_y, width, height) of the canvas its last framing was made for."""
+        self._label_lock = threading.RLock()
         self.label_alternatives: dict[str, tuple] = {}
         """Other points a 3D label may stand at (a scanline's label: the other end of its trace)."""
         """Per browser: (camera key, canvas aspect) of its last framing."""

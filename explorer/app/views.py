@@ -92,6 +92,9 @@ class Views:
         camera_pose: tuple | None
         client_poses: dict[Any, tuple]
         label_layout: dict[str, Any]
+        label_boxes: dict[Any, dict[str, Any]]
+        client_canvases: dict[Any, tuple[float, float, float]]
+        _label_lock: Any
         label_alternatives: dict[str, tuple]
         _framed_clients: dict[Any, tuple]
         _client_since: dict[Any, float]
@@ -483,19 +486,37 @@ class Views:
                       "/orbit/track_label", "/selected/trace_labels/")
     """Which labels yield to which when they would overlap (earlier wins)."""
 
+    def _label_views(self) -> list[tuple[Any, Any]]:
+        """(name, :class:`explorer.scene3d.labels.View`) of every open browser's framed view (its own canvas
+        and the pose the app framed for it), or of the default canvas while no browser reported its canvas."""
+        from explorer.scene3d.camera import DEFAULT_CANVAS_PX, VIEW_FOV_Y
+        from explorer.scene3d.labels import View
+
+        views = []
+        canvases = self.client_canvases
+        with contextlib.suppress(Exception):
+            for cid in sorted(self.server.get_clients(), key=str):
+                pose, canvas = self.client_poses.get(cid), canvases.get(cid)
+                if pose is not None and canvas is not None:
+                    views.append((cid, View(np.array(pose[0]), np.array(pose[1]), *canvas)))
+        if not views and self.camera_pose is not None:
+            pos, look, _ = self.camera_pose
+            views.append(("default", View(np.array(pos), np.array(look), VIEW_FOV_Y, *map(float, DEFAULT_CANVAS_PX))))
+        return views
+
     def _layout_labels(self) -> None:
-        """Anchor every 3D label so that, in the framed view of the default canvas, none is clipped by the
-        view's edge or stacked on another (:func:`explorer.scene3d.labels.place_labels`); a label that fits
-        nowhere is hidden.  Each keeps its builder's anchor when that fits.  The label of a refinement's
-        trajectories (:meth:`explorer.app.refine_view.RefineView.label_nodes`, while they are shown) is laid out
-        with the others; its view calls this again when it redraws them (from its own thread: one layout at a
-        time)."""
-        with self.__dict__.setdefault("_layout_lock", threading.Lock()):
+        """Anchor every 3D label so that, in the framed view of every open browser's canvas (the default
+        canvas before one reported its own), none is clipped by the view's edge or stacked on another
+        (:func:`explorer.scene3d.labels.place_labels_in_views`); a label that fits nowhere is hidden.  Each
+        keeps its builder's anchor when that fits.  The label of a refinement's trajectories
+        (:meth:`explorer.app.refine_view.RefineView.label_nodes`, while they are shown) is laid out with the
+        others; its view calls this again when it redraws them, and a browser's framing does too (from their
+        own threads: one layout at a time)."""
+        with self._label_lock:
             self._layout_labels_now()
 
     def _layout_labels_now(self) -> None:
-        from explorer.scene3d.camera import DEFAULT_CANVAS_PX, VIEW_FOV_Y
-        from explorer.scene3d.labels import Label, place_labels
+        from explorer.scene3d.labels import Label, place_labels_in_views
 
         if self.camera_pose is None:
             return
@@ -517,15 +538,18 @@ class Views:
         found.sort(key=lambda t: (t[0], t[1]))
         labels = [Label(key, str(h.text), prefs[key][2], (prefs[key][1],), float(getattr(h, "font_screen_scale", 1.0)),
                         tuple(alternatives.get(key, ()))) for _, key, h in found]
-        pos, look, _ = self.camera_pose
+        views = self._label_views()
         # (a label redrawn with the same text and point is a new handle: it needs the layout's anchor too)
-        layout_key = (pos, look, tuple((lab.key, lab.text, lab.point.tobytes(), id(h)) for lab, (_, _, h)
-                                       in zip(labels, found, strict=True)))
+        layout_key = (tuple((name, v.position.tobytes(), v.look_at.tobytes(), v.fov_y, v.width, v.height)
+                            for name, v in views),
+                      tuple((lab.key, lab.text, lab.point.tobytes(), id(h)) for lab, (_, _, h)
+                            in zip(labels, found, strict=True)))
         if not self._changed("labels", layout_key):
             return
-        width, height = DEFAULT_CANVAS_PX
-        placed = place_labels(labels, np.array(pos), np.array(look), fov_y=VIEW_FOV_Y, width=width, height=height)
-        self.label_layout = placed
+        placed = place_labels_in_views(labels, [v for _, v in views])
+        self.label_layout = {k: None if v is None else (v[0], v[1][0], v[2]) for k, v in placed.items()}
+        self.label_boxes = {name: {k: None if v is None else v[1][i] for k, v in placed.items()}
+                            for i, (name, _) in enumerate(views)}
         for _, key, handle in found:
             got = placed.get(key)
             with contextlib.suppress(Exception):
@@ -580,13 +604,17 @@ class Views:
 
         cam = client.camera
         aspect, fov = DEFAULT_ASPECT, VIEW_FOV_Y
+        canvas = None
         with contextlib.suppress(Exception):  # a camera that has not reported yet raises / has no size
             w, h, f = float(cam.image_width), float(cam.image_height), float(cam.fov)
             if w > 0 and h > 0 and 0 < f < np.pi:
-                aspect, fov = w / h, f
+                aspect, fov, canvas = w / h, f, (f, w, h)
         pose = self._frame_pose(aspect=aspect, fov_y=fov)
         out = (tuple(float(v) for v in pose.position), tuple(float(v) for v in pose.look_at), pose.far, pose.near)
-        self.client_poses[getattr(client, "client_id", id(client))] = out
+        cid = getattr(client, "client_id", id(client))
+        self.client_poses[cid] = out
+        if canvas is not None:  # the canvas this pose frames: the labels are laid out in it
+            self.client_canvases[cid] = canvas
         return out
 
     def _apply_camera(self, clients: list[Any]) -> None:
@@ -625,6 +653,7 @@ class Views:
                     return
             self._framed_clients[client.client_id] = (key, w / h)
             self._apply_camera([client])
+            self._layout_labels()  # the labels fit this browser's view too
 
     def _frame_camera(self, scene: Scene, key: Hashable, *, refined: bool = False) -> None:
         """Point the initial camera at the footprint and, on a new scene, every open browser's; ``refined``: the

@@ -93,6 +93,18 @@ def project_px(points: np.ndarray, position: np.ndarray, look_at: np.ndarray, *,
     return px, depth > 0
 
 
+@dataclass(frozen=True)
+class View:
+    """A framed view the labels must fit in: camera ``position`` and ``look_at`` (display km), vertical field
+    of view ``fov_y`` (radians) and the canvas ``width`` x ``height`` (pixels)."""
+
+    position: np.ndarray
+    look_at: np.ndarray
+    fov_y: float
+    width: float
+    height: float
+
+
 def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndarray, *, fov_y: float,
                  width: float, height: float, search_first: int = 7
                  ) -> dict[str, tuple[str, np.ndarray, np.ndarray] | None]:
@@ -119,26 +131,50 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
         of its alternatives --, or ``{key: None}`` for a label left out (its points are outside the view or
         behind the camera, or no anchor fits).
     """
+    view = View(np.asarray(position, dtype=np.float64), np.asarray(look_at, dtype=np.float64), float(fov_y),
+                float(width), float(height))
+    placed = place_labels_in_views(labels, [view], search_first=search_first)
+    return {k: None if v is None else (v[0], v[1][0], v[2]) for k, v in placed.items()}
+
+
+def place_labels_in_views(labels: Sequence[Label], views: Sequence[View], *, search_first: int = 7
+                          ) -> dict[str, tuple[str, np.ndarray, np.ndarray] | None]:
+    """:func:`place_labels` for several views at once (browsers of different canvas shapes showing the same
+    labels): each label gets one anchor and point that keep it inside *every* view and clear of every other
+    shown label in every view.
+
+    Returns
+    -------
+    dict
+        ``{key: (anchor, boxes (V, 4) px -- one (x0, y0, x1, y1) per view --, point (3,))}`` or ``{key: None}``.
+    """
     out: dict[str, tuple[str, np.ndarray, np.ndarray] | None] = {lab.key: None for lab in labels}
-    if not labels:
+    if not labels or not views:
         return out
     g = GAP_PX
-    options: list[list[tuple[int, str, np.ndarray, np.ndarray]]] = []  # per label: (rank, anchor, box, point)
+    options: list[list[tuple[int, str, np.ndarray, np.ndarray]]] = []  # per label: (rank, anchor, boxes, point)
     for lab in labels:
         opts: list[tuple[int, str, np.ndarray, np.ndarray]] = []
         cands = np.array([lab.point, *lab.alternatives], dtype=np.float64).reshape(-1, 3)
-        px, front = project_px(cands, position, look_at, fov_y=fov_y, width=width, height=height)
         size = label_box_px(lab.text, lab.scale)
         anchors = tuple(dict.fromkeys((*lab.anchors, *FALLBACK_ANCHORS)))
-        for k, (p, ok) in enumerate(zip(px, front, strict=True)):
-            if not (ok and 0.0 <= p[0] <= width and 0.0 <= p[1] <= height):
+        projected = [project_px(cands, v.position, v.look_at, fov_y=v.fov_y, width=v.width, height=v.height)
+                     for v in views]
+        for k in range(len(cands)):
+            if not all(front[k] and 0.0 <= px[k, 0] <= v.width and 0.0 <= px[k, 1] <= v.height
+                       for (px, front), v in zip(projected, views, strict=True)):
                 continue
             for rank, anchor in enumerate(anchors):
-                box = box_at(p, size, anchor)
-                if box[0] >= g and box[1] >= g and box[2] <= width - g and box[3] <= height - g:
-                    opts.append((k * len(anchors) + rank, anchor, box, cands[k]))
+                boxes = np.array([box_at(px[k], size, anchor) for px, _ in projected])
+                if all(b[0] >= g and b[1] >= g and b[2] <= v.width - g and b[3] <= v.height - g
+                       for b, v in zip(boxes, views, strict=True)):
+                    opts.append((k * len(anchors) + rank, anchor, boxes, cands[k]))
         opts.sort(key=lambda o: o[0])
         options.append(opts)
+
+    def clash(a: np.ndarray, b: np.ndarray) -> bool:  # two labels' boxes overlap in some view
+        return any(boxes_overlap(x, y, g) for x, y in zip(a, b, strict=True))
+
     # the most labels shown, earlier ones first, each as near its preferred side as may be: a depth-first
     # search over the anchors (a few labels, a few anchors each; bounded)
     n = min(len(labels), search_first)
@@ -162,7 +198,7 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
             best_score, best = reach, list(chosen)
             return
         for opt in options[i]:
-            if not any(c is not None and boxes_overlap(opt[2], c[2], g) for c in chosen[:i]):
+            if not any(c is not None and clash(opt[2], c[2]) for c in chosen[:i]):
                 chosen[i] = opt
                 search(i + 1, count + 1, rank + opt[0])
         chosen[i] = None
@@ -171,7 +207,7 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
     search(0, 0, 0)
     placed = [c for c in best if c is not None]
     for opts in options[n:]:  # the rest (minor labels) greedily around them
-        pick = next((o for o in opts if not any(boxes_overlap(o[2], c[2], g) for c in placed)), None)
+        pick = next((o for o in opts if not any(clash(o[2], c[2]) for c in placed)), None)
         best.append(pick)
         if pick is not None:
             placed.append(pick)
@@ -181,4 +217,4 @@ def place_labels(labels: Sequence[Label], position: np.ndarray, look_at: np.ndar
 
 
 __all__ = ["ANCHOR_OFFSET", "CHAR_PX", "FALLBACK_ANCHORS", "GAP_PX", "PAD_PX", "TEXT_PX", "Label", "box_at",
-           "boxes_overlap", "label_box_px", "place_labels", "project_px"]
+           "boxes_overlap", "label_box_px", "place_labels", "place_labels_in_views", "project_px", "View"]
