@@ -82,7 +82,7 @@ class Refinement:
         return np.concatenate(self.result.parameters)
 
     def _role_mask(self, role: str) -> np.ndarray:
-        return np.asarray([r == role for r in self.observations["role"]], dtype=bool)
+        return np.asarray(self.observations["role"]) == role
 
     @property
     def control_rmse_px(self) -> float | None:
@@ -182,17 +182,20 @@ def _image_of(table: PointTable, names: list[str]) -> np.ndarray:
         if len(names) > 1:
             raise InputError(f"{table.path}: an 'image' column is needed with several images")
         return np.zeros(len(table), dtype=np.int64)
-    out = np.empty(len(table), dtype=np.int64)
     stems = [Path(n).name for n in names]
-    for i, value in enumerate(table.image):
+    # one look-up per distinct value of the column (a few), then an index per row
+    values, inverse = np.unique(np.asarray(table.image, dtype=str), return_inverse=True)
+    index = np.empty(values.size, dtype=np.int64)
+    for u, value in enumerate(values.tolist()):
         if value.isdigit() and int(value) < len(names):
-            out[i] = int(value)
+            index[u] = int(value)
         elif value in names or value in stems:
-            out[i] = names.index(value) if value in names else stems.index(value)
+            index[u] = names.index(value) if value in names else stems.index(value)
         else:
+            i = int(np.flatnonzero(inverse == u)[0])
             raise InputError(f"{table.path}: line {i + 2}: image {value!r} is not one of the images "
                              f"(0..{len(names) - 1} or {', '.join(stems)})")
-    return out
+    return index[inverse.ravel()]
 
 
 def _check_inside(table: PointTable, image: np.ndarray, images: list[RPCImage | SceneImage | LineScanImage],
@@ -357,44 +360,46 @@ def refine_images(
     n_pars = [len(p.parameter_names) for p in projectors]
     multi = len(images) > 1
 
-    point_key: dict[tuple[str, str], int] = {}  # (role, id) -> ground point index
-    ground: list[np.ndarray] = []
-    sigma_g: list[float] = []
-    obs: dict[str, list[Any]] = {"id": [], "role": [], "image": [], "row": [], "col": [], "point": []}
-    check_only: dict[str, list[Any]] = {"id": [], "image": [], "row": [], "col": [], "ground": []}
-    pending: list[tuple[int, int, float, float]] = []  # tie points: (ground index, first image, row, col)
+    # observations, ground points and their priors, built per table with array operations (no loop over points)
+    ground: list[np.ndarray] = []  # (M_t, 3) per table: lon, lat, h (NaN for tie points: localised below)
+    sigma_g: list[np.ndarray] = []  # (M_t,)
+    parts: list[dict[str, np.ndarray]] = []
+    pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # ties: (point, first image, row, col)
+    check_only: dict[str, Any] = {"id": [], "image": [], "row": [], "col": [], "ground": []}
+    n_points = 0
 
     def add(table: PointTable, role: str, as_tie: bool) -> None:
+        nonlocal n_points
         image = _image_of(table, labels)
         _check_inside(table, image, images, role)
-        by_id: dict[str, list[int]] = {}
-        for i, pid in enumerate(table.ids):
-            by_id.setdefault(pid, []).append(i)
-        for pid, rows in by_id.items():
-            if as_tie and len(rows) < 2:
-                if role == "tie":
-                    raise InputError(f"{table.path}: tie point {pid!r} is measured in one image only")
-                continue  # a check point seen in one image: projected only (below)
-            key = (role, pid)
-            if key in point_key:
-                raise InputError(f"{table.path}: point id {pid!r} repeated")
-            point_key[key] = len(ground)
-            if as_tie:
-                ground.append(np.full(3, np.nan))  # localised below, all tie points at once
-                pending.append((point_key[key], int(image[rows[0]]), table.row[rows[0]], table.col[rows[0]]))
-                sigma_g.append(np.inf)
-            else:
-                assert table.lon is not None and table.lat is not None and table.h is not None
-                i0 = rows[0]
-                ground.append(np.array([table.lon[i0], table.lat[i0], table.h[i0]]))
-                sigma_g.append(sigma_ground_m)
-            for i in rows:
-                obs["id"].append(pid)
-                obs["role"].append(role)
-                obs["image"].append(int(image[i]))
-                obs["row"].append(float(table.row[i]))
-                obs["col"].append(float(table.col[i]))
-                obs["point"].append(point_key[key])
+        ids = np.asarray(table.ids, dtype=str)
+        uniq, first, inverse, counts = np.unique(ids, return_index=True, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+        if as_tie and (counts < 2).any():
+            single = np.flatnonzero(counts < 2)
+            if role == "tie":
+                pid = str(uniq[single[np.argmin(first[single])]])
+                raise InputError(f"{table.path}: tie point {pid!r} is measured in one image only")
+            # a check point seen in one image: projected only (below)
+        kept = counts >= 2 if as_tie else np.ones(uniq.size, dtype=bool)
+        # ground points in the order of their first row; rows grouped by point (file order within a point)
+        order = np.argsort(np.where(kept, first, np.iinfo(np.int64).max), kind="stable")[:int(kept.sum())]
+        point = np.full(uniq.size, -1, dtype=np.int64)
+        point[order] = n_points + np.arange(order.size)
+        rows = np.flatnonzero(kept[inverse])
+        rows = rows[np.argsort(point[inverse[rows]], kind="stable")]
+        head = first[order]  # the first row of each point
+        if as_tie:
+            ground.append(np.full((order.size, 3), np.nan))
+            sigma_g.append(np.full(order.size, np.inf))
+            pending.append((point[order], image[head], table.row[head], table.col[head]))
+        else:
+            assert table.lon is not None and table.lat is not None and table.h is not None
+            ground.append(np.stack([table.lon[head], table.lat[head], table.h[head]], axis=1))
+            sigma_g.append(np.full(order.size, sigma_ground_m))
+        parts.append({"id": ids[rows], "role": np.full(rows.size, role), "image": image[rows],
+                      "row": table.row[rows], "col": table.col[rows], "point": point[inverse[rows]]})
+        n_points += order.size
 
     if control is not None:
         add(control, "control", False)
@@ -409,26 +414,28 @@ def refine_images(
             add(check, "check", True)
         else:
             _check_inside(check, image, images, "check")
-        check_only.update(id=list(check.ids), image=image.tolist(), row=check.row.tolist(), col=check.col.tolist(),
-                          ground=list(zip(check.lon, check.lat, check.h, strict=True)))
+        check_only.update(id=np.asarray(check.ids, dtype=str), image=image, row=check.row, col=check.col,
+                          ground=np.stack([check.lon, check.lat, check.h], axis=1))
+    obs: dict[str, np.ndarray] = {k: np.concatenate([p[k] for p in parts]) for k in
+                                  ("id", "role", "image", "row", "col", "point")}
+    all_ground = np.concatenate(ground) if ground else np.zeros((0, 3))
     if pending:
-        idx, first, t_row, t_col = (np.asarray(v) for v in zip(*pending, strict=True))
-        starts = _initial_ground(images, first.astype(np.int64), t_row.astype(float), t_col.astype(float))
-        for j, g in zip(idx, starts, strict=True):
-            ground[int(j)] = g
-    if not obs["id"]:
+        idx, first_image, t_row, t_col = (np.concatenate(v) for v in zip(*pending, strict=True))
+        all_ground[idx] = _initial_ground(images, first_image.astype(np.int64), t_row.astype(float),
+                                          t_col.astype(float))
+    if not obs["id"].size:
         raise InputError("no usable observation (every check point is measured in one image only)")
-    n_control = sum(1 for r in obs["role"] if r == "control")
+    n_control = int(np.sum(obs["role"] == "control"))
     if not multi and n_control * 2 <= n_pars[0]:
         raise InputError(f"too few control points: the {models[0]} model has {n_pars[0]} parameters and needs at "
                          f"least {n_pars[0] // 2 + 1} points, got {n_control}")
     problem = BundleProblem(
         projectors=projectors,
         initial_parameters=[np.zeros(n) for n in n_pars],
-        ground=np.asarray(ground),
-        ground_sigma_m=np.asarray(sigma_g)[:, None],
-        image_index=np.asarray(obs["image"]),
-        point_index=np.asarray(obs["point"]),
+        ground=all_ground,
+        ground_sigma_m=np.concatenate(sigma_g)[:, None],
+        image_index=obs["image"],
+        point_index=obs["point"],
         measured=np.stack([obs["row"], obs["col"]], axis=1),
         sigma_px=np.asarray(sigma_px, dtype=np.float64),
         axes=images[0].axes,
@@ -445,7 +452,7 @@ def refine_images(
     ck_before = np.zeros((0, 2))
     ck_after = np.zeros((0, 2))
     extra: dict[str, Any] = {}
-    if check_only["id"]:
+    if len(check_only["id"]):
         g = np.asarray(check_only["ground"])
         img = np.asarray(check_only["image"])
         measured = np.stack([check_only["row"], check_only["col"]], axis=1)
@@ -455,10 +462,10 @@ def refine_images(
             sel = img == k
             before[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], models[k], None)
             after[sel] = adapter.project(g[sel, 0], g[sel, 1], g[sel, 2], models[k], result.parameters[k])
-        flagged = {(pid, k) for pid, k, r, o in zip(obs["id"], obs["image"], obs["role"], result.outlier,
-                                                    strict=True) if r == "check" and o}
-        check_only["outlier"] = [int((pid, k) in flagged) for pid, k in zip(check_only["id"], check_only["image"],
-                                                                              strict=True)]
+        # a check measurement that entered as a tie observation and was flagged there is flagged here too
+        flagged = (obs["role"] == "check") & result.outlier
+        check_only["outlier"] = np.isin(_keys(check_only["id"], check_only["image"]),
+                                        _keys(obs["id"][flagged], obs["image"][flagged])).astype(int)
         keep = ~np.asarray(check_only["outlier"], dtype=bool)
         ck_before, ck_after = (measured - before)[keep], (measured - after)[keep]
         extra["check_only"] = check_only
@@ -474,27 +481,34 @@ def refine_images(
                       extra=extra)
 
 
-def _check_ground(check: PointTable, obs: dict[str, list[Any]], result: BundleResult,
+def _keys(ids: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """One string per (id, image) pair, for set operations on arrays."""
+    return np.char.add(np.char.add(np.asarray(ids, dtype=str), "\x00"), np.asarray(image).astype(str))
+
+
+def _check_ground(check: PointTable, obs: dict[str, np.ndarray], result: BundleResult,
                   axes: tuple[float, float]) -> dict[str, Any]:
     """Triangulated check points against their surveyed ground: errors (E, N, U metres) and predicted sigmas."""
     assert check.lon is not None and check.lat is not None and check.h is not None
-    truth = {pid: (check.lon[i], check.lat[i], check.h[i]) for i, pid in enumerate(check.ids)}
-    points = sorted({p for p, r in zip(obs["point"], obs["role"], strict=True) if r == "check"})
-    ids = {p: pid for p, pid, r in zip(obs["point"], obs["id"], obs["role"], strict=True) if r == "check"}
-    if not points:
+    is_check = obs["role"] == "check"
+    points, first = np.unique(obs["point"][is_check], return_index=True)
+    if not points.size:
         return {"n": 0}
+    point_ids = obs["id"][is_check][first]
+    table_ids, table_first = np.unique(np.asarray(check.ids, dtype=str), return_index=True)
+    row = table_first[np.searchsorted(table_ids, point_ids)]  # each point's surveyed ground: its first row
     est = result.ground[points]
-    tru = np.asarray([truth[ids[p]] for p in points])
+    tru = np.stack([check.lon[row], check.lat[row], check.h[row]], axis=1)
     m_lon, m_lat = metres_per_degree(tru[:, 1], tru[:, 2], axes)
     err = np.stack([(est[:, 0] - tru[:, 0]) * m_lon, (est[:, 1] - tru[:, 1]) * m_lat, est[:, 2] - tru[:, 2]], axis=1)
     cov = result.ground_covariance_m[points]
     predicted = np.sqrt(np.einsum("jii->j", cov))
     return {
-        "n": len(points),
+        "n": int(points.size),
         "rmse_3d_m": float(np.sqrt(np.mean(np.sum(err**2, axis=1)))),
         "predicted_rmse_3d_m": float(np.sqrt(np.mean(predicted**2))),
         "rmse_enu_m": np.sqrt(np.mean(err**2, axis=0)).tolist(),
         "predicted_rmse_enu_m": np.sqrt(np.mean(np.diagonal(cov, axis1=1, axis2=2), axis=0)).tolist(),
-        "ids": [ids[p] for p in points],
+        "ids": point_ids.tolist(),
         "errors_enu_m": err.tolist(),
     }
