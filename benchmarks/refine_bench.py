@@ -17,10 +17,16 @@ Times are wall-clock medians of ``--repeat`` runs in one process (torch imported
 known affines) with N tie points and 6 GCPs measured in both images (2 N + 12 image measurements of a row and
 a column each; 50,000 ties are 100,012 measurements and 150,030 unknowns), once.
 
-``--line-sensors`` also times one LM iteration over the same number of GCPs on the rigorous Pleiades DIMAP
-model (tests/data/rpc PHRDIMAP 2018) and the MRO CTX CSM camera (tests/data/usgscsm), model
-``position-attitude`` (6 parameters), the GCPs simulated by the sensor with known offsets + 0.3 px noise, ground
-known to 0.5 m as above (:mod:`explorer.refine.torch_linescan`: the compiled line search, then torch).
+``--line-sensors`` also runs the same comparison on line scanners: the rigorous Pleiades DIMAP model
+(tests/data/rpc PHRDIMAP 2018), the rigorous WorldView-1 DG model (tests/data/rpc rpc_WV1.xml) and the MRO CTX CSM
+camera (tests/data/usgscsm), model ``position-attitude`` (6 parameters), the GCPs simulated by the sensor with known
+offsets + 0.3 px noise, ground known to 0.5 m as above (:mod:`explorer.refine.torch_linescan`: the compiled line
+search, then torch).  For each: one LM iteration (median of ``--repeat``; the projector keeps the lines of its
+previous call as a warm start, as an adjustment's iterations do), the whole adjustment and its seconds per
+iteration, and scipy ``least_squares`` (``trf``, ``2-point`` finite differences with the Jacobian's sparsity,
+``x_scale="jac"``) on the same residuals from the same compiled ground to image of the adjusted sensor (its lines
+warm-started from the previous evaluation in the same way), once.  ``--line-gcps`` sets their number of GCPs
+(default ``--gcps``).
 
 Usage::
 
@@ -114,7 +120,9 @@ def _pair(n_ties: int, seed: int) -> dict:
 
 
 LINE_SENSORS = {"dimap": ("dimap", "tests/data/rpc/PHRDIMAP_P1BP--2018122638935449CP.XML"),
+                "dg": ("dg", "tests/data/rpc/rpc_WV1.xml"),
                 "ctx": ("isd", "tests/data/usgscsm/ctxLineScan.json")}
+LINE_TRUTH = np.array([60.0, -40.0, 20.0, 3e-5, -2e-5, 4e-5])
 
 
 def _line_problem(which: str, n: int, seed: int):
@@ -126,8 +134,7 @@ def _line_problem(which: str, n: int, seed: int):
     kind, path = LINE_SENSORS[which]
     sensor = load_source(kind, str(ROOT / path)).scene
     corr = correction_for(sensor, "position-attitude")
-    truth = np.array([60.0, -40.0, 20.0, 3e-5, -2e-5, 4e-5])
-    biased = adjusted_sensor(sensor, corr, truth)
+    biased = adjusted_sensor(sensor, corr, LINE_TRUTH)
     rng = np.random.default_rng(seed)
     rows, cols = sensor.n_rows - 1, sensor.n_columns - 1
     g = biased.image_to_ground(rng.uniform(0.05 * rows, 0.95 * rows, n), rng.uniform(0.05 * cols, 0.95 * cols, n),
@@ -146,6 +153,83 @@ def _line_problem(which: str, n: int, seed: int):
                          measured=measured, sigma_px=np.full(m, 0.3), axes=axes)
 
 
+def _line_scipy(problem):
+    """scipy least_squares with 2-point finite differences on the line-scanner problem (same residuals: the
+    compiled ground to image of the adjusted sensor, lines warm-started from the previous evaluation)."""
+    import torch
+    from scipy.optimize import least_squares
+    from scipy.sparse import lil_matrix
+
+    from explorer.refine.bundle import metres_per_degree
+
+    proj = problem.projectors[0]
+    proj.forget_roots()
+    n = problem.ground.shape[0]
+    g0 = problem.ground
+    m_lon, m_lat = metres_per_degree(g0[:, 1], g0[:, 2], problem.axes)
+    p = len(proj.parameter_names)
+
+    def residuals(x):
+        theta, d = x[:p], x[p:].reshape(n, 3)
+        lon = torch.from_numpy(g0[:, 0] + d[:, 0] / m_lon)
+        lat = torch.from_numpy(g0[:, 1] + d[:, 1] / m_lat)
+        h = torch.from_numpy(g0[:, 2] + d[:, 2])
+        if hasattr(proj, "_origin"):  # rigorous: ENU of the frame, the compiled search of the adjusted scene
+            frame = proj.sensor.frame
+            ground = frame.geodetic_to_enu(lon.numpy(), lat.numpy(), h.numpy())
+            row, col = proj._search(theta, ground)
+        else:  # CSM: body-fixed points, the adjusted camera's compiled lines and samples
+            cam = proj.adjusted(theta).camera
+            a, b = float(cam.semi_major_m), float(cam.semi_minor_m)
+            from explorer.refine.torch_linescan import geodetic_to_ecef
+
+            xyz = geodetic_to_ecef(lon, lat, h, a, 1.0 - (b * b) / (a * a)).numpy()
+            g = cam.ground_to_image(xyz)
+            row, col = np.where(g.status == 0, g.line, np.nan) - 0.5, g.sample - 0.5
+        image = ((problem.measured - np.stack([row, col], axis=1)) / problem.sigma_px[:, None]).ravel()
+        return np.concatenate([image, (d / problem.ground_sigma_m).ravel()])
+
+    sparsity = lil_matrix((5 * n, p + 3 * n), dtype=np.int8)
+    obs = np.arange(n)
+    for c in range(2):
+        sparsity[2 * obs + c, :p] = 1
+        for a in range(3):
+            sparsity[2 * obs + c, p + 3 * obs + a] = 1
+    for a in range(3):
+        sparsity[2 * n + 3 * obs + a, p + 3 * obs + a] = 1
+    return least_squares(residuals, np.zeros(p + 3 * n), jac="2-point", jac_sparsity=sparsity.tocsr(),
+                         method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+
+
+def _line_sensor(which: str, n: int, seed: int, repeat: int) -> dict:
+    from explorer.refine.bundle import bundle_adjust, lm_iteration
+
+    problem = _line_problem(which, n, seed)
+    lm_iteration(problem, loss="linear")  # warm-up
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        lm_iteration(problem, loss="linear")
+        times.append(time.perf_counter() - t0)
+    problem.projectors[0].forget_roots()  # the whole adjustment from a cold search
+    t0 = time.perf_counter()
+    ours = bundle_adjust(problem, loss="linear")
+    whole = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    peer = _line_scipy(problem)
+    peer_s = time.perf_counter() - t0
+    sigma = ours.parameter_sigma
+    return {f"{which}_gcps": int(problem.measured.shape[0]), f"{which}_lm_iteration_s": statistics.median(times),
+            f"{which}_adjustment_s": whole, f"{which}_adjustment_iterations": ours.iterations,
+            f"{which}_adjustment_s_per_iteration": whole / max(ours.iterations, 1),
+            f"{which}_scipy_least_squares_2point_s": peer_s, f"{which}_scipy_nfev": int(peer.nfev),
+            f"{which}_speedup_vs_scipy": peer_s / whole,
+            f"{which}_max_parameter_difference_in_sigmas": float(np.max(np.abs(ours.parameters[0] - peer.x[:6])
+                                                                        / sigma)),
+            f"{which}_max_error_vs_truth_in_sigmas": float(np.max(np.abs(ours.parameters[0] - LINE_TRUTH) / sigma)),
+            f"{which}_sigma0": ours.sigma0}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--gcps", type=int, default=10_000)
@@ -153,10 +237,29 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pair-ties", type=int, default=0, help="also time a stereo-pair bundle adjustment")
     ap.add_argument("--line-sensors", action="store_true",
-                    help="also time one LM iteration on the rigorous DIMAP model and the CTX CSM camera")
+                    help="also time one LM iteration and the whole adjustment against scipy on the rigorous DIMAP "
+                         "and WorldView-1 models and the CTX CSM camera")
+    ap.add_argument("--line-gcps", type=int, default=0, help="GCPs of the line-scanner problems (default --gcps)")
+    ap.add_argument("--only-line-sensors", action="store_true", help="skip the RPC problem")
+    ap.add_argument("--sensors", default="",
+                    help=f"line scanners, comma-separated (default all: {', '.join(LINE_SENSORS)})")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
 
+    doc = _rpc_run(args) if not args.only_line_sensors else {}
+    if args.pair_ties:
+        doc.update(_pair(args.pair_ties, args.seed))
+    if args.line_sensors or args.only_line_sensors:
+        for which in (args.sensors.split(",") if args.sensors else LINE_SENSORS):
+            doc.update(_line_sensor(which, args.line_gcps or args.gcps, args.seed, args.repeat))
+    for key, value in doc.items():
+        print(f"{key:>38}: {value:.4g}" if isinstance(value, float) else f"{key:>38}: {value}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"wrote {args.json}")
+
+
+def _rpc_run(args: argparse.Namespace) -> dict:
     from explorer.refine.bundle import bundle_adjust, lm_iteration
 
     rpc, problem, truth, scales = _problem(args.gcps, args.seed)
@@ -185,24 +288,7 @@ def main() -> None:
         "sigma0": ours.sigma0,
         "max_error_vs_truth_in_sigmas": float(np.max(np.abs(ours_theta - truth) / ours.parameter_sigma)),
     }
-    if args.pair_ties:
-        doc.update(_pair(args.pair_ties, args.seed))
-    if args.line_sensors:
-        for which in LINE_SENSORS:
-            line_problem = _line_problem(which, args.gcps, args.seed)
-            lm_iteration(line_problem, loss="linear")  # warm-up
-            times = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                lm_iteration(line_problem, loss="linear")
-                times.append(time.perf_counter() - t0)
-            doc[f"{which}_gcps"] = int(line_problem.measured.shape[0])
-            doc[f"{which}_lm_iteration_s"] = statistics.median(times)
-    for key, value in doc.items():
-        print(f"{key:>38}: {value:.4g}" if isinstance(value, float) else f"{key:>38}: {value}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
-        print(f"wrote {args.json}")
+    return doc
 
 
 if __name__ == "__main__":

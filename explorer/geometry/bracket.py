@@ -39,12 +39,13 @@ def bracket_best_scanline(
     n_bracket: int = 33,
     tol_rows: float = 1e-10,
     max_iter: int = 100,
+    guess_halfwidth_rows: float | np.ndarray = 2.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ground -> image for any model: solve the best-scanline condition by bracketing.
 
     The along-track residual is sampled at ``n_bracket`` rows spanning the image plus
-    ``margin_fraction`` of its height on each side (or, with ``row_guess``, at the guess +- 2
-    rows first); the sign change is refined by the Illinois variant of regula falsi until the
+    ``margin_fraction`` of its height on each side (or, with ``row_guess``, at the guess +-
+    ``guess_halfwidth_rows`` first); the sign change is refined by the Illinois variant of regula falsi until the
     bracket is below ``tol_rows``.
 
     Parameters
@@ -58,6 +59,9 @@ def bracket_best_scanline(
     margin_fraction, n_bracket, tol_rows, max_iter
         Search window margin (fraction of the image height), samples of the first bracket,
         bracket width that counts as converged (rows), iterations.
+    guess_halfwidth_rows : float or ndarray, shape (N,)
+        The first bracket about ``row_guess`` (default +-2 rows; a point whose residual does not change sign
+        within it is searched over the whole window).
 
     Returns
     -------
@@ -80,7 +84,8 @@ def bracket_best_scanline(
         g = np.asarray(row_guess, dtype=np.float64)
         ok = np.isfinite(g)
         idx = todo[ok]
-        a, b = g[ok] - 2.0, g[ok] + 2.0
+        hw = np.broadcast_to(np.asarray(guess_halfwidth_rows, dtype=np.float64), g.shape)[ok]
+        a, b = g[ok] - hw, g[ok] + hw
         fa, fb = f(a, idx), f(b, idx)
         good = np.sign(fa) != np.sign(fb)
         lo[idx[good]], hi[idx[good]] = a[good], b[good]

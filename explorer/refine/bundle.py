@@ -214,7 +214,7 @@ def _ground_geodetic(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray
 
 
 def _evaluate(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _State,
-              jacobians: bool) -> tuple[np.ndarray, _Linearisation | None]:
+              jacobians: bool, strict: bool = True) -> tuple[np.ndarray, _Linearisation | None]:
     """Projections (N, 2) of every observation and, with ``jacobians``, the whitened linearisation.
 
     torch runs on one thread here: its element-wise kernels over 50,000 points took 16 ms forward and
@@ -229,7 +229,7 @@ def _evaluate(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], stat
         projected, lin = _evaluate_torch(problem, scale, state, jacobians)
     finally:
         torch.set_num_threads(threads)
-    if jacobians and not np.isfinite(projected).all():  # (a trial step without projection is rejected by its cost)
+    if jacobians and strict and not np.isfinite(projected).all():  # (a trial step without one: rejected by its cost)
         k = int(np.flatnonzero(~np.isfinite(projected).all(axis=1))[0])
         raise InputError(f"observation {k} (image {problem.image_index[k]}, ground point {problem.point_index[k]}) "
                          "has no projection: the sensor sees its ground point on no image line (outside the image, "
@@ -258,6 +258,13 @@ def _evaluate_torch(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray]
             with torch.no_grad():
                 row, col = projector.project(lon, lat, h, theta)
             projected[sel, 0], projected[sel, 1] = row.numpy(), col.numpy()
+            continue
+        if hasattr(projector, "project_jacobian"):  # the projector forms its own Jacobians (line scanners)
+            row_np, col_np, j_ground, j_params = projector.project_jacobian(
+                ground[pts, 0], ground[pts, 1], ground[pts, 2], state.theta[offs[k]:offs[k + 1]])
+            projected[sel, 0], projected[sel, 1] = row_np, col_np
+            a_x[sel] = j_ground / np.stack([scale[0][pts], scale[1][pts], np.ones(sel.size)], axis=1)[:, None, :]
+            a_theta.append(j_params / problem.sigma_px[sel, None, None])
             continue
         # one leaf per observation (its own copy of the ground point and of the parameters): the
         # gradient of the sum of rows is then the per-observation derivative
@@ -381,7 +388,8 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
             step_x = np.matmul(v_inv, reduced[:, :, None])[:, :, 0]
             step_x[~free] = 0.0
             trial = _State(state.theta + step_theta, state.offsets_m + step_x)
-            projected, _ = _evaluate(problem, scale, trial, False)
+            # linearised at the trial point at once: an accepted step (most are) needs no second evaluation there
+            projected, trial_lin = _evaluate(problem, scale, trial, True, strict=False)
             e_trial = (problem.measured - projected) / problem.sigma_px[:, None]
             trial_cost = _cost(problem, e_trial, trial, use, loss, loss_scale, prior_weight)
             if trial_cost <= cost:
@@ -392,9 +400,9 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
         decrease = cost - trial_cost
         state = trial
         damping = max(damping / 10.0, 1e-12)
-        _, lin = _evaluate(problem, scale, state, True)
+        lin = trial_lin
         assert lin is not None
-        cost = _cost(problem, lin.e, state, use, loss, loss_scale, prior_weight)
+        cost = trial_cost
         history.append(cost)
         small_step = float(np.max(np.abs(step_theta) * np.sqrt(np.clip(np.diag(u), 0, None))
                                   , initial=0.0)) < 1e-8 and float(np.max(np.abs(step_x), initial=0.0)) < 1e-7
@@ -543,9 +551,9 @@ def projected_after(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray]
 def lm_iteration(problem: BundleProblem, *, loss: str = "huber", loss_scale: float = 1.5) -> np.ndarray:
     """One Levenberg-Marquardt iteration from the initial values (for benchmarks and teaching).
 
-    Linearises (torch autograd), builds and reduces the normal equations, solves, evaluates the trial
-    step (more damping until the cost drops) and linearises again at the new point, as every iteration
-    of :func:`bundle_adjust` does (plus its first linearisation).
+    Linearises (torch autograd), builds and reduces the normal equations, solves, and evaluates the trial
+    step with its linearisation (more damping until the cost drops; the accepted step's linearisation is the
+    next iteration's), as every iteration of :func:`bundle_adjust` does (plus its first linearisation).
 
     Returns
     -------

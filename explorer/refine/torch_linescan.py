@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from explorer.errors import InputError
+from explorer.geometry.bracket import bracket_best_scanline
 from explorer.refine.line_adjust import adjusted_sensor
 from explorer.refine.line_corrections import LineCorrection, quaternion_multiply
 from explorer.refine.torch_scene import radially_distorted
@@ -131,12 +132,35 @@ class _Projector:
         self.correction = correction
         self.parameter_names = correction.parameter_names
         self._cache: tuple[bytes, Any] | None = None
+        self._last_roots: tuple[bytes, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def adjusted(self, params: np.ndarray) -> Any:
         key = np.asarray(params, dtype=np.float64).tobytes()
         if self._cache is None or self._cache[0] != key:
             self._cache = (key, adjusted_sensor(self.sensor, self.correction, params, reuse_setup=True))
         return self._cache[1]
+
+    def _roots(self, p_np: np.ndarray, points: np.ndarray, solve: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The compiled search's (line, column) of ``points`` (N, 3) at parameters ``p_np``: ``solve(points,
+        guess)`` with the lines of the previous call on as many points as a warm start (an adjustment's
+        iterations move each line by a fraction of a row; the search checks the guess by its bracket and searches
+        the whole image where it fails), and the previous answer itself when the parameters and the points are
+        the same (a trial step that becomes the next iterate, the final pass of an adjustment)."""
+        key = p_np.tobytes()
+        last = self._last_roots
+        if last is not None and last[1].shape == points.shape:
+            if last[0] == key and np.array_equal(last[1], points):
+                return last[2], last[3]
+            guess = last[2]
+        else:
+            guess = None
+        lines, cols = solve(points, guess)
+        self._last_roots = (key, points.copy(), lines, cols)
+        return lines, cols
+
+    def forget_roots(self) -> None:
+        """Drop the remembered search (a benchmark timing a cold start)."""
+        self._last_roots = None
 
     def _theta(self, params: Any, n: int) -> tuple[torch.Tensor, np.ndarray]:
         theta = params if isinstance(params, torch.Tensor) else _t(params)
@@ -350,7 +374,7 @@ class TorchRigorous(_Projector):
         (N, P) (equal rows)."""
         frame = self.sensor.frame
         ecef = geodetic_to_ecef(lon, lat, h, float(frame.body.a_m), float(frame.body.e2))
-        return self.project_enu((ecef - _t(self._origin)) @ _t(self._e), params, (lon, lat, h))
+        return self.project_enu(_to_enu(ecef - _t(self._origin), self._e), params, (lon, lat, h))
 
     def project_enu(self, ground: torch.Tensor, params: torch.Tensor | Any,
                     geodetic: tuple[torch.Tensor, ...] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -363,9 +387,8 @@ class TorchRigorous(_Projector):
         if geodetic is None:
             geodetic = tuple(_t(v) for v in self.sensor.frame.enu_to_geodetic(ground.detach().numpy()))
         theta, p_np = self._theta(params, ground.shape[0])
-        scene = self._cache_scene(p_np)
-        row0, col0 = scene.ground_to_image(ground.detach().numpy())
-        t0 = _t(scene.scanline_time(row0)).requires_grad_(True)
+        row0, col0 = self._search(p_np, ground.detach().numpy())
+        t0 = _t(self.sensor.scanline_time(row0)).requires_grad_(True)
         keep = torch.is_grad_enabled()
         with torch.enable_grad():  # d r / d t and d y / d t by autograd, also when the caller needs no gradients
             x, y = self.focal_plane(ground, geodetic, t0, theta)
@@ -376,20 +399,120 @@ class TorchRigorous(_Projector):
         # carried to the new time to first order (the step is below the compiled tolerance)
         dt = -residual / slope
         row = _t(row0) + dt / self.line_period
-        y = y + y_rate * dt
+        return row, self._column(y + y_rate * dt, col0)[0]
+
+    def _search(self, p_np: np.ndarray, ground: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        scene = self._cache_scene(p_np)
+
+        def solve(points: np.ndarray, guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+            if guess is None:
+                return scene.ground_to_image(points)
+            # three secant steps of this sensor's residual from the previous lines (four evaluations; each step
+            # divides the error by ~1e4 after an iteration's step of a hundred rows), then the compiled bracket
+            # (the model's own root to 1e-10 rows, as without a guess) about the result, four times the last step
+            # + 3e-9 rows wide (above the residual's float64 wobble): a point whose residual does not change sign
+            # there is searched over the whole image
+            r0 = scene.along_track_residual(points, scene.scanline_time(guess))
+            r1 = scene.along_track_residual(points, scene.scanline_time(guess + 1.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slope = r1 - r0
+                step = r0 / slope
+                for _ in range(2):
+                    guess = guess - step
+                    step = scene.along_track_residual(points, scene.scanline_time(guess)) / slope
+                guess = guess - step
+            row, col, _ = bracket_best_scanline(scene, points, row_guess=guess,
+                                                guess_halfwidth_rows=4.0 * np.abs(step) + 3e-9)
+            return row, col
+
+        return self._roots(p_np, ground, solve)
+
+    def _column(self, y: Any, col0: np.ndarray) -> tuple[Any, Any]:
+        """Column (N,) of the focal-plane ``y`` (N,) near the compiled column ``col0`` (one Newton step of the
+        uneven detector spacing from it) and ``d column / d y`` (N,), tensors or arrays."""
         interior = self.sensor.interior
         target = y / interior.detector_pitch_m
         if not interior.column_polynomial:
-            return row, target + interior.principal_column
-        u = _t(col0 - interior.principal_column)  # one Newton step of g(u) = target from the compiled root
-        g = u.clone()
-        dg = torch.ones_like(u)
-        power = u.clone()
+            return target + interior.principal_column, 1.0 / interior.detector_pitch_m
+        u = col0 - interior.principal_column
+        if isinstance(y, torch.Tensor):
+            u = _t(u)
+        g = u * 1.0
+        dg = u * 0.0 + 1.0
+        power = u * 1.0
         for k, a in enumerate(interior.column_polynomial, start=2):
             dg = dg + k * a * power
             power = power * u
             g = g + a * power
-        return row, u - (g - target) / dg + interior.principal_column
+        return u - (g - target) / dg + interior.principal_column, 1.0 / (interior.detector_pitch_m * dg)
+
+    def project_jacobian(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
+                         params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`project` of geodetic points (N,) with its Jacobians, from one forward pass and two backward passes.
+
+        The implicit-function derivatives of :meth:`project` (its Newton step with the slopes as constants)
+        formed in closed form from the gradients of the line residual ``r`` and the across-track ``y`` by the
+        scanline time, the ground and the parameters: ``d row = -d r / (r_t T)``, ``d y' = d y - y_t d r / r_t``.
+
+        Returns
+        -------
+        row, col : ndarray, shape (N,)
+        j_ground : ndarray, shape (N, 2, 3)
+            d (row, col) / d (lon deg, lat deg, h m).
+        j_params : ndarray, shape (N, 2, P)
+        """
+        frame = self.sensor.frame
+        n = np.asarray(lon).shape[0]
+        geo = [_t(v).requires_grad_(True) for v in (lon, lat, h)]
+        theta = _t(np.broadcast_to(np.asarray(params, dtype=np.float64), (n, len(self.parameter_names))).copy())
+        theta.requires_grad_(True)
+        p_np = np.asarray(params, dtype=np.float64).reshape(-1, len(self.parameter_names))[0].copy() \
+            if n else np.zeros(len(self.parameter_names))
+        with torch.enable_grad():
+            ecef = geodetic_to_ecef(geo[0], geo[1], geo[2], float(frame.body.a_m), float(frame.body.e2))
+            ground = _to_enu(ecef - _t(self._origin), self._e)
+            row0, col0 = self._search(p_np, ground.detach().numpy())
+            t0 = _t(self.sensor.scanline_time(row0)).requires_grad_(True)
+            x, y = self.focal_plane(ground, tuple(geo), t0, theta)
+            residual = x - self._detector_x(y)
+            leaves = (t0, *geo, theta)
+            g_r = torch.autograd.grad(residual.sum(), leaves, retain_graph=True, allow_unused=True)
+            g_y = torch.autograd.grad(y.sum(), leaves, allow_unused=True)
+        return _implicit(row0, col0, residual, y, g_r, g_y, n, self.line_period, self._column)
+
+    def _cache_scene(self, p_np: np.ndarray) -> Any:
+        return self.adjusted(p_np)
+
+
+def _stack_gradients(g: tuple[torch.Tensor | None, ...], n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(d/d line-or-time (N,), d/d ground (N, 3), d/d params (N, P)) of autograd's gradients (None: zero)."""
+    def arr(v: torch.Tensor | None, shape: tuple[int, ...]) -> np.ndarray:
+        return np.zeros(shape) if v is None else v.numpy()
+
+    p = g[4].shape[1] if g[4] is not None else 0
+    ground = np.stack([arr(v, (n,)) for v in g[1:4]], axis=1)
+    return arr(g[0], (n,)), ground, arr(g[4], (n, p))
+
+
+def _implicit(line0: np.ndarray, col0: np.ndarray, residual: torch.Tensor, across: torch.Tensor,
+              g_r: tuple[torch.Tensor | None, ...], g_a: tuple[torch.Tensor | None, ...], n: int, line_scale: float,
+              column: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The Newton step of the line residual from the compiled root and its implicit-function Jacobians, in numpy
+    (the same operations as the projectors' torch path): ``step = -r / r_t``, ``line = line0 + step / line_scale``,
+    ``across' = across + a_t step``, ``column = column(across')``."""
+    r_t, r_g, r_p = _stack_gradients(g_r, n)
+    a_t, a_g, a_p = _stack_gradients(g_a, n)
+    r = residual.detach().numpy()
+    a = across.detach().numpy()
+    step = -r / r_t
+    row = line0 + step / line_scale
+    col, dcol = column(a + a_t * step, col0)
+    dstep_g, dstep_p = -r_g / r_t[:, None], -r_p / r_t[:, None]
+    dcol = np.broadcast_to(np.asarray(dcol, dtype=np.float64), (n,))[:, None]
+    j_ground = np.stack([dstep_g / line_scale, dcol * (a_g + a_t[:, None] * dstep_g)], axis=1)
+    j_params = np.stack([dstep_p / line_scale, dcol * (a_p + a_t[:, None] * dstep_p)], axis=1)
+    return row, col, j_ground, j_params
+
 
     def _cache_scene(self, p_np: np.ndarray) -> Any:
         return self.adjusted(p_np)
@@ -636,10 +759,7 @@ class TorchCsm(_Projector):
     def project_xyz(self, xyz: torch.Tensor, params: torch.Tensor | Any) -> tuple[torch.Tensor, torch.Tensor]:
         """Corrected (row, col) of body-fixed points (N, 3), metres."""
         theta, p_np = self._theta(params, xyz.shape[0])
-        camera = self.adjusted(p_np).camera
-        g = camera.ground_to_image(xyz.detach().numpy())
-        solved = g.status == 0
-        line0 = _t(np.where(solved, g.line, np.nan)).requires_grad_(True)
+        line0 = _t(self._search(p_np, xyz.detach().numpy())).requires_grad_(True)
         keep = torch.is_grad_enabled()
         with torch.enable_grad():
             res, sample = self.residual(xyz, line0, theta)
@@ -647,6 +767,47 @@ class TorchCsm(_Projector):
             (sample_rate,) = torch.autograd.grad(sample.sum(), line0, retain_graph=keep)
         step = -res / slope  # the Newton step with the slopes as constants (exact implicit derivatives at the root)
         return line0.detach() + step - 0.5, sample + sample_rate * step - 0.5
+
+    def _search(self, p_np: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+        """The adjusted camera's compiled lines (N,) of body-fixed points (NaN where it finds none)."""
+        camera = self.adjusted(p_np).camera
+
+        def solve(points: np.ndarray, guess: Any) -> tuple[np.ndarray, np.ndarray]:
+            g = camera.ground_to_image(points)
+            return np.where(g.status == 0, g.line, np.nan), np.empty(0)
+
+        return self._roots(p_np, xyz, solve)[0]
+
+    def project_jacobian(self, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
+                         params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`project` of geodetic points (N,) with its Jacobians (as :meth:`TorchRigorous.project_jacobian`:
+        one forward and two backward passes, the implicit-function derivatives in closed form).
+
+        Returns
+        -------
+        row, col : ndarray, shape (N,)
+        j_ground : ndarray, shape (N, 2, 3)
+            d (row, col) / d (lon deg, lat deg, h m).
+        j_params : ndarray, shape (N, 2, P)
+        """
+        cam = self.camera
+        n = np.asarray(lon).shape[0]
+        a, b = float(cam.semi_major_m), float(cam.semi_minor_m)
+        geo = [_t(v).requires_grad_(True) for v in (lon, lat, h)]
+        theta = _t(np.broadcast_to(np.asarray(params, dtype=np.float64), (n, len(self.parameter_names))).copy())
+        theta.requires_grad_(True)
+        p_np = np.asarray(params, dtype=np.float64).reshape(-1, len(self.parameter_names))[0].copy() \
+            if n else np.zeros(len(self.parameter_names))
+        with torch.enable_grad():
+            xyz = geodetic_to_ecef(geo[0], geo[1], geo[2], a, 1.0 - (b * b) / (a * a))
+            line0 = _t(self._search(p_np, xyz.detach().numpy())).requires_grad_(True)
+            res, sample = self.residual(xyz, line0, theta)
+            leaves = (line0, *geo, theta)
+            g_r = torch.autograd.grad(res.sum(), leaves, retain_graph=True, allow_unused=True)
+            g_s = torch.autograd.grad(sample.sum(), leaves, allow_unused=True)
+        row, col, j_ground, j_params = _implicit(line0.detach().numpy(), np.empty(0), res, sample, g_r, g_s, n, 1.0,
+                                                 lambda s_, _c: (s_ - 0.5, 1.0))
+        return row - 0.5, col, j_ground, j_params
 
 
 def line_projector(sensor: Any, correction: LineCorrection) -> TorchRigorous | TorchCsm:
