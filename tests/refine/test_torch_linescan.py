@@ -88,6 +88,55 @@ def test_torch_equals_the_compiled_adjusted_sensor(sensors, which, model):
         assert np.nanmax(np.abs(col.detach().numpy() - want_col)) < tol_col
 
 
+DIMAP_2017 = DATA / "rpc" / "PHRDIMAP_P1BP--2017030824934340CP.XML"
+
+
+@pytest.mark.parametrize("option", ["none", "aberration", "refraction", "slerp", "lever-arm"])
+def test_torch_equals_the_compiled_path_with_every_option(option):
+    """The 2017 Pleiades DIMAP model with each option of the rigorous model switched (aberration and refraction
+    on, slerp attitude, a lever arm) under the 12-parameter correction: torch within the issue's 1e-9 px."""
+    from dataclasses import replace
+
+    base = load_source("dimap", str(DIMAP_2017)).scene
+    ext = base.exterior
+    lever = np.array([1.5, -0.7, 2.0])
+    sensor = {"none": base, "aberration": replace(base, aberration=not base.aberration),
+              "refraction": replace(base, refraction=not base.refraction),
+              "slerp": replace(base, exterior=replace(ext, attitude=replace(ext.attitude, method="slerp"))),
+              "lever-arm": replace(base, exterior=replace(ext, centre_offset_body_m=lever))}[option]
+    ground = _ground(sensor)
+    corr = correction_for(sensor, "position-attitude-drift")
+    for params in (np.zeros(corr.n_parameters), _params(corr, 5)):
+        want_row, want_col = adjusted_sensor(sensor, corr, params).ground_to_image(ground)
+        row, col = _torch_pixels(sensor, corr, ground, params)
+        assert np.isfinite(want_row).sum() > 150
+        assert np.nanmax(np.abs(row.detach().numpy() - want_row)) < 1e-9
+        assert np.nanmax(np.abs(col.detach().numpy() - want_col)) < 1e-9
+
+
+def test_line_jacobians_of_one_pass_equal_autograd(sensors):
+    """``project_jacobian`` (one forward, two backward passes, the implicit-function derivatives in closed form;
+    what the adjustment uses) equals autograd through :meth:`project` (values and Jacobians) on both kinds."""
+    for which in ("dimap", "ctx"):
+        sensor = sensors[which]
+        corr = correction_for(sensor, "position-attitude-drift")
+        params = _params(corr, 7)
+        lon, lat, h = sensor.frame.enu_to_geodetic(_ground(sensor, 60, seed=4))
+        proj = line_projector(sensor, corr)
+        row, col, j_ground, j_params = proj.project_jacobian(lon, lat, h, params)
+        geo = [torch.tensor(v, requires_grad=True) for v in (lon, lat, h)]
+        theta = torch.tensor(np.repeat(params[None], lon.size, axis=0), requires_grad=True)
+        r, c = line_projector(sensor, corr).project(*geo, theta)
+        np.testing.assert_array_equal(row, r.detach().numpy())
+        np.testing.assert_array_equal(col, c.detach().numpy())
+        for k, value in enumerate((r, c)):
+            grads = torch.autograd.grad(value.sum(), (*geo, theta), retain_graph=True)
+            want_ground = np.stack([g.numpy() for g in grads[:3]], axis=1)
+            np.testing.assert_allclose(j_ground[:, k], want_ground, rtol=1e-9, atol=1e-12 * np.abs(want_ground).max())
+            np.testing.assert_allclose(j_params[:, k], grads[3].numpy(), rtol=1e-9,
+                                       atol=1e-12 * np.abs(grads[3].numpy()).max())
+
+
 @pytest.mark.parametrize("which", ["dimap", "wv1"])
 def test_rigorous_residual_is_monotonic_at_the_nanorow_level(sensors, which):
     """The compiled residual around a root, sampled 2e-9 rows apart, is monotonic: its float64 noise is below the
