@@ -122,31 +122,40 @@ def _plot_texts(page) -> str:
 
 def _red_on_screen(app, view, page, shot: Path) -> None:
     """In the default framed view (no camera moved): the adjusted (red) trajectory is drawn on the canvas, where
-    viser's camera model puts it.  Only the trajectories shown (the SCPs' residual red would count), then none."""
+    viser's camera model puts it.  Only the trajectories shown (the SCPs' residual red would count), then none.
+
+    The screenshots are taken again if the canvas changed shape or the app reframed the browser meanwhile (under
+    load the page's panels may still be laying out, and the app frames each canvas shape anew): the pose and the
+    rectangle used are those of the screenshot."""
     from explorer.scene3d.camera import view_ndc
 
-    rect = page.evaluate(RECT_3D)
-    w, h = rect["width"], rect["height"]
     (cid, client), = app.server.get_clients().items()
-    pos, look = np.array(app.client_poses[cid][0]), np.array(app.client_poses[cid][1])
+    for _ in range(5):
+        rect, pose = page.evaluate(RECT_3D), app.client_poses[cid]
+        was = _show_only(app, ("/refine/",))
+        try:
+            page.wait_for_timeout(2500)
+            png = page.screenshot(clip=rect)
+            _show_only(app, ())
+            page.wait_for_timeout(1500)
+            hidden = _near(page, ADJUSTED_RGB)
+        finally:
+            _restore(app, was)
+        if page.evaluate(RECT_3D) == rect and app.client_poses[cid] == pose:
+            break
+    else:
+        raise AssertionError("the 3D canvas kept changing shape")
+    Image.open(io.BytesIO(png)).save(shot)
+    w, h = rect["width"], rect["height"]
+    pos, look = np.array(pose[0]), np.array(pose[1])
     # closed form: every point of both tracks is inside this browser's view
     for key in ("/refine/original/track", "/refine/adjusted/track"):
         pts = np.asarray(view._nodes[key].points, dtype=np.float64).reshape(-1, 3)
         ndc, depth = view_ndc(pts, pos, look, fov_y=client.camera.fov, aspect=w / h)
         assert np.all(depth > 0) and np.abs(ndc).max() < 1.0, (key, np.abs(ndc).max())
-    was = _show_only(app, ("/refine/",))
-    try:
-        page.wait_for_timeout(2500)
-        png = page.screenshot(clip=rect)
-        Image.open(io.BytesIO(png)).save(shot)
-        px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
-        red_mask = np.abs(px - np.array(ADJUSTED_RGB)).sum(axis=2) < 60
-        red_mask[int(h) - 110:, :110] = False  # the axes gizmo in the bottom-left corner (its x axis is red)
-        _show_only(app, ())
-        page.wait_for_timeout(1500)
-        hidden = _near(page, ADJUSTED_RGB)
-    finally:
-        _restore(app, was)
+    px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+    red_mask = np.abs(px - np.array(ADJUSTED_RGB)).sum(axis=2) < 60
+    red_mask[int(h) - 110:, :110] = False  # the axes gizmo in the bottom-left corner (its x axis is red)
     red = int(red_mask.sum())
     assert red > hidden + 50, (red, hidden)  # the adjusted trajectory is drawn in the default view
     # where the camera model puts it: the red pixels lie within the projected box of the red track and camera
