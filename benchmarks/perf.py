@@ -256,8 +256,8 @@ def write_doc(data: dict) -> None:
         "",
         f"Measured by `python benchmarks/perf.py{' --quick' if data['quick'] else ''}` on {data['date']} "
         f"({data['machine']}; numba threads: {data.get('threads', '?')})"
-        + (f"; the target methods re-measured with `--update` on {data['updated']} (quieter machine)"
-           if data.get("updated") else "")
+        + (f"; methods re-measured later with `--update` (last on {data['updated']}) carry their own date in "
+           "the raw records and the load of their run in the *load* column" if data.get("updated") else "")
         + ".  Raw records (each with its own time and load): `benchmarks/results/perf.json`.",
         "",
         "Protocol: every (scene, method) runs in its own fresh process, which simulates the SCPs, builds the "
