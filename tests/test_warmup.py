@@ -55,3 +55,27 @@ def test_stereo_kernels_compile_both_variants_from_one():
     for par, ser in _kernels.TWINS:
         assert set(ser.signatures) <= set(par.signatures) and set(par.signatures) <= set(ser.signatures)
     assert set(serial.signatures) <= set(parallel.signatures)
+
+
+def test_warmup_writes_the_bytecode_python_will_read():
+    """The first warm-up step writes every module's ``.pyc`` stamped with its source's mtime and size (what Python
+    checks before reading it instead of compiling the source), whatever PYTHONDONTWRITEBYTECODE says."""
+    import importlib.util
+    import os
+    import struct
+    from pathlib import Path
+
+    import explorer
+    from explorer.warmup import compile_bytecode
+
+    assert steps()[0][1] is compile_bytecode
+    assert compile_bytecode()
+    sources = sorted(Path(explorer.__file__).parent.rglob("*.py"))
+    assert len(sources) > 100
+    for src in sources:
+        pyc = Path(importlib.util.cache_from_source(str(src)))
+        head = pyc.read_bytes()[:16]
+        assert head[:4] == importlib.util.MAGIC_NUMBER, src
+        flags, mtime, size = struct.unpack("<III", head[4:16])
+        st = os.stat(src)
+        assert flags == 0 and mtime == int(st.st_mtime) & 0xFFFFFFFF and size == st.st_size & 0xFFFFFFFF, src
