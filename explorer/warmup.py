@@ -148,7 +148,7 @@ def steps() -> list[tuple[str, Callable[[], None]]]:
     from explorer.methods import available
     from explorer.presets import build_scene, preset_ids
 
-    out: list[tuple[str, Callable[[], None]]] = [("the package's Python bytecode", compile_bytecode),
+    out: list[tuple[str, Callable[[], None]]] = [("the package's Python bytecode", _warm_bytecode),
                                                   ("rational function model (projection, inverse, DEM)", _warm_rpc)]
     ids = preset_ids()
     paper = "WSU" if "WSU" in ids else ids[0]
@@ -184,6 +184,10 @@ def compile_bytecode() -> bool:
     import os
 
     return bool(compileall.compile_dir(os.path.dirname(os.path.abspath(__file__)), quiet=1))
+
+
+def _warm_bytecode() -> None:
+    compile_bytecode()
 
 
 def _warm_manifest() -> None:
