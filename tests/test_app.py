@@ -486,19 +486,19 @@ def test_background_worker_shows_fast_methods_while_a_slow_one_trains(server):
     assert not app._worker.is_alive()
 
 
-def test_long_trainings_start_once_the_first_maps_are_on_screen(server):
+def test_long_trainings_start_once_the_first_maps_are_on_screen(server, monkeypatch):
     """A ``long_fit`` method (an MLP: seconds of training, torch to import) trains only after the first update that
     drew the other methods' maps: beside it, it took the CPU from them.  It then trains and is drawn."""
     ToyLong.started.clear()
-    shown: list[tuple[float, tuple]] = []
+    shown: list[tuple[float, tuple, str]] = []
+    real = ExplorerApp._maps_shown
+
+    def spy(self, s):
+        shown.append((time.monotonic(), tuple(self.runs), self.handles["summary"].content))
+        real(self, s)
+
+    monkeypatch.setattr(ExplorerApp, "_maps_shown", spy)
     app = make_app(server, methods=("toy_poly", "toy_long"), background=True, fit_wait_s=0.2)
-    real = app._maps_shown
-
-    def spy(s):
-        shown.append((time.monotonic(), tuple(app.runs), app.handles["summary"].content))
-        real(s)
-
-    app._maps_shown = spy
     try:
         assert app.wait_idle(timeout=60)
         assert app.runs["toy_long"].ok and app.runs["toy_poly"].ok and not app.pending
@@ -507,6 +507,40 @@ def test_long_trainings_start_once_the_first_maps_are_on_screen(server):
         assert "toy_long" not in runs and "toy_long" in summary and "starts once the other maps are drawn" in summary
         assert len(ToyLong.started) == 1 and ToyLong.started[0] > t_first
         assert not app.fits.held and not app.hold_long_fits
+    finally:
+        app.close()
+
+
+def test_long_trainings_wait_while_a_preview_is_on_screen(server, monkeypatch):
+    """Maps shown as a preview are not complete: its full evaluation runs on the fit threads, and a long training
+    beside it would slow it; the training starts once the full maps are drawn."""
+    ToyLong.started.clear()
+    shown: list[tuple[float, bool]] = []
+    real = ExplorerApp._maps_shown
+
+    def spy(self, s):
+        run = self.runs.get("toy_bisect")
+        shown.append((time.monotonic(), run is not None and run.preview))
+        real(self, s)
+
+    monkeypatch.setattr(ExplorerApp, "_maps_shown", spy)
+
+    class SlowOnEveryPoint(ToyBisect):  # the full evaluation (3,000 points) lasts 1 s: the preview is drawn first
+        def _locate(self, ground, **kw):
+            if len(ground) > 1000:
+                time.sleep(1.0)
+            return super()._locate(ground, **kw)
+
+    monkeypatch.setitem(methods_base._REGISTRY, "toy_bisect", SlowOnEveryPoint)
+    model = ExplorerModel(preview_after_s=1e-9, preview_points=500, probe_points=200)
+    app = make_app(server, model=model, methods=("toy_bisect", "toy_long"), background=True, fit_wait_s=0.2)
+    try:
+        assert app.wait_idle(timeout=60)
+        assert app.runs["toy_long"].ok and not app.runs["toy_bisect"].preview
+        previews = [t for t, preview in shown if preview]
+        full = [t for t, preview in shown if not preview and t > (previews[0] if previews else 0.0)]
+        assert previews and full, shown  # a preview first, then the full maps
+        assert len(ToyLong.started) == 1 and ToyLong.started[0] > full[0] > previews[0]
     finally:
         app.close()
 

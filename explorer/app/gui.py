@@ -510,9 +510,15 @@ class ExplorerApp(Views):
         return f"queued for training on {s.scop_density} SCOPs"
 
     def _maps_shown(self, s: Settings) -> None:
-        """After an update put its maps on screen: the first time with methods checked, let the long trainings
-        (held until then) start."""
-        if self.hold_long_fits and s.methods and self.fits is not None:
-            self.hold_long_fits = False
-            self.fits.release()
+        """After an update put its maps on screen: the first time they are complete (methods checked, none shown
+        as a preview, none pending but the held trainings), let the long trainings (held until then) start."""
+        fits = self.fits
+        if not self.hold_long_fits or not s.methods or fits is None:
+            return
+        if any(r.preview for r in self.runs.values()):  # its full evaluation runs on the fit threads
+            return
+        if any(self.model.fit_key(n, s) not in fits.held for n in self.pending):
+            return
+        self.hold_long_fits = False
+        fits.release()
 
