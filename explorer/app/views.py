@@ -158,12 +158,21 @@ class Views:
         times: dict[str, float] = {}
         t_start = time.perf_counter()
         self._check(gen)
-        for stage in ("scene", "methods", "cloud", "panels", "selection"):
+        for stage in ("scene", "methods", "panels"):
             t0 = time.perf_counter()
             getattr(self, f"_update_{stage}")(s, gen)
             times[stage] = time.perf_counter() - t0
             self._check(gen)
-        self._layout_labels()
+        # what the 3D view shows of the new results (the SCOPs, the cloud's colours, the selection, the labels)
+        # reaches the browser as ONE batch after the panels: a browser's WebGL redraws the whole view for each
+        # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first
+        with self.server.atomic():
+            for stage in ("cloud", "selection"):
+                t0 = time.perf_counter()
+                getattr(self, f"_update_{stage}")(s, gen)
+                times[stage] = time.perf_counter() - t0
+                self._check(gen)
+            self._layout_labels()
         self.last_update_s = time.perf_counter() - t_start
         times["total"] = self.last_update_s
         if self.request_started is not None:
@@ -196,7 +205,7 @@ class Views:
         self._status(f"building scene {status_name(s.preset)}", 2)
         scene = m.scene(s)
         self._check(gen)
-        scops = m.scops(s)
+        m.scops(s)
         m.scps(s)
         self.scene = scene
         frame_key = self._frame_key(s)
@@ -249,8 +258,6 @@ class Views:
                 # the dropdown may cut a long file name: its tooltip gives the one shown whole
                 self.handles["preset"].hint = f"shown: {s.preset} -- a loaded file (named by file and sensor) or a " \
                     "synthetic preset"
-        if self._changed("scops", (frame_key, s.scop_density)):
-            self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
 
     def _update_methods(self, s: Settings, gen: int | None) -> None:
         """Fit (cached / background) and evaluate every checked method on every SCP.
@@ -284,9 +291,11 @@ class Views:
         self.runs, self.pending = runs, pending
 
     def _update_cloud(self, s: Settings, gen: int | None) -> None:
-        """The SCP cloud in the 3D view, coloured by the colour method's row residual."""
+        """The SCOPs and the SCP cloud in the 3D view, the cloud coloured by the colour method's row residual."""
         B, F = self._B, self._F  # noqa: N806
         scps, scops = self.model.scps(s), self.model.scops(s)
+        if self._changed("scops", (self._frame_key(s), s.scop_density)):
+            self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
         cm = s.color_method
         run = self.runs.get(cm) if cm else None
         ev = run.evaluation if run is not None else None
@@ -349,7 +358,8 @@ class Views:
                                   limit_px=s.limit_px if s.colour_mode == "fixed" else None,
                                   mode=s.colour_mode, component=s.component, difference=s.diff,
                                   status=status, aggregate=s.aggregate, max_cells=self.max_map_cells,
-                                  labels=labels, against=stand_in_truth(src.info if src is not None else None))
+                                  labels=labels, against=stand_in_truth(src.info if src is not None else None),
+                                  cache=self._map_cache())
         else:
             fig = F.empty_figure("waiting for " + ", ".join(pending) if pending else self._no_method_text())
         self._set_figure("maps", fig)
@@ -461,6 +471,15 @@ class Views:
         if unavailable:
             txt += f"; unavailable on this sensor (no scanlines; see the summary): {', '.join(unavailable)}"
         return txt
+
+    def _map_cache(self) -> dict:
+        """The residual maps' cell aggregates kept between updates (:func:`explorer.panels.figures.residual_maps`
+        ``cache``): a SCOP change re-aggregates only the maps whose evaluation changed.  Bounded: emptied when it
+        holds more than 64 maps."""
+        cache = self.__dict__.setdefault("_map_cells", {})
+        if len(cache) > 64:
+            cache.clear()
+        return cache
 
     def _set_figure(self, key: str, fig: Any) -> None:
         h = self.handles[key]

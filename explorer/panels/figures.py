@@ -22,8 +22,9 @@ explorer: ``docs/explorer.md``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, MutableMapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import plotly.graph_objects as go
@@ -152,6 +153,8 @@ class MapPanel:
     index: np.ndarray
     missing: dict[str, np.ndarray]
     method: str = ""
+    source: Any = None
+    """What the values were taken from (the Evaluation and the component), for :func:`residual_maps`' cache."""
 
 
 def _panels(
@@ -186,7 +189,7 @@ def _panels(
                         missing["not converged"] = np.union1d(missing.get("not converged", []), idx[rest])
                 else:
                     missing["not converged"] = idx[~ok]
-            out.append(MapPanel(title, res[ok], idx[ok], missing, _label(n, labels)))
+            out.append(MapPanel(title, res[ok], idx[ok], missing, _label(n, labels), (ev, c)))
     if difference is not None:
         a, b = difference
         if a in evaluations and b in evaluations and a != b:
@@ -219,6 +222,7 @@ def residual_maps(
     show_control: bool = True,
     percentile: float = ROBUST_PERCENTILE,
     against: str | None = None,
+    cache: MutableMapping | None = None,
 ) -> go.Figure:
     """Residual maps over the image: one small multiple per method (and component), each a raster of
     the residual aggregated per image cell (:mod:`explorer.panels.raster`).
@@ -273,6 +277,11 @@ def residual_maps(
     against : str, optional
         What the residuals are measured against when it is not the sensor itself (``--as-mpc``: "the
         STAND-IN MPC"); every method's title then says so (the stand-in's own map is labelled already).
+    cache : mutable mapping, optional
+        Keeps each map's cell aggregates between calls (the caller owns it and may clear it): a map drawn again
+        from the *same* Evaluation object on the same check points and cells is not aggregated again (an
+        explorer update redraws every map when one method's result changed).  Entries hold their evaluation,
+        check points and cells and are used only when these are the very same objects.
 
     Returns
     -------
@@ -348,7 +357,15 @@ def residual_maps(
     xe, ye = cells.col_edges, cells.row_edges
     for k, p in enumerate(panels):
         xr, yr = refs[k]
-        field = aggregate_cells(cells, check.row[p.index], check.col[p.index], p.values, p.index, aggregate)
+        key = None if cache is None or p.source is None else (id(p.source[0]), p.source[1], aggregate)
+        hit = cache.get(key) if cache is not None and key is not None else None
+        if hit is not None and hit[0] is p.source[0] and hit[1] is check and np.array_equal(hit[2], cells.row_edges) \
+                and np.array_equal(hit[3], cells.col_edges):
+            field = hit[4]
+        else:
+            field = aggregate_cells(cells, check.row[p.index], check.col[p.index], p.values, p.index, aggregate)
+            if cache is not None and key is not None:
+                cache[key] = (p.source[0], check, cells.row_edges, cells.col_edges, field)
         axis = f"coloraxis{k + 1 if k else ''}" if per_map else "coloraxis"
         z = np.log10(np.maximum(np.abs(field.value), 1e-300)) if mode == "log magnitude" else field.value
         shown = "log10 |px| %{z:.3f}" if mode == "log magnitude" else f"{value_word} %{{z:.4g}} px"

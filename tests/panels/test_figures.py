@@ -424,3 +424,39 @@ def test_every_method_title_names_a_stand_in_truth_and_only_then(results):
                                                        "toy_poly column", "toy_poly row"]
     plain = F.residual_maps(evs, scps, shape=scene.shape)
     assert not any("against" in str(a.text) for a in plain.layout.annotations)
+
+
+def test_map_cache_reuses_only_the_same_evaluation(results, monkeypatch):
+    """With a cache, a map drawn again from the same Evaluation object is not aggregated again and the figure is
+    the uncached one (z, customdata); a new evaluation (another object, other residuals) is aggregated anew and
+    its map holds the brute-force cell means of its own residuals."""
+    scene, scops, scps, evs = results
+    calls = []
+    real = F.aggregate_cells
+    monkeypatch.setattr(F, "aggregate_cells", lambda *a, **k: calls.append(1) or real(*a, **k))
+    cache: dict = {}
+    kw = dict(control=scops, shape=scene.shape, component="row and column")
+    first = F.residual_maps(evs, scps, cache=cache, **kw)
+    assert len(calls) == 4 and len(cache) == 4  # 2 methods x (row, column)
+    again = F.residual_maps(evs, scps, cache=cache, **kw)
+    assert len(calls) == 4  # nothing aggregated again
+    plain = F.residual_maps(evs, scps, **kw)
+    for fig in (first, again):
+        for a, b in zip(fig.data, plain.data, strict=True):
+            if a.type == "heatmap":
+                np.testing.assert_array_equal(np.asarray(a.z), np.asarray(b.z))
+                if a.customdata is not None:
+                    np.testing.assert_array_equal(np.asarray(a.customdata), np.asarray(b.customdata))
+    changed = dict(evs, toy_poly=_scaled(evs["toy_poly"], 3.0))
+    calls.clear()
+    fig = F.residual_maps(changed, scps, cache=cache, **kw)
+    assert len(calls) == 2  # toy_poly's row and column maps only
+    tr = _map(fig, "toy_poly row")
+    ev = changed["toy_poly"]
+    truth = _cell_means(np.asarray(tr.y), np.asarray(tr.x), scps.row[ev.evaluated_index],
+                        scps.col[ev.evaluated_index], ev.residual_row)
+    np.testing.assert_allclose(np.asarray(tr.z), truth, rtol=1e-12, atol=1e-15)
+    # other check points (same evaluations): aggregated again
+    calls.clear()
+    F.residual_maps(evs, dataclasses.replace(scps), cache=cache, **kw)
+    assert len(calls) == 4
