@@ -131,18 +131,15 @@ def localise_geodetic(sensor: Sensor, row: np.ndarray, col: np.ndarray, h: np.nd
 
 def project_geodetic(sensor: Sensor, lon: np.ndarray, lat: np.ndarray, h: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`project` of geodetic points (degrees, ellipsoidal metres; NaN in, NaN out)."""
+    """:func:`project` of geodetic points (degrees, ellipsoidal metres; NaN in, NaN out): the sensor's geodetic
+    entry (:meth:`explorer.sensor.Sensor.geodetic_to_image`), which converts them only into the coordinates its
+    model is defined on (none for an RPC)."""
     lon, lat, h = (np.asarray(a, dtype=np.float64).ravel() for a in np.broadcast_arrays(lon, lat, h))
-    model = rpc_model(sensor)
     ok = np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)
-    if model is not None:
-        out = np.full((2, lon.size), np.nan)
-        if ok.any():
-            out[0, ok], out[1, ok] = model.projection(lon[ok], lat[ok], h[ok])
-        return out[0], out[1]
-    ecef = np.full((lon.size, 3), np.nan)
-    ecef[ok] = geodetic_to_ecef(sensor, lon[ok], lat[ok], h[ok])
-    return project(sensor, ecef)
+    out = np.full((2, lon.size), np.nan)
+    if ok.any():
+        out[0, ok], out[1, ok] = sensor.geodetic_to_image(lon[ok], lat[ok], h[ok])
+    return out[0], out[1]
 
 
 def project(sensor: Sensor, ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
