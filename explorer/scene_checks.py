@@ -128,9 +128,10 @@ def _check_above_terrain(scene: Any, source: str) -> None:
         raise _fail(source, f"the sensor is {height[k]:.1f} m above the ellipsoid at line {rows[k]:g}, not above "
                             f"the terrain (up to {top:.1f} m): below the ground a camera sees nothing")
     k = int(np.argmax(height))
-    if height[k] > MAX_SENSOR_HEIGHT_M:
+    limit = max_sensor_height_m(scene.frame.body)
+    if height[k] > limit:
         raise _fail(source, f"the sensor is {height[k]:.3g} m above the ellipsoid at line {rows[k]:g}: beyond "
-                            f"{MAX_SENSOR_HEIGHT_M:g} m no camera images the ground")
+                            f"{limit:g} m no camera images the ground")
     cols = np.array([0.5 * (scene.interior.n_columns - 1), 0.0, scene.interior.n_columns - 1.0])
     rr, cc = (g.ravel() for g in np.meshgrid(rows, cols, indexing="ij"))
     try:
@@ -141,6 +142,14 @@ def _check_above_terrain(scene: Any, source: str) -> None:
     if not np.any(np.all(np.isfinite(ground), axis=1)):
         raise _fail(source, "no line of sight (image centre and corners, first/middle/last line) meets the "
                             "terrain: the camera does not look at the ground")
+
+
+def max_sensor_height_m(body: Any) -> float:
+    """:data:`MAX_SENSOR_HEIGHT_M` for the Earth, scaled by the body's equatorial radius for a larger one: a camera
+    images a disc of the body from a distance in proportion to its size (New Horizons MVIC saw Jupiter, 11 Earth
+    radii, from 2.3e9 m)."""
+    a = float(getattr(body, "a_m", 0.0) or 0.0)
+    return MAX_SENSOR_HEIGHT_M * max(1.0, a / 6378137.0)
 
 
 def check_orbit_tables(source: str, positions: Any, quaternions: Any = None) -> None:

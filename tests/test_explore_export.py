@@ -176,14 +176,18 @@ def test_isd_exports_byte_identical_residuals(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("isd", ["ctxLineScan.json", "orbitalLineScan.json"])
+@pytest.mark.parametrize("isd", ["usgscsm/ctxLineScan.json", "usgscsm/orbitalLineScan.json",
+                                 "ale/nhmvic_tdi_isd.json"])
 def test_isd_export_is_measured_against_the_camera_itself(tmp_path, capsys, isd):
-    """The acceptance of issue 23 on the real usgscsm ISDs: the exported check points are where the export says
-    (read_isd(file).ground_to_image at x_m, y_m, z_m gives line, sample), exact and csm-secant agree with the
-    camera to 1e-6 px, the learned methods and the stand-in map are present, and a second export is the same."""
+    """The acceptance of issue 23 on the real usgscsm ISDs and ALE's New Horizons MVIC ISD (Jupiter's disc fills
+    part of the field, seen from 2.2e9 m: the image centre misses the body, so the frame anchors on the nearest
+    image point that sees it; it was refused "the image centre does not see the body", then "beyond 5e8 m no camera
+    images the ground"): the exported check points are where the export says (read_isd(file).ground_to_image at
+    x_m, y_m, z_m gives line, sample), exact and csm-secant agree with the camera to 1e-6 px, the learned methods
+    and the stand-in map are present, and a second export is the same."""
     from explorer.real.csm_camera import read_isd
 
-    path = RPC_DIR.parent / "usgscsm" / isd
+    path = RPC_DIR.parent / isd
     outs = []
     for name in ("a", "b"):
         out = tmp_path / name

@@ -706,6 +706,30 @@ class CsmCamera:
         a, b = max(ranges, key=lambda r: r[1] - r[0])
         return 0.5 * (a + b)
 
+    def anchor_point(self) -> tuple[float, float]:
+        """(line, sample) (CSM) where frames and set-ups anchor on the body: the image centre on a covered line
+        (:meth:`covered_centre_line`) when its line of sight meets the ellipsoid, else the point nearest to it
+        (in pixels) of a 65 x 65 grid over the covered lines whose line of sight does -- a disc of the body
+        filling part of the field (New Horizons MVIC on Jupiter).
+
+        Raises
+        ------
+        SceneFileError
+            No point of the grid sees the body (naming the file)."""
+        line0, sample0 = self.covered_centre_line(), 0.5 * self.n_samples
+        if self._image_to_ground_raw(np.array([line0]), np.array([sample0]), 0.0)[1][0]:
+            return line0, sample0
+        ranges = self.covered_line_ranges() or [(0.0, float(self.n_lines))]
+        lines = np.concatenate([np.linspace(a + 0.5, b - 0.5, 65) for a, b in ranges])
+        ll, ss = np.meshgrid(lines, np.linspace(0.5, self.n_samples - 0.5, 65), indexing="ij")
+        ll, ss = ll.ravel(), ss.ravel()
+        hit = self._image_to_ground_raw(ll, ss, 0.0)[1] & self.line_covered(ll)
+        if not hit.any():
+            raise SceneFileError(f"{self.source}: no line of sight of the image meets the body's ellipsoid "
+                                 "(65 x 65 image points tried)")
+        k = int(np.argmin(np.where(hit, np.hypot(ll - line0, ss - sample0), np.inf)))
+        return float(ll[k]), float(ss[k])
+
     @property
     def look_sign(self) -> float:
         """+1 when the camera looks along ``(-x, -y, -f)`` of the focal plane, -1 when along ``(x, y, f)``."""

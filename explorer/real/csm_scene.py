@@ -121,9 +121,10 @@ def scene_from_camera(camera: CsmCamera, *, degree: int = 3, interior_degree: in
         raise ValueError(f"degree and interior_degree must be >= 1 and harmonics >= 0, got {degree}, "
                          f"{interior_degree}, {harmonics}")
     cam = camera
-    n_rows, n_cols = cam.n_lines, cam.n_samples
-    # ---- frame: ENU at the ground point of the image centre
-    centre = cam.image_to_ground([cam.covered_centre_line()], [0.5 * n_cols], 0.0)
+    n_rows = cam.n_lines
+    # ---- frame: ENU at the ground point of the image centre (or the nearest image point that sees the body)
+    line0, sample0 = cam.anchor_point()  # the image centre, or the nearest image point that sees the body
+    centre = cam.image_to_ground([line0], [sample0], 0.0)
     if not centre.hit[0]:
         raise SceneFileError(f"{cam.source}: the image centre does not see the body")
     origin = centre.ground[0]

@@ -128,8 +128,10 @@ def csm_interior(camera: CsmCamera, degree: int = 7) -> tuple[InteriorOrientatio
 
 
 def csm_frame(camera: CsmCamera) -> LocalFrame:
-    """Local ENU frame on the ISD's ellipsoid at the ground point (height 0) of the image centre."""
-    centre = camera.image_to_ground([camera.covered_centre_line()], [0.5 * camera.n_samples], 0.0)
+    """Local ENU frame on the ISD's ellipsoid at the ground point (height 0) of the image centre (or of the
+    image point nearest to it that sees the body: :meth:`CsmCamera.anchor_point`)."""
+    line, sample = camera.anchor_point()
+    centre = camera.image_to_ground([line], [sample], 0.0)
     if not centre.hit[0]:
         raise SceneFileError(f"{camera.source}: the image centre does not see the body")
     body = csm_body(camera)
@@ -363,7 +365,8 @@ def csm_scene(camera: CsmCamera, *, terrain: Any = None, interior_degree: int = 
                      camera=camera)
     # the scene convention (docs/conventions.md#best-scanline): the residual is positive before the best scanline
     # (it predicts how many lines ahead the root lies, as GDP reads it), whatever the camera's axes
-    rc, cc = camera.covered_centre_line() - 0.5, 0.5 * (camera.n_samples - 1)  # a line the tables cover
+    line, sample = camera.anchor_point()  # a line the tables cover, a point that sees the body
+    rc, cc = line - 0.5, sample - 0.5
     g = scene.image_to_ground(np.array([rc]), np.array([cc]), height=0.0)
     res, _ = camera.detector_residual(frame.enu_to_ecef(g), np.array([rc + 0.5 - 1.0]))
     if not (np.isfinite(res[0]) and res[0] != 0.0):
