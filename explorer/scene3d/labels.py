@@ -181,7 +181,19 @@ def place_labels_in_views(labels: Sequence[Label], views: Sequence[View], *, sea
     best: list = [None] * n
     best_score: tuple = (-1,)
     chosen: list = [None] * n
+    picked: list[int | None] = [None] * n  # the index of chosen[i] in options[i]
     budget = [20_000]
+    # which options of two searched labels clash (in some view), for every pair: the search looks them up instead
+    # of comparing boxes at each of its up to 20,000 steps (the same comparisons as clash(), vectorised)
+    stacks = [np.array([o[2] for o in opts], dtype=np.float64).reshape(len(opts), len(views), 4)
+              for opts in options[:n]]
+
+    def clash_table(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        x, y = a[:, None], b[None, :]
+        return ((x[..., 0] < y[..., 2] + g) & (y[..., 0] < x[..., 2] + g) & (x[..., 1] < y[..., 3] + g)
+                & (y[..., 1] < x[..., 3] + g)).any(axis=-1)
+
+    table = {(j, i): clash_table(stacks[j], stacks[i]) for i in range(n) for j in range(i)}
 
     possible = [bool(o) for o in options[:n]]
 
@@ -197,11 +209,11 @@ def place_labels_in_views(labels: Sequence[Label], views: Sequence[View], *, sea
         if i == n:
             best_score, best = reach, list(chosen)
             return
-        for opt in options[i]:
-            if not any(c is not None and clash(opt[2], c[2]) for c in chosen[:i]):
-                chosen[i] = opt
+        for k, opt in enumerate(options[i]):
+            if not any(p is not None and table[(j, i)][p, k] for j, p in enumerate(picked[:i])):
+                chosen[i], picked[i] = opt, k
                 search(i + 1, count + 1, rank + opt[0])
-        chosen[i] = None
+        chosen[i], picked[i] = None, None
         search(i + 1, count, rank)
 
     search(0, 0, 0)
