@@ -190,8 +190,8 @@ def place_labels_in_views(labels: Sequence[Label], views: Sequence[View], *, sea
 
     def clash_table(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         x, y = a[:, None], b[None, :]
-        return ((x[..., 0] < y[..., 2] + g) & (y[..., 0] < x[..., 2] + g) & (x[..., 1] < y[..., 3] + g)
-                & (y[..., 1] < x[..., 3] + g)).any(axis=-1)
+        return np.asarray(((x[..., 0] < y[..., 2] + g) & (y[..., 0] < x[..., 2] + g) & (x[..., 1] < y[..., 3] + g)
+                           & (y[..., 1] < x[..., 3] + g)).any(axis=-1))
 
     table = {(j, i): clash_table(stacks[j], stacks[i]) for i in range(n) for j in range(i)}
 
