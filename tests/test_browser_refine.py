@@ -104,15 +104,29 @@ def _open(browser, url: str):
 
 
 
-def _near(page, rgb, tol: int = 60) -> int:
-    """Pixels of the 3D canvas within ``tol`` (sum of |channel differences|) of ``rgb``, the axes gizmo in the
-    bottom-left corner left out (its x axis is red)."""
-    rect = page.evaluate(RECT_3D)
-    png = page.screenshot(clip=rect)
+def _near_mask(png: bytes, rgb, tol: int = 60) -> np.ndarray:
+    """Pixels of a screenshot of the 3D canvas within ``tol`` (sum of |channel differences|) of ``rgb``, the axes
+    gizmo in the bottom-left corner left out (its x axis is red)."""
     px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
     near = np.abs(px - np.array(rgb)).sum(axis=2) < tol
-    near[int(rect["height"]) - 110:, :110] = False
-    return int(near.sum())
+    near[px.shape[0] - 110:, :110] = False
+    return near
+
+
+def _drawn_change(page, rect, before: bytes, timeout_s: float = 120.0) -> bytes:
+    """A screenshot of ``rect`` once the browser has drawn a change of the scene: different from ``before`` and
+    the same on two screenshots 0.5 s apart.  (A fixed wait is not enough: under CPU load headless Chromium's
+    software WebGL takes seconds to receive and draw a change, and a screenshot of the old frame counted the
+    trajectories as hidden while still drawn.)"""
+    last = None
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        page.wait_for_timeout(500)
+        png = page.screenshot(clip=rect)
+        if png != before and png == last:
+            return png
+        last = png
+    raise AssertionError("the browser did not draw the change")
 
 
 def _plot_texts(page) -> str:
@@ -132,19 +146,19 @@ def _red_on_screen(app, view, page, shot: Path) -> None:
     (cid, client), = app.server.get_clients().items()
     for _ in range(5):
         rect, pose = page.evaluate(RECT_3D), app.client_poses[cid]
+        full = page.screenshot(clip=rect)
         was = _show_only(app, ("/refine/",))
         try:
-            page.wait_for_timeout(2500)
-            png = page.screenshot(clip=rect)
+            png = _drawn_change(page, rect, full)
             _show_only(app, ())
-            page.wait_for_timeout(1500)
-            hidden = _near(page, ADJUSTED_RGB)
+            none = _drawn_change(page, rect, png)
         finally:
             _restore(app, was)
         if page.evaluate(RECT_3D) == rect and app.client_poses[cid] == pose:
             break
     else:
         raise AssertionError("the 3D canvas kept changing shape")
+    hidden = int(_near_mask(none, ADJUSTED_RGB).sum())
     Image.open(io.BytesIO(png)).save(shot)
     w, h = rect["width"], rect["height"]
     pos, look = np.array(pose[0]), np.array(pose[1])
@@ -153,9 +167,7 @@ def _red_on_screen(app, view, page, shot: Path) -> None:
         pts = np.asarray(view._nodes[key].points, dtype=np.float64).reshape(-1, 3)
         ndc, depth = view_ndc(pts, pos, look, fov_y=client.camera.fov, aspect=w / h)
         assert np.all(depth > 0) and np.abs(ndc).max() < 1.0, (key, np.abs(ndc).max())
-    px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
-    red_mask = np.abs(px - np.array(ADJUSTED_RGB)).sum(axis=2) < 60
-    red_mask[int(h) - 110:, :110] = False  # the axes gizmo in the bottom-left corner (its x axis is red)
+    red_mask = _near_mask(png, ADJUSTED_RGB)
     red = int(red_mask.sum())
     assert red > hidden + 50, (red, hidden)  # the adjusted trajectory is drawn in the default view
     # where the camera model puts it: the red pixels lie within the projected box of the red track and camera
