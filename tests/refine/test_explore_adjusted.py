@@ -143,3 +143,19 @@ def test_an_adjusted_rpc_opens_in_explore(tmp_path):
     assert main(["explore", "--rpc", str(adjusted), "--export", str(tmp_path / "x"), "--scps", "1000",
                  "--scops", "30", "--methods", "lrm", "--no-sweep"]) == 0
     assert json.loads((tmp_path / "x" / "summary.json").read_text())["source"]["kind"] == "rpc"
+
+
+def test_bad_sidecars_are_one_line(adjusted_files, tmp_path, capsys):
+    """Not a sidecar, a sidecar alone whose base file is not beside it, a sidecar with --pair: one line each."""
+    _, side = adjusted_files
+    isd = Path(__file__).resolve().parents[1] / "data" / "usgscsm" / "orbitalLineScan.json"
+    moved = tmp_path / "moved.json"
+    shutil.copy(side, moved)  # without its base file
+    cases = [(["--adjusted", str(isd)], "not an adjusted line-scanner sidecar"),
+             (["--adjusted", str(moved)], "is not there (give its path)"),
+             (["--pair", str(PLEIADES), str(PLEIADES), "--adjusted", str(side)], "not a --pair")]
+    for argv, message in cases:
+        assert main(["explore", *argv, "--export", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (argv, err)
+    assert not (tmp_path / "out").exists()
