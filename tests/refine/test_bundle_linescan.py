@@ -127,3 +127,20 @@ def test_bad_input_is_one_line(pair):
         refine_images([a, b], model=["attitude"] * 3, control=gcps, ties=ties)
     with pytest.raises(InputError, match="image B: unknown rigorous line-scan model correction model 'affine'"):
         refine_images([a, b], model=["attitude", "affine"], control=gcps, ties=ties, names=["A", "B"])
+
+
+@pytest.mark.parametrize("pair", ["dimap"], indirect=True)
+def test_panels_of_a_line_scanner_pair(pair):
+    """``refine --images`` writes panels.html unless --no-panels: every image's residual vectors and removed field,
+    the parameter table, and a trajectory per line scanner."""
+    from explorer.panels.refine import correction_field, refinement_html
+
+    *_, ref, _ = pair
+    html = refinement_html(ref)
+    for name in ("A: residuals", "B: residuals", "A: the field the position-attitude adjustment removed",
+                 "B:along_m", "A: trajectory moved by", "B: trajectory moved by"):
+        assert name in html, name
+    # B's removed field: the adjusted model minus the original at the ground of each pixel -- the bias seen from B
+    # (tens of pixels), finite over the image
+    _, _, field = correction_field(ref, 1, n=5)
+    assert np.isfinite(field).all() and np.abs(field).max() > 10.0
