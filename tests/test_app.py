@@ -201,13 +201,13 @@ def test_scene_nodes_and_counts(server):
     s = app.settings()
     names = set(app.nodes)
     for n in ("/ground/surface", "/ground/outline", "/orbit/track", "/orbit/sensor_frames",
-              "/orbit/direction", "/orbit/flight_label", "/scanlines/planes/0", "/scanlines/edges",
+              "/orbit/direction", "/orbit/flight_label", "/scanlines/planes/3", "/scanlines/edges",
               "/scanlines/labels/0", "/scanlines/labels/2", "/points/scops", "/points/scps",
               "/selected/point", "/selected/ray", "/selected/label"):
         assert n in names, n
-    # first / middle / last / selected scanline planes: 4 unlit triangle images, their outlines 12 segments
-    assert sorted(n for n in names if n.startswith("/scanlines/planes/")) == [f"/scanlines/planes/{i}"
-                                                                              for i in range(4)]
+    # first / middle / last / selected scanline planes: their outlines 12 segments, the selected one filled (an
+    # unlit triangle image)
+    assert sorted(n for n in names if n.startswith("/scanlines/planes/")) == ["/scanlines/planes/3"]
     assert app.nodes["/scanlines/edges"].points.shape == (12, 2, 3)
     assert app.nodes["/scanlines/labels/0"].text.startswith("first scanline")
     assert app.nodes["/scanlines/labels/2"].text.startswith("last scanline")

@@ -411,8 +411,10 @@ class Views:
             # the planes depend on the selected point's scanline only: a new method result (a SCOP change)
             # leaves them as they are (no new textures for the browser to upload and draw)
             if self._changed("scanlines", (self._frame_key(s), rows.tobytes(), heights.tobytes())):
+                # the selected point's scanline plane filled, the first / middle / last outlined: a filled plane
+                # covers much of the view and costs a software WebGL ~40 ms per frame at load 10
                 self._put("/scanlines", B.add_scanline_planes(self.server.scene, drawn, self.frame, rows, heights,
-                                                              names))
+                                                              names, filled=[len(rows) - 1]))
                 # a scanline's label may stand at either end of its ground trace (whichever keeps it clear)
                 ends = self.frame.ground(B.scanline_footprints(drawn, rows, heights).reshape(-1, 3)).reshape(-1, 2, 3)
                 self.label_alternatives.update({f"/scanlines/labels/{i}": (ends[i, 1],)

@@ -547,6 +547,7 @@ def add_scanline_planes(
     names: list[str],
     *,
     opacity: float = 0.22,
+    filled: list[int] | None = None,
 ) -> Handles:
     """The central perspective planes of several scanlines, translucent.
 
@@ -561,16 +562,19 @@ def add_scanline_planes(
         Height of the ground plane each triangle is clipped at, metres.
     names : list of str, length K
         Label text for each plane (shown at its first-column ground end; "" for none).
+    filled : list of int, optional
+        The planes drawn filled (default: all); the others are drawn by their outline only (the fill is what a
+        software WebGL pays for, per frame, over the whole area the plane covers on screen).
 
-    Nodes: ``/scanlines/planes/<k>`` (plane k's image, double-sided), ``/scanlines/edges`` (the triangles'
-    outlines), ``/scanlines/labels/<k>``.
+    Nodes: ``/scanlines/planes/<k>`` (plane k's image, double-sided, for each filled k), ``/scanlines/edges``
+    (every triangle's outline), ``/scanlines/labels/<k>``.
     """
     centres, ends = scanline_planes(scene, rows, heights)
     c = frame.sensor(centres)
     e = frame.ground(ends.reshape(-1, 3)).reshape(-1, 2, 3)
     tri = np.concatenate([c[:, None, :], e], axis=1)
     out: Handles = {}
-    for k in range(len(tri)):
+    for k in range(len(tri)) if filled is None else sorted(set(filled)):
         rgba, w, h, centre, rot = triangle_texture(tri[k], PLANE_RGB, opacity)
         key = f"/scanlines/planes/{k}"
         out[key] = api.add_image(key, rgba, w, h, format="png", position=centre, wxyz=quaternion_wxyz(rot)[0],

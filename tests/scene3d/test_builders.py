@@ -163,6 +163,10 @@ def test_orbit_and_planes_nodes(api, scene):
     # each plane's image is its triangle (texel centres inside it are opaque-ish, outside transparent)
     img = planes["/scanlines/planes/0"]
     assert float(img.render_width) > 0 and float(img.render_height) > 0
+    # only the planes asked for are filled; every one keeps its outline
+    some = B.add_scanline_planes(api, scene, f, rows, 60.0, ["first", "mid", "last", ""], filled=[3])
+    assert [k for k in some if k.startswith("/scanlines/planes/")] == ["/scanlines/planes/3"]
+    assert some["/scanlines/edges"].points.shape == (12, 2, 3)
 
 
 def _texel_points(rgba, width, height, position, rotation):
