@@ -29,7 +29,10 @@ the a posteriori ``sigma0`` and the covariances (``sigma0^2 S^-1`` for the param
 Ground points are parametrised by metric offsets from their prior position (east, north, up):
 ``lon = lon0 + dE / m_lon``, ``lat = lat0 + dN / m_lat``, ``h = h0 + dU`` with ``m_lon``, ``m_lat`` the
 metres per degree at the prior position -- an exact reparametrisation of (lon, lat, h), metric to 1e-6.
-Jacobians are torch autograd derivatives of the projection (one backward pass per image coordinate).
+Jacobians are torch autograd derivatives of the projection (one backward pass per image coordinate); a
+projector with ``project_jacobian`` (the line scanners, :mod:`explorer.refine.torch_linescan`) forms its own from
+one forward and two backward passes.  Each trial step is evaluated with its linearisation, which the accepted step
+keeps for the next iteration: one evaluation per iteration where most steps are accepted.
 """
 
 from __future__ import annotations

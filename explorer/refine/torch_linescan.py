@@ -20,6 +20,13 @@ closed form of an along-track position offset).  Distortions solved by Newton in
 ``apply`` of a model stated as a removal) are made differentiable the same way: one Newton step of the closed
 form with its autograd Jacobian from the compiled solution.
 
+For an adjustment, ``project_jacobian`` returns the values and the Jacobians by the ground and the parameters in
+numpy from one forward pass and two backward passes (the gradients of the line residual and of the across-track
+coordinate by time, ground and parameters; the implicit-function derivatives then in closed form), and each
+projector remembers its last search: the same parameters and points give the same lines back, and other ones start
+from the previous lines (three secant steps of the adjusted sensor's residual, then the compiled bracket about the
+result, which checks it; see :meth:`_Projector._roots`).
+
 Points where the compiled path finds no line (behind the sensor, outside the window, outside the ISD's tables)
 come out NaN.  Agreement with the compiled path: 1e-10 px on CSM cameras, 1e-9 px on the rigorous models (the
 perspective centre interpolated about each window's tangent line, :func:`explorer.real.linescan.lagrange_position_from`,
