@@ -430,11 +430,27 @@ def _restore(app, was: dict) -> None:
             nodes[name].visible = vis
 
 
-def _drawn_box(page, rect, *, dark: bool = False, wait_ms: int = 2500) -> np.ndarray | None:
+def drawn_change(page, rect, before: bytes, timeout_s: float = 120.0) -> bytes:
+    """A screenshot of ``rect`` once the browser has drawn a change of the scene: different from ``before`` (a
+    screenshot taken before the change) and the same on two screenshots 0.5 s apart.  A fixed wait is not enough:
+    under CPU load headless Chromium's software WebGL takes seconds to receive and draw a change (a screenshot of
+    the old frame measured nodes the test had just hidden)."""
+    last = None
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        page.wait_for_timeout(500)
+        png = page.screenshot(clip=rect)
+        if png != before and png == last:
+            return png
+        last = png
+    raise AssertionError("the browser did not draw the change")
+
+
+def _drawn_box(page, rect, before: bytes, *, dark: bool = False) -> np.ndarray | None:
     """Bounding box (x0, y0, x1, y1) in canvas pixels of what is drawn on the white canvas (``dark``: text
-    only), the orientation gizmo in the bottom-left corner left out."""
-    page.wait_for_timeout(wait_ms)
-    png = page.screenshot(clip=rect)
+    only), the orientation gizmo in the bottom-left corner left out, once the browser has drawn the change made
+    since the screenshot ``before`` (:func:`drawn_change`)."""
+    png = drawn_change(page, rect, before)
     px = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int32)
     px[int(rect["height"]) - 110:, :110] = 255  # the axes gizmo
     mask = px.sum(axis=2) < 450 if dark else (765 - px.sum(axis=2)) > 90
@@ -466,9 +482,10 @@ def _check_framing_and_labels(app, page) -> None:
     assert settled()
     pos, look = np.array(app.client_poses[cid][0]), np.array(app.client_poses[cid][1])
     assert client.camera.image_width == int(w) and client.camera.image_height == int(h)
+    before = page.screenshot(clip=rect)
     was = _show_only(app, ("/points/scps",))
     try:
-        box = _drawn_box(page, rect)
+        box = _drawn_box(page, rect, before)
         assert box is not None
         scps = app.model.scps(app.settings()).ground[app.cloud_index]
         ndc, depth = view_ndc(app.frame.ground(scps), pos, look, fov_y=client.camera.fov, aspect=w / h)
@@ -485,8 +502,9 @@ def _check_framing_and_labels(app, page) -> None:
         assert {"/scanlines/labels/0", "/scanlines/labels/1", "/scanlines/labels/2"} <= set(shown)
         texts = {}
         for key in shown:
+            before = page.screenshot(clip=rect)
             _show_only(app, (key,))
-            texts[key] = _drawn_box(page, rect, dark=True)
+            texts[key] = _drawn_box(page, rect, before, dark=True)
             assert texts[key] is not None, key
             t = texts[key]
             assert t[0] > 0 and t[1] > 0 and t[2] < w and t[3] < h, (key, t)

@@ -35,7 +35,7 @@ from explorer.refine.points_io import PointTable  # noqa: E402
 from explorer.scene3d.refine import ADJUSTED_RGB  # noqa: E402
 from explorer.sources import load_source  # noqa: E402
 from tests.refine.cases import write_points_csv  # noqa: E402
-from tests.test_browser import RECT_3D, _check_framing_and_labels, _restore, _show_only  # noqa: E402
+from tests.test_browser import RECT_3D, _check_framing_and_labels, _restore, _show_only, drawn_change  # noqa: E402
 
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-quic",
         "--no-first-run", "--disable-component-update", "--disable-sync"]
@@ -113,22 +113,6 @@ def _near_mask(png: bytes, rgb, tol: int = 60) -> np.ndarray:
     return near
 
 
-def _drawn_change(page, rect, before: bytes, timeout_s: float = 120.0) -> bytes:
-    """A screenshot of ``rect`` once the browser has drawn a change of the scene: different from ``before`` and
-    the same on two screenshots 0.5 s apart.  (A fixed wait is not enough: under CPU load headless Chromium's
-    software WebGL takes seconds to receive and draw a change, and a screenshot of the old frame counted the
-    trajectories as hidden while still drawn.)"""
-    last = None
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        page.wait_for_timeout(500)
-        png = page.screenshot(clip=rect)
-        if png != before and png == last:
-            return png
-        last = png
-    raise AssertionError("the browser did not draw the change")
-
-
 def _plot_texts(page) -> str:
     return page.evaluate("() => Array.from(document.querySelectorAll('.js-plotly-plot')).map(e => e.innerText)"
                          ".join('\\n')")
@@ -149,9 +133,9 @@ def _red_on_screen(app, view, page, shot: Path) -> None:
         full = page.screenshot(clip=rect)
         was = _show_only(app, ("/refine/",))
         try:
-            png = _drawn_change(page, rect, full)
+            png = drawn_change(page, rect, full)
             _show_only(app, ())
-            none = _drawn_change(page, rect, png)
+            none = drawn_change(page, rect, png)
         finally:
             _restore(app, was)
         if page.evaluate(RECT_3D) == rect and app.client_poses[cid] == pose:
