@@ -78,3 +78,14 @@ def test_tie_point_in_one_image_is_an_error(pair):
     with pytest.raises(InputError, match="an 'image' column is needed with several images"):
         refine_images(rpcs, model="shift", control=PointTable(gcps.ids, gcps.row, gcps.col, gcps.lon, gcps.lat,
                                                             gcps.h))
+
+
+def test_a_sensor_that_is_not_refinable_is_named():
+    """Each image of a bundle is adapted on its own: one that no adapter refines is refused naming it."""
+    rpcs = [read_rpc(p) for p in PAIR]
+    rng = np.random.default_rng(3)
+    gcps = simulate_pair_points(rpcs, 6, ground_known=True, prefix="g", rng=rng)
+    with pytest.raises(InputError, match=r"^image right: cannot refine a dict: an RPC model, an MPC scene"):
+        refine_images([rpcs[0], {"not": "a sensor"}], control=gcps, names=["left", "right"])
+    with pytest.raises(InputError, match="3 image name"):
+        refine_images(rpcs, control=gcps, names=["left", "right", "third"])
