@@ -10,6 +10,7 @@ import argparse
 import math
 import os
 import stat
+from collections.abc import Callable
 from pathlib import Path
 
 from explorer.commands import parsed_paths
@@ -189,6 +190,28 @@ def method_list(text: str) -> str:
     if bad:
         raise argparse.ArgumentTypeError(f"{bad[0]!r} is not a method name (letters, digits, '_' and '-')")
     return ",".join(items)
+
+
+def choice_list(choices: tuple[str, ...] | list[str], what: str) -> Callable[[str], list[str]]:
+    """A parser of one comma-separated value of ``choices`` per image (``--model attitude,affine``).
+
+    One token, not ``nargs="+"``: a list option written before the positional SOURCE would otherwise take the
+    file name as one more item.
+    """
+    def parse(text: str) -> list[str]:
+        items = [t.strip() for t in text.split(",")]
+        if not text.strip() or any(not t for t in items):
+            raise argparse.ArgumentTypeError(f"{text!r}: give one {what} or a comma-separated list, no empty item")
+        bad = [t for t in items if t not in choices]
+        if bad:
+            raise argparse.ArgumentTypeError(f"{bad[0]!r} is not a {what} (choose from {', '.join(choices)})")
+        return items
+    return parse
+
+
+def positive_float_list(text: str) -> list[float]:
+    """A comma-separated list of finite numbers > 0 (``--jitter-hz 0.5,1``)."""
+    return [positive_float(t) for t in text.split(",")]
 
 
 def port_number(text: str) -> int:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from explorer.commands._args import existing_file, positive_float, positive_int
+from explorer.commands._args import choice_list, existing_file, positive_float, positive_float_list, positive_int
 
 __all__ = ["cmd_refine", "register"]
 
@@ -155,26 +155,29 @@ def register(subparsers: Any) -> None:
                    help="Pleiades DIMAP metadata: refine the rigorous model (position / attitude of its tables)")
     p.add_argument("--dg", type=existing_file, metavar="XML", help="DigitalGlobe metadata: refine the rigorous model")
     p.add_argument("--isd", type=existing_file, metavar="JSON", help="USGS CSM line-scan ISD: refine the camera")
-    p.add_argument("--jitter-hz", type=positive_float, nargs="+", metavar="HZ",
-                   help="--model jitter: frequencies of the attitude harmonics (default 1/T and 2/T, T the exposure)")
+    p.add_argument("--jitter-hz", type=positive_float_list, metavar="HZ[,HZ...]",
+                   help="--model jitter: frequencies of the attitude harmonics, comma-separated (default 1/T and "
+                        "2/T, T the exposure)")
     p.add_argument("--images", nargs="+", type=existing_file, metavar="FILE",
                    help="files of several images (bundle adjustment), read as --kinds says")
-    p.add_argument("--kinds", nargs="+", choices=SENSOR_KINDS, metavar="KIND",
-                   help="what SOURCE / each of --images is: one for all or one per image, of auto (default: an ISD "
-                        ".json is a CSM camera, another .json an MPC scene, anything else an RPC -- a DIMAP or DG XML "
-                        "then gives its vendor RPC), rpc, scene, dimap (the rigorous Pleiades/SPOT model), dg (the "
-                        "rigorous WorldView model), isd (a CSM camera)")
+    p.add_argument("--kinds", type=choice_list(SENSOR_KINDS, "kind"), metavar="KIND[,KIND...]",
+                   help="what SOURCE / each of --images is: one for all or one per image, comma-separated, of "
+                        "auto (default: an ISD .json is a CSM camera, another .json an MPC scene, anything else an "
+                        "RPC -- a DIMAP or DG XML then gives its vendor RPC), rpc, scene, dimap (the rigorous "
+                        "Pleiades/SPOT model), dg (the rigorous WorldView model), isd (a CSM camera)")
     p.add_argument("--gcps", type=existing_file,
                    help="control points CSV: id,lon,lat,h,row,col (+ image with several images)")
     p.add_argument("--ties", type=existing_file,
                    help="tie points CSV: id,image,row,col; one row per image a point is seen in (two or more)")
     p.add_argument("--check", type=existing_file,
                    help="check points CSV: id,lon,lat,h,row,col (+ image); never used as control")
-    p.add_argument("--model", nargs="+", choices=MODELS, default=None, metavar="MODEL",
-                   help="the correction model, one for all images or one per image: RPC shift, affine (default), "
-                        "poly2; MPC scene attitude (default; position and angle offsets), attitude-drift (and their "
-                        "rates); rigorous DIMAP/DG model or CSM camera attitude (default; roll, pitch, yaw), "
-                        "attitude-drift, position-attitude, position-attitude-drift, jitter (docs/refine.md)")
+    p.add_argument("--model", type=choice_list(MODELS, "correction model"), default=None,
+                   metavar="MODEL[,MODEL...]",
+                   help="the correction model, one for all images or one per image, comma-separated: RPC shift, "
+                        "affine (default), poly2; MPC scene attitude (default; position and angle offsets), "
+                        "attitude-drift (and their rates); rigorous DIMAP/DG model or CSM camera attitude (default; "
+                        "roll, pitch, yaw), attitude-drift, position-attitude, position-attitude-drift, jitter "
+                        "(docs/refine.md)")
     p.add_argument("--sigma-px", type=positive_float, default=0.5, help="sigma of a measured coordinate, px")
     p.add_argument("--sigma-ground", type=_non_negative, default=0.0,
                    help="sigma of control points' ground coordinates, m (0 = fixed; default)")

@@ -104,3 +104,19 @@ def test_refine_scene_attitude(tmp_path):
     values = np.array([p["value"] for p in report["parameters"]])
     np.testing.assert_allclose(adjusted.exterior.position_coeffs[:, 0],
                                scene.exterior.position_coeffs[:, 0] + values[:3], rtol=0, atol=1e-9)
+
+
+def test_list_options_before_the_source_leave_the_source_alone():
+    """``--model`` / ``--kinds`` / ``--jitter-hz`` take one comma-separated token: written before SOURCE they do not
+    swallow the file name (with nargs="+" ``refine --model affine X.xml`` lost its SOURCE)."""
+    from explorer.cli import build_parser
+
+    args = build_parser().parse_args(["refine", "--model", "affine", str(PLEIADES), "--gcps", str(PLEIADES),
+                                      "--out", "o"])
+    assert args.source == str(PLEIADES) and args.model == ["affine"]
+    args = build_parser().parse_args(["refine", "--kinds", "dimap,rpc", "--model", "attitude,affine",
+                                      "--jitter-hz", "0.5,1", "--images", str(PLEIADES), str(PLEIADES), "--out", "o"])
+    assert args.kinds == ["dimap", "rpc"] and args.model == ["attitude", "affine"] and args.jitter_hz == [0.5, 1.0]
+    for bad in (["--model", "affine,,shift"], ["--model", "afine"], ["--kinds", "dimap,raw"], ["--jitter-hz", "1,-2"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["refine", str(PLEIADES), *bad])

@@ -89,7 +89,7 @@ def mixed(tmp_path_factory):
                              True),
     }
     out = folder / "out"
-    code = main(["refine", "--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap", "rpc",
+    code = main(["refine", "--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap,rpc",
                  "--ties", str(files["ties"]), "--gcps", str(files["gcps"]), "--check", str(files["check"]),
                  "--sigma-px", str(NOISE_PX), "--no-panels", "--out", str(out)])
     assert code == 0
@@ -140,13 +140,13 @@ def test_bad_input_is_one_line(mixed, tmp_path, capsys):
     scene = tmp_path / "scene.json"
     scene.write_text("{}")
     cases = [
-        (["--images", str(DIMAP_2017), str(isd), "--kinds", "dimap", "isd"], "images on different bodies"),
-        (["--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap", "rpc", "--model", "affine"],
+        (["--images", str(DIMAP_2017), str(isd), "--kinds", "dimap,isd"], "images on different bodies"),
+        (["--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap,rpc", "--model", "affine"],
          "unknown rigorous line-scan model correction model 'affine'"),
-        (["--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap", "rpc", "scene"], "3 kinds for 2 images"),
-        (["--images", str(DIMAP_2017), str(rpc_file), "--model", "attitude", "affine", "shift"],
+        (["--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap,rpc,scene"], "3 kinds for 2 images"),
+        (["--images", str(DIMAP_2017), str(rpc_file), "--model", "attitude,affine,shift"],
          "3 correction models for 2 images"),
-        (["--images", str(DIMAP_2017), str(scene), "--kinds", "dimap", "scene"], str(scene)),
+        (["--images", str(DIMAP_2017), str(scene), "--kinds", "dimap,scene"], str(scene)),
         (["--dimap", str(DIMAP_2017), "--kinds", "rpc"], "--kinds goes with SOURCE or --images"),
     ]
     for extra, message in cases:
@@ -161,7 +161,7 @@ def test_bad_input_is_one_line(mixed, tmp_path, capsys):
     unknown.write_text("\n".join(lines[:3] + [lines[151].replace(rpc_file.name, "C.txt")]) + "\n")
     for ties, message in ((one, "tie point 't1' is measured in one image only"),
                           (unknown, "image 'C.txt' is not one of the images")):
-        code = main(["refine", "--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap", "rpc", "--ties",
+        code = main(["refine", "--images", str(DIMAP_2017), str(rpc_file), "--kinds", "dimap,rpc", "--ties",
                      str(ties), "--gcps", str(files["gcps"]), "--out", str(tmp_path / "o")])
         err = capsys.readouterr().err
         assert code == 2 and message in err and len(err.strip().splitlines()) == 1, (ties, err)
