@@ -28,9 +28,9 @@ iteration, and scipy ``least_squares`` (``trf``, ``2-point`` finite differences 
 warm-started from the previous evaluation in the same way), once.  ``--line-gcps`` sets their number of GCPs
 (default ``--gcps``).  The LM iteration, the adjustment and scipy are also given in CPU seconds of this process
 (``*_cpu_s``, ``*_speedup_vs_scipy_cpu``): on the shared machine the wall time is several times that, and a load
-spike during the short adjustment moves the wall-time ratio by 3x from one run to the next.  scipy's finite differences step the position offsets by
-~1.5e-8 m, which moves a rigorous model's lines by ~2e-8 px against their float64 noise of ~1e-9 px: its solution is
-reported against the truth as well as against ours.
+spike during the short adjustment moves the wall-time ratio by 3x from one run to the next.  scipy's finite
+differences step the position offsets by ~1.5e-8 m, which moves a rigorous model's lines by ~2e-8 px against their
+float64 noise of ~1e-9 px: its solution is reported against the truth as well as against ours.
 
 Usage::
 
