@@ -111,7 +111,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=port_number, default=8080,
                    help="port (default 8080; 0 picks a free one; a busy port is an error)")
     p.add_argument("--methods", default=None, type=method_list,
-                   help="comma-separated methods (default lrm,prm,mlp,nr where registered)")
+                   help="comma-separated methods (default: lrm,prm,mlp,nr where registered; with --export of a "
+                        "file, every learned and generalized method and every exact search method: exact, "
+                        "csm-secant, nr, ...; the search methods are unavailable on an RPC)")
     p.add_argument("--scops", type=positive_int, default=100, help="SCOPs (control points) to train on (default 100)")
     p.add_argument("--scps", type=positive_int, default=50_000, help="SCPs (check points) of the maps (default 50000)")
     p.add_argument("--seed", type=random_seed, default=0, help="seed of the point heights and subsamples (default 0)")
