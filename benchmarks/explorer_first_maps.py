@@ -39,10 +39,9 @@ import threading
 import time
 from pathlib import Path
 
+from explorer_browser import ARGS, CHROMIUM, MAPS_DONE  # one browser set-up, one "maps complete" test
+
 ROOT = Path(__file__).resolve().parent.parent
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--no-first-run",
-        "--disable-component-update", "--disable-sync"]
 
 DIMAP17 = "tests/data/rpc/PHRDIMAP_P1BP--2017030824934340CP.XML"
 DEM17 = "assets/dem/MNT_P1BP--2017030824934340CP.tif"
@@ -57,21 +56,12 @@ CASES: dict[str, tuple[list[str], bool]] = {
     "isd-ctx": (["--isd", "tests/data/usgscsm/ctxLineScan.json"], True),
     "isd-orbital": (["--isd", "tests/data/usgscsm/orbitalLineScan.json"], True),
     "isd-constvel": (["--isd", "tests/data/usgscsm/constVelocityLineScan.json"], True),
-    "isd-hirise": (["--isd", "tests/data/ale/nhmvic_tdi_isd.json"], True),
+    "isd-mvic": (["--isd", "tests/data/ale/nhmvic_tdi_isd.json"], True),
     "rpc": (["--rpc", "tests/data/rpc/rpc_PLEIADES.xml"], False),
     "rpc-dem": (["--rpc", DIMAP17, "--dem", DEM17, "--dem-datum", "egm96"], False),
 }
-DEFAULT_CASES = "preset,dimap-dem,dg,isd-ctx,isd-orbital,isd-constvel,rpc,rpc-dem"
-"""Every source kind (isd-hirise is refused by ``explore``: its image centre does not see the body)."""
-
-MAPS_DONE = """([names]) => {
-  const gd = document.querySelector('.js-plotly-plot');
-  if (!gd || !gd._fullLayout) return null;
-  const text = gd.innerText || gd.textContent || '';
-  if (!names.every(n => text.includes(n + ' row: RMSE'))) return null;
-  if (/preview|waiting|computing/.test(text)) return null;
-  return text.length;
-}"""
+DEFAULT_CASES = "preset,dimap-dem,dg,isd-ctx,isd-orbital,isd-constvel,isd-mvic,rpc,rpc-dem"
+"""Every source kind (and ALE's New Horizons MVIC TDI ISD)."""
 
 
 def _load() -> float:
