@@ -50,9 +50,11 @@ __all__ = ["BundleProblem", "BundleResult", "Projector", "bundle_adjust", "lm_it
 
 WGS84_AXES = (6378137.0, 6356752.314245179)
 
-#: Relative cost changes at or below this are float64 noise: the compiled line search of a rigorous line scanner
-#: defines each projection to ~1e-9 px, which moves the cost by ~1e-10 of it (measured on 300 and 10,000 GCPs); a
-#: parameter change that moves the cost by 1e-9 of it is below 1e-2 of its sigma.
+#: Relative cost changes at or below this are float64 noise for a projector whose ground to image is an iterative
+#: line search (its ``cost_rounding``): the compiled search of a rigorous line scanner defines each projection to
+#: ~1e-9 px, which moves the cost by ~1e-10 of it (measured on 300 and 10,000 GCPs); a parameter change that moves
+#: the cost by 1e-9 of it is below 1e-2 of its sigma.  A closed-form projector (an RPC) declares none: its cost is
+#: exact to float64, and the rule below would stop it short of the closed-form solution (1e-8 of the parameters).
 COST_ROUNDING = 1e-9
 
 #: Robust losses by name.
@@ -379,10 +381,12 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
 
     It stops when an iteration lowers the cost by no more than ``1e-12`` of it or ``cost_tolerance`` (in units of
     the whitened cost, half a chi-square), when the step is below rounding, or when a trial step for which the
-    linearisation predicts a decrease below ``1e-6`` of the cost raises it by no more than :data:`COST_ROUNDING` of
-    it (at the minimum, to the cost's float64 noise: without this rule a line scanner's adjustment spent ~15 more
-    evaluations raising the damping to its limit at the end of every run)."""
+    linearisation predicts a decrease below ``1e-6`` of the cost raises it by no more than the projectors' cost
+    rounding (their largest ``cost_rounding``, e.g. :data:`COST_ROUNDING` for a line scanner; none for closed-form
+    projectors) of it: at the minimum, to the cost's float64 noise (without this rule a line scanner's adjustment
+    spent ~15 more evaluations raising the damping to its limit at the end of every run)."""
     damping = 1e-4
+    rounding = max((float(getattr(p, "cost_rounding", 0.0)) for p in problem.projectors), default=0.0)
     _, lin = _evaluate(problem, scale, state, True)
     assert lin is not None
     cost = _cost(problem, lin.e, state, use, loss, loss_scale, prior_weight)
@@ -411,7 +415,7 @@ def _lm(problem: BundleProblem, scale: tuple[np.ndarray, np.ndarray], state: _St
             # the decrease the linearisation predicts for this damped step (Nielsen: d^T (g + damping D d) / 2)
             predicted = 0.5 * (float(step_theta @ (g_theta + damping * np.diag(u) * step_theta))
                                + float(np.sum(step_x * (g_x + damping * np.diagonal(v, axis1=1, axis2=2) * step_x))))
-            if trial_cost - cost <= COST_ROUNDING * cost and predicted <= 1e-6 * cost:
+            if rounding and trial_cost - cost <= rounding * cost and predicted <= 1e-6 * cost:
                 return state, iteration, True  # a negligible step that only the cost's float64 noise rejects
             damping *= 10.0
             if damping > 1e12:  # no step lowers the cost: at the minimum to rounding

@@ -134,6 +134,10 @@ def _rotate_transposed(m: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
 class _Projector:
     """What both projectors share: parameters, the cache of the adjusted compiled sensor, the parameter rows."""
 
+    cost_rounding = 1e-9
+    """Relative float64 noise of an adjustment's cost with this projector (its compiled line search defines a
+    projection to ~1e-9 px): :data:`explorer.refine.bundle.COST_ROUNDING`."""
+
     def __init__(self, sensor: Any, correction: LineCorrection) -> None:
         self.sensor = sensor
         self.correction = correction
