@@ -467,19 +467,23 @@ def _check_framing_and_labels(app, page) -> None:
     from explorer.scene3d.camera import view_ndc
 
     page.evaluate(HIDE_TOASTS)
-    rect = page.evaluate(RECT_3D)
-    w, h = rect["width"], rect["height"]
     (cid, client), = app.server.get_clients().items()
     t0 = time.monotonic()  # the browser's camera settles on the pose framed for its (docked) canvas
 
     def settled() -> bool:
+        nonlocal rect, w, h
+        rect = page.evaluate(RECT_3D)  # the canvas as it is now: under load the panels dock seconds late
+        w, h = rect["width"], rect["height"]
         framed = app._framed_clients.get(cid)
         return (framed is not None and abs(framed[1] - w / h) < 1e-3 and cid in app.client_poses
                 and np.allclose(client.camera.position, app.client_poses[cid][0], atol=1e-6))
 
+    rect: dict = {}
+    w = h = 0.0
     while time.monotonic() - t0 < 30 and not settled():
         time.sleep(0.2)
-    assert settled()
+    assert settled(), (app._framed_clients.get(cid), w / h if h else None, client.camera.position,
+                       app.client_poses.get(cid))
     pos, look = np.array(app.client_poses[cid][0]), np.array(app.client_poses[cid][1])
     assert client.camera.image_width == int(w) and client.camera.image_height == int(h)
     before = page.screenshot(clip=rect)

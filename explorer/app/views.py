@@ -664,13 +664,17 @@ class Views:
             if done is not None and done[0] == key:
                 # at a pose the app gave it: the one framed for this browser, or the server's initial camera (a
                 # report sent before the browser's own framing arrived carries that one)
-                at_pose = any(p is not None and np.allclose(cam.position, p[0], atol=1e-6, rtol=1e-6)
-                              and np.allclose(cam.look_at, p[1], atol=1e-6, rtol=1e-6)
-                              for p in (self.client_poses.get(client.client_id), self.camera_pose))
+                ours = self.client_poses.get(client.client_id)
+                at_ours, at_initial = (p is not None and np.allclose(cam.position, p[0], atol=1e-6, rtol=1e-6)
+                                       and np.allclose(cam.look_at, p[1], atol=1e-6, rtol=1e-6)
+                                       for p in (ours, self.camera_pose))
                 # just connected: its reports may still carry the pose before ours (the page lays out its
                 # panels in its first seconds); later, only a camera the user has not moved is reframed
                 young = time.monotonic() - self._client_since.get(client.client_id, -np.inf) < CANVAS_SETTLE_S
-                if not (at_pose or young) or abs(done[1] - w / h) <= 1e-3 * done[1]:
+                # back at the server's initial camera after its own framing was sent: a late report of the pose
+                # the page started with overwrote it (seen under load) -- frame it again, whatever its shape
+                lost = ours is not None and at_initial and not at_ours
+                if not lost and (not (at_ours or at_initial or young) or abs(done[1] - w / h) <= 1e-3 * done[1]):
                     return
             self._framed_clients[client.client_id] = (key, w / h)
             self._apply_camera([client])
