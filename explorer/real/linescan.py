@@ -170,8 +170,15 @@ def lagrange_interpolate(ts: np.ndarray, values: np.ndarray, t: np.ndarray, orde
     -------
     ndarray, shape (M, K)
     """
-    ts = np.asarray(ts, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
+    _, idx, w = _lagrange_windows(ts, t, order)
+    return np.einsum("mj,mjk->mk", w, values[idx])
+
+
+def _lagrange_windows(ts: np.ndarray, t: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each query time's window of ``min(order, N)`` samples, centred and clamped at the table's ends: its first
+    sample (M,), the sample indexes (M, m) and the Lagrange weights (M, m) at ``t``."""
+    ts = np.asarray(ts, dtype=np.float64)
     t = np.atleast_1d(np.asarray(t, dtype=np.float64))
     n = ts.size
     m = min(order, n)
@@ -184,7 +191,7 @@ def lagrange_interpolate(ts: np.ndarray, values: np.ndarray, t: np.ndarray, orde
         for k in range(m):
             if k != j:
                 w[:, j] *= dt[:, k] / (tw[:, j] - tw[:, k])
-    return np.einsum("mj,mjk->mk", w, values[idx])
+    return start, idx, w
 
 
 def lagrange_position_from(ts: np.ndarray, positions: np.ndarray, velocities: np.ndarray, t: np.ndarray,
@@ -225,18 +232,10 @@ def lagrange_position_from(ts: np.ndarray, positions: np.ndarray, velocities: np
     positions = np.asarray(positions, dtype=np.float64)
     velocities = np.asarray(velocities, dtype=np.float64)
     t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-    n = ts.size
-    m = min(order, n)
-    start = np.clip(np.searchsorted(ts, t) - m // 2, 0, n - m)
-    idx = start[:, None] + np.arange(m)[None, :]  # (M, m)
+    start, idx, w = _lagrange_windows(ts, t, order)
+    m = idx.shape[1]
     mid = start + m // 2
     tw = ts[idx]
-    dt = t[:, None] - tw
-    w = np.ones_like(dt)
-    for j in range(m):
-        for k in range(m):
-            if k != j:
-                w[:, j] *= dt[:, k] / (tw[:, j] - tw[:, k])
     t_r, p_r, v_r = ts[mid], positions[mid], velocities[mid]
     departure = (positions[idx] - p_r[:, None, :]) - v_r[:, None, :] * (tw - t_r[:, None])[:, :, None]
     total = w[:, 0, None] * departure[:, 0]
