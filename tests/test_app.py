@@ -196,6 +196,23 @@ def make_app(server, methods=("toy_poly", "toy_bisect"), **kw) -> ExplorerApp:
 
 
 # ------------------------------------------------------------------------ tests
+def test_lighting_costs_a_software_webgl_browser_no_environment_map_and_no_shadows(server):
+    """What every browser is sent (the server's persistent messages, newest last): no environment map (its
+    GGX pre-filtering took 4.9-7.3 s of one software-WebGL frame in Chrome traces) and default lights without
+    shadows, an ambient light instead for the lit objects."""
+    from viser import _messages
+
+    make_app(server)
+    buffer = server._websock_server._broadcast_buffer
+    sent = [buffer.message_from_id[k] for k in sorted(buffer.message_from_id)]
+    env = [m for m in sent if isinstance(m, _messages.EnvironmentMapMessage)]
+    lights = [m for m in sent if isinstance(m, _messages.EnableLightsMessage)]
+    ambient = [m for m in sent if isinstance(m, _messages.AmbientLightMessage)]
+    assert env and env[-1].hdri_data is None
+    assert lights and lights[-1].enabled and not lights[-1].cast_shadow
+    assert len(ambient) == 1 and ambient[0].props.intensity > 0
+
+
 def test_scene_nodes_and_counts(server):
     app = make_app(server)
     s = app.settings()

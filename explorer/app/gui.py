@@ -44,6 +44,26 @@ DEBOUNCE_S = 0.25
 frame; only the last is computed)."""
 
 
+AMBIENT_INTENSITY = 1.2
+"""The ambient light that stands in for the environment map on the few lit objects (the selected point's sphere,
+the flight-direction arrow, the sensor frames): their sides away from the default lights stay readable."""
+
+
+def configure_lighting(scene: Any) -> None:
+    """Light the 3D view for a browser that draws WebGL in software (no GPU: headless Chromium, many VMs).
+
+    viser's defaults cost such a browser seconds: its environment map (an HDR image turned into a
+    pre-filtered cube map by a 256-sample GGX convolution, compiled and run on the first frame that shows a lit
+    object: 4.9-7.3 s of one frame in Chrome traces at load 3-6, the first SCOP change after loading waiting
+    behind it) and its shadows (three cascaded shadow maps rendered every frame, every material compiled with
+    shadow sampling).  The explorer's points, lines, planes and labels are unlit; the few lit objects get the two
+    default directional lights and an ambient light instead.  ``scene``: a ``viser.SceneApi``.
+    """
+    scene.configure_environment_map(None)
+    scene.configure_default_lights(True, cast_shadow=False)
+    scene.add_light_ambient("/lights/ambient", intensity=AMBIENT_INTENSITY)
+
+
 class ExplorerApp(Views):
     """The explorer's GUI on a viser server.
 
@@ -189,6 +209,7 @@ class ExplorerApp(Views):
         if compile_progress is not None:
             compile_progress.observers.append(self._show_compiling)
         self.server.scene.set_up_direction("+z")
+        configure_lighting(self.server.scene)
         self.server.initial_camera.near = 0.001
         self.server.initial_camera.far = 5000.0
         with contextlib.suppress(Exception):  # frame each browser for its own canvas once it reports it
