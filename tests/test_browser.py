@@ -16,6 +16,7 @@ import os
 import socket
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -318,6 +319,12 @@ def _titles_when_complete(page, methods, scops: int, timeout: float = 240.0) -> 
     raise AssertionError(f"maps not complete: {page.evaluate(MAP_STATE)}")
 
 
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds a process has used (``/proc/PID/stat`` fields 14 and 15)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 @pytest.mark.slow
 def test_real_scene_maps_are_trustworthy(browser, tmp_path):
     """Issue 24 acceptance, on the Pleiades DIMAP scene with its DEM in headless Chromium:
@@ -326,8 +333,10 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
       +0.25 px) is drawn as one uniform colour over its whole map (the raster of cell means), the colour of
       +0.25 px on its scale;
     * two runs in a row (two servers, fresh caches) give equal map titles and summary tables;
-    * after a SCOP change under artificial CPU load (two busy-loop processes), every method still reports
-      every check point (titles "all N SCPs", evaluations of every SCP).
+    * after a SCOP change under artificial CPU load (two busy-loop processes, checked to have run), every method
+      still reports every check point (titles "all N SCPs", evaluations of every SCP); and when, under that
+      load, every method is sent down the slow-method branch (a seeded preview first), its final titles and
+      table are every SCP and equal those of the same settings on an unloaded server.
     """
     import subprocess
     import sys
@@ -339,6 +348,7 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
     src = load_source("dimap", str(PHR_2017), dem=str(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif"),
                       dem_datum="egm96")
     states = []
+    loaded_at_50 = None  # titles and table at 50 SCOPs, reached under load through the preview branch (run 1)
     with toy_registry(), pytest.MonkeyPatch.context() as mp:
         from explorer.methods import base as methods_base
 
@@ -350,7 +360,11 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
                 page = _open(browser, app.url)
                 titles = _titles_when_complete(page, TRUST_METHODS, 100)
                 states.append((titles, app.handles["summary"].content))
-                if run == 1:
+                if run == 1:  # the settings changed under load in run 1, here without load and without preview
+                    app.handles["density"].value = "50"
+                    titles = _titles_when_complete(page, TRUST_METHODS, 50)
+                    assert app.wait_idle(240)
+                    assert (titles, app.handles["summary"].content) == loaded_at_50
                     break
                 # the constant field: every drawn cell holds +0.25 px, the map is one colour
                 app.handles["show_scops"].value = False
@@ -380,17 +394,46 @@ def test_real_scene_maps_are_trustworthy(browser, tmp_path):
 
                 # a SCOP change under CPU load: every method still on every SCP
                 busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+                preview_after_s = app.model.preview_after_s
                 try:
+                    time.sleep(0.5)  # the loops run before the change is made
+                    cpu0, t_load = [_cpu_seconds(p.pid) for p in busy], time.monotonic()
                     app.handles["density"].value = "30"
                     titles = _titles_when_complete(page, TRUST_METHODS, 30)
                     assert app.wait_idle(240)
+                    n = len(app.model.scps(app.settings()))
+                    assert all(app.runs[m].evaluation.n_evaluated == n and not app.runs[m].preview
+                               for m in TRUST_METHODS)
+                    assert all(f"all {n:,} SCPs" in t for t in titles if "row: RMSE" in t)
+                    # The branch load can send a method down: projected slower than preview_after_s, it is drawn
+                    # on the seeded preview first and then on every SCP.  At 10,000 SCPs none of these methods
+                    # comes near the 2 s projection even under this load, so the change above never took it;
+                    # here every method that is evaluated again is made to take it, still under load.  Its final
+                    # state must be every SCP, and equal to the same settings without load (run 2 below).
+                    app.model.preview_after_s = 1e-9
+                    app.handles["density"].value = "50"
+                    titles = _titles_when_complete(page, TRUST_METHODS, 50)
+                    assert app.wait_idle(240)
+                    s = app.settings()
+                    previewed = [m for m in TRUST_METHODS if app.model._evals.peek(
+                        app.model.eval_key(m, s, max_points=app.model.preview_points)) is not None]
+                    # each method fitted on the SCOPs was drawn on the preview first (nr and toy_constant use
+                    # no SCOPs: their evaluation of every SCP is the one cached before the change)
+                    assert previewed == ["lrm", "prm"]
+                    assert all(app.runs[m].evaluation.n_evaluated == n and not app.runs[m].preview
+                               for m in TRUST_METHODS)
+                    loaded_at_50 = (titles, app.handles["summary"].content)
+                    # the load was on while the changes were made: the busy loops together kept at least a
+                    # quarter of a core busy over the window (each runs whenever the scheduler lets it)
+                    used = [_cpu_seconds(p.pid) - c for p, c in zip(busy, cpu0, strict=True)]
+                    window = time.monotonic() - t_load
+                    print(f"busy loops: {used} CPU s over {window:.2f} s, load {os.getloadavg()}")
+                    assert sum(used) > 0.25 * window, (used, window)
                 finally:
+                    app.model.preview_after_s = preview_after_s
                     for p in busy:
                         p.kill()
                         p.wait()
-                n = len(app.model.scps(app.settings()))
-                assert all(app.runs[m].evaluation.n_evaluated == n and not app.runs[m].preview for m in TRUST_METHODS)
-                assert all(f"all {n:,} SCPs" in t for t in titles if "row: RMSE" in t)
                 app.handles["density"].value = "100"
                 assert app.wait_idle(240)
             finally:
