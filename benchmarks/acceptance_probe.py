@@ -7,15 +7,17 @@ exports each one twice with the command's defaults (``pushbroom explore --<kind>
 
 Variants built (each from a real file; see :func:`build_cases`):
 
-* DEMs for the 2017 Pleiades DIMAP and its vendor RPC: reprojected to UTM (Float32, a no-data value, tiled and
-  DEFLATE-compressed), a geographic grid at another spacing (Float32), no-data holes with a declared no-data value
-  (Int16), a DEM covering only part of the footprint, the heights declared above EGM96 by the file's vertical CRS
-  (EPSG:4326+5773) and the same heights read as above the ellipsoid, a DEM far larger than the footprint (an
-  SRTM-like 1-arcsecond tile), a tiled/compressed copy of the original, and a DEM that does not cover the
-  footprint at all (must be a one-line error);
-* RPC files of the same Pleiades image in every format the package reads, written by GDAL (GeoTIFF RPC tags, a
-  ``.RPB`` and an ``_RPC.TXT`` sidecar, via rasterio) and by hand (a GDAL VRT, an OSSIM ``.geom``, a DIMAP v2 XML
-  with its validity box removed), 0-based and 1-based conventions (docs/conventions.md);
+* DEMs for the 2017 Pleiades DIMAP (its rigorous model, and its vendor RPC read from the same DIMAP v1.4
+  file): reprojected to UTM (Float32, a no-data value, tiled and DEFLATE-compressed), a geographic grid at
+  another spacing (Float32), no-data holes with a declared no-data value (Int16), a DEM covering only part of
+  the footprint, the heights declared above EGM96 by the file's vertical CRS (EPSG:4326+5773) and the same
+  heights read as above the ellipsoid, a DEM far larger than the footprint (an SRTM-like 1-arcsecond tile), a
+  tiled/compressed copy of the original, and a DEM that does not cover the footprint at all (must be a
+  one-line error);
+* RPC files of another Pleiades image (``RPC_PHR1B_P_201709281038045``, DIMAP v2, Nice) in every format the
+  package reads, written by GDAL (GeoTIFF RPC tags, a ``.RPB`` and an ``_RPC.TXT`` sidecar, via rasterio) and by
+  hand (a GDAL VRT, an OSSIM ``.geom``, a DIMAP v2 XML with its validity boxes removed), 0-based and 1-based
+  conventions (docs/conventions.md);
 * every other RPC, DG XML and ISD of the repository's test data, exported with its defaults.
 
 Checks on each export (the issue's acceptance line, plus the "What to build" lines an export can show):
@@ -253,7 +255,8 @@ def build_cases(work: Path) -> list[Case]:
     dems = build_dems(work)
     rpcs = build_rpcs(work)
     dimap = ["--dimap", str(PHR_2017)]
-    rpc = ["--rpc", str(RPC_2017)]
+    rpc = ["--rpc", str(RPC_2017)]  # another Pleiades image (Nice), 1-based DIMAP v2
+    vendor = ["--rpc", str(PHR_2017)]  # the 2017 DIMAP's own RPC (DIMAP v1.4), inside its DEM
     cases = [
         Case("dimap2017-dem", [*dimap, "--dem", str(DEM_2017), "--dem-datum", "egm96"], note="the reference"),
         Case("dimap2017-dem-tiled", [*dimap, "--dem", str(dems["tiled"]), "--dem-datum", "egm96"],
@@ -271,10 +274,12 @@ def build_cases(work: Path) -> list[Case]:
              error="covers"),
         Case("dimap2017", dimap),
         Case("dimap2018-dem", ["--dimap", str(PHR_2018), "--dem", str(DEM_2018)]),
-        Case("rpc2017-dem", [*rpc, "--dem", str(DEM_2017), "--dem-datum", "egm96"]),
-        Case("rpc2017-dem-utm", [*rpc, "--dem", str(dems["utm"]), "--dem-datum", "egm96"]),
-        Case("rpc2017-dem-holes", [*rpc, "--dem", str(dems["holes"]), "--dem-datum", "egm96"]),
-        Case("rpc2017", rpc, note="DIMAP v2 XML, 1-based"),
+        Case("rpc-dimap2017-dem", [*vendor, "--dem", str(DEM_2017), "--dem-datum", "egm96"],
+             note="the DIMAP v1.4's vendor RPC on its DEM"),
+        Case("rpc-dimap2017-dem-utm", [*vendor, "--dem", str(dems["utm"]), "--dem-datum", "egm96"]),
+        Case("rpc-dimap2017-dem-holes", [*vendor, "--dem", str(dems["holes"]), "--dem-datum", "egm96"]),
+        Case("rpc-dimap2017-dem-huge", [*vendor, "--dem", str(dems["huge"]), "--dem-datum", "egm96"]),
+        Case("rpc2017", rpc, note="DIMAP v2 XML, 1-based (Nice: no DEM of ours covers it)"),
         Case("rpc2017-as-mpc", [*rpc, "--as-mpc"]),
     ]
     for key, what in (("tif", "GeoTIFF RPC tags (GDAL)"), ("rpb", ".RPB (GDAL)"), ("txt", "_RPC.TXT (GDAL)"),

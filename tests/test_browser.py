@@ -631,3 +631,62 @@ def test_isd_scene_is_framed_and_its_labels_are_apart(browser):
     finally:
         stop.set()
         th.join(60)
+
+
+def _utm_dem(path):
+    """The 2017 DIMAP's real DEM (EPSG:4269, Int16, EGM96 heights) reprojected by GDAL to UTM zone 40N at 90 m,
+    Float32 with a no-data value: a DEM layout the repository does not have."""
+    import rasterio
+    from rasterio.crs import CRS
+    from rasterio.warp import Resampling, calculate_default_transform, reproject
+
+    from tests.real.conftest import DEM_DIR
+
+    with rasterio.open(DEM_DIR / "MNT_P1BP--2017030824934340CP.tif") as src:
+        crs = CRS.from_epsg(32640)
+        t, w, h = calculate_default_transform(src.crs, crs, src.width, src.height, *src.bounds, resolution=90.0)
+        out = np.full((h, w), -9999.0, np.float32)
+        reproject(src.read(1).astype(np.float32), out, src_transform=src.transform, src_crs=src.crs,
+                  dst_transform=t, dst_crs=crs, resampling=Resampling.bilinear, dst_nodata=-9999.0)
+    with rasterio.open(path, "w", driver="GTiff", width=w, height=h, count=1, dtype="float32", crs=crs,
+                       transform=t, nodata=-9999.0, tiled=True, compress="deflate") as dst:
+        dst.write(out, 1)
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["rpc-utm-dem", "dg", "isd-ctx", "isd-mvic"])
+def test_other_real_sources_are_framed_and_their_labels_are_apart(browser, tmp_path, kind):
+    """Issue 24's 3D view on sources the other browser tests do not open: the 2017 Pleiades DIMAP's vendor RPC on
+    its DEM reprojected to UTM (built here), the WorldView-1 rigorous DG model, the CTX ISD and ALE's New Horizons
+    MVIC ISD (Jupiter seen from 2.2e9 m): the footprint fills at least half of the view where the camera model says, the
+    labels are inside the canvas and apart; on a DEM the relief exaggeration is stated; a long file name is
+    shortened in the status line with the whole name as its tooltip."""
+    from explorer.app.views import STATUS_NAME_CHARS, short_name
+    from explorer.sources import load_source
+    from tests.real.conftest import PHR_2017, RPC_DIR
+
+    data = RPC_DIR.parent
+    src = {"rpc-utm-dem": lambda: load_source("rpc", str(PHR_2017), dem=str(_utm_dem(tmp_path / "utm.tif")),
+                                              dem_datum="egm96"),
+           "dg": lambda: load_source("dg", str(RPC_DIR / "rpc_WV1.xml")),
+           "isd-ctx": lambda: load_source("isd", str(data / "usgscsm" / "ctxLineScan.json")),
+           "isd-mvic": lambda: load_source("isd", str(data / "ale" / "nhmvic_tdi_isd.json"))}[kind]()
+    app, stop, th = _serve_real(src, ["lrm"], 3000)
+    try:
+        assert app.wait_idle(240)
+        page = _open(browser, app.url)
+        try:
+            page.wait_for_function("() => document.body.innerText.includes('lrm row: RMSE')")
+            _check_framing_and_labels(app, page)
+            if kind == "rpc-utm-dem":
+                assert "heights exaggerated x" in app.ground_text
+            label = src.label
+            if len(label) > STATUS_NAME_CHARS:
+                tip = page.locator(f"span[title={json.dumps(label)}]")
+                assert tip.count() == 1 and tip.inner_text() == short_name(label)
+        finally:
+            page.context.close()
+    finally:
+        stop.set()
+        th.join(60)
