@@ -242,6 +242,41 @@ def test_scene_nodes_and_counts(server):
     assert 2.0 * app.frame.diagonal_km < d < 3.0 * app.frame.diagonal_km
 
 
+def test_scop_change_moves_the_scop_cloud_and_redraws_the_selection_only_when_it_moved(server):
+    """A SCOP change sends the SCOP cloud's new points and size to the same node (a new node is a new material: a
+    software-WebGL browser re-links its shader); the selected point's nodes are drawn again exactly when what they
+    show changed (its point, scanline, search path or label), not merely because the colour method's result did."""
+    from explorer.scene3d import builders as B  # noqa: N812
+
+    app = make_app(server, methods=("toy_poly", "toy_bisect"))
+    assert app.settings().color_method == "toy_poly"
+    node = app.nodes["/points/scops"]
+    for density in ("30", "300", "50"):
+        before = app.selection
+        selected = {k: v for k, v in app.nodes.items() if k.startswith("/selected/")}
+        app.handles["density"].value = density
+        s = app.settings()
+        scops = app.model.scops(s)
+        assert app.nodes["/points/scops"] is node  # the same cloud, moved
+        np.testing.assert_allclose(node.points, app.frame.ground(scops.ground), rtol=0, atol=1e-5)  # float32 km
+        assert node.point_size == pytest.approx(B.scop_point_size_km(app.frame, len(scops)))
+        sel = app.selection
+        same = (np.array_equal(sel.ground, before.ground) and sel.exact_row == before.exact_row
+                and sel.exact_col == before.exact_col
+                and (sel.trace_rows is None) == (before.trace_rows is None)
+                and (sel.trace_rows is None or np.array_equal(sel.trace_rows, before.trace_rows)))
+        now = {k: v for k, v in app.nodes.items() if k.startswith("/selected/")}
+        assert (set(now) == set(selected) and all(now[k] is selected[k] for k in now)) == same, (density, same)
+        assert app.nodes["/selected/label"].text == f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"
+    # another point selected: drawn again, at its own row
+    selected = dict(app.nodes)
+    app.handles["sel_mode"].value = "image point"
+    app.handles["sel_row"].value = float(round(app.selection.exact_row / 2))
+    sel = app.selection
+    assert app.nodes["/selected/point"] is not selected["/selected/point"]
+    assert app.nodes["/selected/label"].text == f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"
+
+
 def test_scp_colours_follow_residuals(server):
     app = make_app(server)
     app.handles["colour_mode"].value = "fixed"

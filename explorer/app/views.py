@@ -30,6 +30,8 @@ from explorer.sources import stand_in_truth, table_coverage_text
 CANVAS_SETTLE_S = 10.0
 """A browser's canvas may still change shape (its panels docking) this long after it connected: its camera is
 reframed for the new shape even if its reports still carry an earlier pose."""
+SEND_WAIT_S = 0.1
+"""How long an update waits for the browsers' connections to take the panels before it queues the 3D batch."""
 STATUS_NAME_CHARS = 48
 """Scene names longer than this are shortened in the status line (the Scene control shows them whole)."""
 
@@ -129,6 +131,18 @@ class Views:
                 del self.nodes[n]
         self.nodes.update(handles)
 
+    def _send_queued(self, timeout_s: float = SEND_WAIT_S) -> None:
+        """Hand what is queued for the browsers to their connections now (viser otherwise gathers messages into
+        windows, and an atomic block started meanwhile holds them back with its own): waits until every open
+        connection has taken them, at most ``timeout_s``."""
+        with contextlib.suppress(Exception):
+            self.server.flush()
+            buffer = self.server._websock_server._broadcast_buffer  # viser's own; absent in another version
+            last = buffer.message_counter - 1
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end and any(c < last for c in list(buffer.generator_cursors.values())):
+                time.sleep(0.002)
+
     def _changed(self, group: str, key: Hashable) -> bool:
         if self._sent.get(group) == key:
             return False
@@ -165,7 +179,9 @@ class Views:
             self._check(gen)
         # what the 3D view shows of the new results (the SCOPs, the cloud's colours, the selection, the labels)
         # reaches the browser as ONE batch after the panels: a browser's WebGL redraws the whole view for each
-        # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first
+        # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first -- in a batch of their
+        # own (a batch without 3D nodes is applied at once; one with them waits for the next 3D frame)
+        self._send_queued()
         with self.server.atomic():
             for stage in ("cloud", "selection"):
                 t0 = time.perf_counter()
@@ -295,7 +311,12 @@ class Views:
         B, F = self._B, self._F  # noqa: N806
         scps, scops = self.model.scps(s), self.model.scops(s)
         if self._changed("scops", (self._frame_key(s), s.scop_density)):
-            self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
+            node = self.nodes.get("/points/scops")
+            if node is not None and getattr(self, "_scops_frame", None) is self.frame:
+                B.move_scops(node, self.frame, scops.ground)  # the same cloud on the new SCOPs (no new material)
+            else:
+                self._put("/points/scops", B.add_scops(self.server.scene, self.frame, scops.ground))
+                self._scops_frame = self.frame
         cm = s.color_method
         run = self.runs.get(cm) if cm else None
         ev = run.evaluation if run is not None else None
@@ -394,14 +415,25 @@ class Views:
 
     def _update_selection(self, s: Settings, gen: int | None) -> None:
         """The selected point, its scanline plane, ray and the colour method's search path."""
+        sel = self.model.selection(s, self.runs)
+        self.selection = sel
+        label = f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"
+        trace = None if sel.trace_rows is None else np.asarray(sel.trace_rows, dtype=np.float64).tobytes()
+        # keyed by what is drawn, not by the colour method's result: a SCOP change that leaves the worst point and
+        # its search path where they were sends nothing to the 3D view for them (the text below still follows)
+        if self._changed("selection", (self._frame_key(s), sel.ground.tobytes(), sel.exact_row, trace, label)):
+            self._draw_selection(s, sel, label)
+        self._selection_text(sel)
+        with self.quiet():
+            if sel.source != "image point":
+                self.handles["sel_row"].value = round(sel.exact_row * 2) / 2
+                self.handles["sel_col"].value = round(sel.exact_col * 2) / 2
+
+    def _draw_selection(self, s: Settings, sel: Selection, label: str) -> None:
+        """The selected point's 3D nodes: its scanline plane (with the first / middle / last), ray, label and the
+        colour method's search path."""
         B, m = self._B, self.model  # noqa: N806
         scene = m.scene(s)
-        sel = m.selection(s, self.runs)
-        self.selection = sel
-        run = self.runs.get(s.color_method) if s.color_method else None
-        ev_key = run.key if run is not None and run.ok else None
-        if not self._changed("selection", (self._frame_key(s), sel.ground.tobytes(), sel.method, ev_key)):
-            return
         rows = np.array([0.0, (scene.n_rows - 1) / 2.0, scene.n_rows - 1.0, sel.exact_row])
         h_mean = scene.terrain.mean_height
         heights = np.array([h_mean, h_mean, h_mean, sel.ground[2]])
@@ -420,13 +452,7 @@ class Views:
                 self.label_alternatives.update({f"/scanlines/labels/{i}": (ends[i, 1],)
                                                 for i, n in enumerate(names) if n})
             self._put("/selected", B.add_selection(
-                self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows,
-                label=f"selected: row {sel.exact_row:.2f}, col {sel.exact_col:.2f}"))
-        self._selection_text(sel)
-        with self.quiet():
-            if sel.source != "image point":
-                self.handles["sel_row"].value = round(sel.exact_row * 2) / 2
-                self.handles["sel_col"].value = round(sel.exact_col * 2) / 2
+                self.server.scene, drawn, self.frame, sel.ground, sel.exact_row, sel.trace_rows, label=label))
 
     def _update_sweep(self, s: Settings, gen: int | None) -> None:
         """Accuracy vs SCOP density: evaluate what is trained, queue the rest (low priority)."""

@@ -607,12 +607,24 @@ def add_points(
                                       precision="float32", point_shading="flat")}
 
 
+def scop_point_size_km(frame: DisplayFrame, n: int) -> float:
+    """The SCOP markers' size: 1.2 % of the footprint diagonal, smaller when they are many (30 % of their
+    spacing), so 1,000 SCOPs leave the ground visible."""
+    return min(point_size_km(frame, n, 0.3), 0.012 * frame.diagonal_km)
+
+
 def add_scops(api: viser.SceneApi, frame: DisplayFrame, ground_m: np.ndarray) -> Handles:
-    """SCOPs as gold points, node ``/points/scops``: 1.2 % of the footprint diagonal, smaller when they are
-    many (30 % of their spacing), so 1,000 SCOPs leave the ground visible."""
+    """SCOPs as gold points, node ``/points/scops`` (size :func:`scop_point_size_km`)."""
     return add_points(api, "/points/scops", frame, ground_m, SCOP_RGB,
-                      size_km=min(point_size_km(frame, len(ground_m), 0.3), 0.012 * frame.diagonal_km),
-                      shape="diamond")
+                      size_km=scop_point_size_km(frame, len(ground_m)), shape="diamond")
+
+
+def move_scops(handle: Any, frame: DisplayFrame, ground_m: np.ndarray) -> None:
+    """Put the SCOP cloud made by :func:`add_scops` on other SCOPs in place: only the points and their size are
+    sent (its single colour, its shape and so its material stay; a browser drawing WebGL in software re-links a
+    new cloud's shader program)."""
+    handle.points = frame.ground(np.asarray(ground_m, dtype=np.float64)).astype(np.float32)
+    handle.point_size = float(scop_point_size_km(frame, len(ground_m)))
 
 
 def add_selection(
@@ -679,7 +691,8 @@ __all__ = [
     "COMPRESSED_DISTANCE_FACTOR", "GROUND_NODES", "SCP_COVER", "VISER_POINT_SCALE",
     "DisplayFrame", "add_ground", "add_orbit", "add_points",
     "ground_mesh_nodes",
-    "add_scanline_planes", "add_scops", "triangle_texture", "PLANE_TEXTURE_PX", "add_selection", "attitude_samples",
+    "add_scanline_planes", "add_scops", "move_scops", "scop_point_size_km",
+    "triangle_texture", "PLANE_TEXTURE_PX", "add_selection", "attitude_samples",
     "footprint_mesh",
     "footprint_corners", "footprint_outline", "mesh_glb", "point_size_km", "quaternion_wxyz", "scanline_footprints",
     "scanline_planes", "scene_centre", "track_positions", "vertex_normals", "auto_height_exaggeration",
