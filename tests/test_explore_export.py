@@ -326,3 +326,33 @@ def test_cli_and_an_export_without_torch_methods_never_import_torch(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().splitlines()[-1] == "[]"
     assert (tmp_path / "e" / "residuals.csv").stat().st_size > 0
+
+
+def test_a_sweep_density_a_method_cannot_fit_is_named_with_its_reason(tmp_path, capsys):
+    """Issue 24 (never a silent gap): on the MPC resected from a Pleiades RPC (flat terrain), the sweep's 10 SCOPs
+    are a 2 x 5 grid on two image rows at one height, where prm's quadratic in the ground plane is not determined
+    -- checked here independently: the 6 monomials 1, x, y, x^2, xy, y^2 of the SCOPs' standardised ground
+    coordinates have a singular value ~1e-16 of the largest.  The sweep used to drop that density without a word;
+    now summary.json lists it with the fit's reason and the page's sweep panel names it.  Every other density is
+    there, and lrm (3 coefficients) fits at all of them."""
+    from explorer.app.model import SCOP_DENSITIES, ExplorerModel, Settings
+    from explorer.sources import load_source
+
+    files = _export(tmp_path, "asmpc", ["--rpc", str(RPC_PHR), "--as-mpc"], capsys, methods="lrm,prm")
+    summary = json.loads(files["summary.json"])
+    assert summary["accuracy_vs_scops_failed"] == {"prm": [{"n_scops": 10, "error": summary[
+        "accuracy_vs_scops_failed"]["prm"][0]["error"]}]}
+    assert "rank-deficient" in summary["accuracy_vs_scops_failed"]["prm"][0]["error"]
+    assert [e["n_scops"] for e in summary["accuracy_vs_scops"]["prm"]] == list(SCOP_DENSITIES[1:])
+    assert [e["n_scops"] for e in summary["accuracy_vs_scops"]["lrm"]] == list(SCOP_DENSITIES)
+    assert "prm: no point at 10 SCOPs (ValueError: prm: the control points do not determine" in \
+        files["panels.html"].decode()
+    # the independent check of the reason: the 10 SCOPs' layout
+    src = load_source("rpc", str(RPC_PHR), as_mpc=True)
+    model = ExplorerModel(preview_after_s=None, scenes={src.label: src.scene})
+    scops = model.scops(Settings(preset=src.label, scp_count=4000, methods=("prm",)), 10)
+    x, y, z = scops.ground.T
+    x, y = (x - x.mean()) / x.std(), (y - y.mean()) / y.std()
+    sv = np.linalg.svd(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), compute_uv=False)
+    assert np.unique(np.round(scops.row, 6)).size == 2 and np.unique(np.round(z, 3)).size == 1
+    assert sv[-1] < 1e-12 * sv[0]

@@ -9,13 +9,16 @@ then writes
   "methods": {name: {"rmse_row_px", "rmse_col_px", "max_row_px", "max_col_px", "n_valid", "n_invalid",
   "n_refused", "n_not_converged", "n_outside_image", "n_scops", "ce_per_point", "error", "warnings"}},
   "accuracy_vs_scops": {name: [{"n_scops", "rmse_px", "dr_max_px", "n_evaluated"}, ...]} or null,
+  "accuracy_vs_scops_failed": {name: [{"n_scops", "error"}, ...]} or null,
   "stand_in": {"model", "against", "rmse_row_px", ...} or null, "run_dependent": {file: why}}``: ``truth``
   names the sensor every residual is measured against (its own ground to image), ``stand_in`` the
   model-vs-model map of a file source (the MPC fitted to a CSM camera, the vendor RPC of a rigorous DIMAP / DG
   model, the RPC against its resected MPC with ``--as-mpc``) against it; a method the sensor cannot serve (a search
   method on an RPC, which has no scanlines) has ``"unavailable": reason`` and no numbers; ``accuracy_vs_scops``
   the GUI's accuracy-vs-SCOPs sweep (each method refitted at every density of
-  :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs);
+  :data:`explorer.app.model.SCOP_DENSITIES`, evaluated on the model's ``sweep_points`` SCPs), and
+  ``accuracy_vs_scops_failed`` the densities where a method could not be fitted or evaluated, with the reason
+  (they have no point in the sweep; the panel names them);
 * ``residuals.csv`` -- one row per check point per method (and per stand-in, method ``stand-in``):
   ``method, scp_index, row_px, col_px, row_residual_px, col_residual_px, status, x_m, y_m, z_m`` (the
   sensor's own image position of the SCP, estimated minus exact, empty where the method gave no answer;
@@ -242,12 +245,15 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     # the GUI's accuracy-vs-SCOPs panel: the same sweep (ExplorerModel.sweep), fits at every density
     t_sweep = time.perf_counter()
     sweeps: dict[str, list[Evaluation]] = {}
+    sweep_failed: dict[str, dict[int, str]] = {}
     for name in (s.methods if s.sweep else ()):
         def get_fit(density: int, name: str = name) -> FitRecord:
             return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(
                 name, s, density, purpose=SWEEP_PURPOSE)
 
-        sweeps[name] = model.sweep(name, s, get_fit=get_fit)
+        sweep_failed[name] = {}
+        sweeps[name] = model.sweep(name, s, get_fit=get_fit, failed=sweep_failed[name])
+    sweep_failed = {k: v for k, v in sweep_failed.items() if v}
     sweep_s = time.perf_counter() - t_sweep
     maps = dict(evaluations)
     map_status = dict(status)
@@ -269,6 +275,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
              "check_points": "simulated by the sensor's own image_to_ground on its terrain"}
     payload = {"source": source, "settings": settings, "truth": truth, "methods": summary,
                "accuracy_vs_scops": _sweep_summary(sweeps) if s.sweep else None,
+               "accuracy_vs_scops_failed": ({k: [{"n_scops": int(d), "error": e} for d, e in sorted(v.items())]
+                                             for k, v in sweep_failed.items()} if s.sweep else None),
                "stand_in": stand_in_summary, "run_dependent": dict(RUN_DEPENDENT)}
     timing_payload = {"methods": timing, "about": RUN_DEPENDENT[TIMING_JSON],
                       "sweep_s": float(sweep_s) if s.sweep else None,
@@ -290,7 +298,7 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     if sweeps:
         figs.append((f"Accuracy vs SCOP density (each method refitted at every density, evaluated on "
                      f"{min(model.sweep_points, len(scps)):,} check points)",
-                     F.accuracy_vs_density(sweeps, colors=colors)))
+                     F.accuracy_vs_density(sweeps, colors=colors, failed=sweep_failed)))
     if runs:
         figs.append(("Summary (every check point)", _markdown_html(summary_markdown(runs, len(scps)))))
     if evaluations:

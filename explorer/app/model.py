@@ -528,9 +528,13 @@ class ExplorerModel:
         return self._evals.get_or(key, make)
 
     def sweep(self, name: str, s: Settings, densities=SCOP_DENSITIES,
-              get_fit: Callable[[int], FitRecord | None] | None = None) -> list[Evaluation]:
+              get_fit: Callable[[int], FitRecord | None] | None = None,
+              failed: dict[int, str] | None = None) -> list[Evaluation]:
         """Evaluations of ``name`` at each SCOP density on ``sweep_points`` SCPs (one if it needs
-        no fit).  ``get_fit(density)`` may return None for a fit not ready yet (skipped)."""
+        no fit).  ``get_fit(density)`` may return None for a fit not ready yet (skipped).  A density whose
+        fit or evaluation failed (e.g. too few SCOPs to determine the model) has no evaluation; ``failed``,
+        when given, receives its reason (density -> error text), so the panel can say why its point is
+        missing."""
         cls = registry()[name]
         out = []
         for d in (densities if cls.needs_fit else densities[:1]):
@@ -540,6 +544,8 @@ class ExplorerModel:
             run = self.evaluate(name, s, max_points=self.sweep_points, density=d, fit=rec)
             if run.evaluation is not None:
                 out.append(run.evaluation)
+            elif failed is not None:
+                failed[d] = run.error or rec.error or "no evaluation"
         return out
 
     def selection(self, s: Settings, runs: dict[str, MethodRun]) -> Selection:

@@ -465,14 +465,18 @@ class Views:
             wanted |= {m.fit_key(n, s, d) for n, d in jobs}
             fits = self._get_fits(jobs, s, 1, self.fit_wait_s, gen)
             self._check(gen)
+            failed: dict[str, dict[int, str]] = {}
             for name in s.methods:
-                sweeps[name] = m.sweep(name, s, get_fit=lambda d, n=name: fits.get((n, d)))
+                failed[name] = {}
+                sweeps[name] = m.sweep(name, s, get_fit=lambda d, n=name: fits.get((n, d)), failed=failed[name])
                 self._check(gen)
+            failed = {k: v for k, v in failed.items() if v}
             sweep_key = (s.scene_key, tuple((n, tuple((e.n_scops, e.rmse_px, e.dr_max_px) for e in v))
-                                            for n, v in sweeps.items()))
+                                            for n, v in sweeps.items()), tuple(sorted(failed.items())))
             if self._changed("sweep", sweep_key):
                 self.sweeps = sweeps
-                self._set_figure("accuracy", F.accuracy_vs_density(sweeps, colors=F.method_colors(self.method_names)))
+                self._set_figure("accuracy", F.accuracy_vs_density(sweeps, colors=F.method_colors(self.method_names),
+                                                                   failed=failed))
         elif self._changed("sweep", ("off", bool(s.methods), self.methods_ready.is_set())):
             self.sweeps = {}
             self._set_figure("accuracy", F.empty_figure("sweep off" if s.methods else self._no_method_text()))

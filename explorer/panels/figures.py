@@ -479,12 +479,17 @@ def residual_maps(
     return go.Figure(data=data, layout=layout)
 
 
+_FAILED_NOTE_CHARS = 140
+"""Longest reason quoted per method in the accuracy-vs-SCOPs note (the summary has it whole)."""
+
+
 def accuracy_vs_density(
     sweep: Mapping[str, Sequence[Evaluation]],
     *,
     labels: Mapping[str, str] | None = None,
     marks: Sequence[int] = SCOP_MARKS,
     colors: Mapping[str, str] | None = None,
+    failed: Mapping[str, Mapping[int, str]] | None = None,
 ) -> go.Figure:
     """RMSE and dr_max per method against the number of SCOPs (log-log).
 
@@ -496,6 +501,9 @@ def accuracy_vs_density(
     labels, colors : mapping, optional
     marks : sequence of int
         The SCOP counts shown as x ticks.
+    failed : mapping of str to mapping of int to str, optional
+        Method name -> {SCOP count: reason} where the method could not be fitted or evaluated: those
+        counts have no point, and a note under the plot names each with its reason.
 
     Returns
     -------
@@ -535,9 +543,15 @@ def accuracy_vs_density(
             ))
     fig.add_hline(y=1.0, line={"dash": "dot", "color": "black"},
                   annotation_text="1 px (sub-pixel below)", annotation_position="top left")
+    notes = [f"{_label(n, labels)}: no point at {', '.join(f'{d:,}' for d in sorted(by))} SCOPs "
+             f"({by[min(by)][:_FAILED_NOTE_CHARS]})" for n, by in (failed or {}).items() if by]
+    if notes:
+        fig.add_annotation(text="<br>".join(notes), xref="paper", yref="paper", x=0.0, y=0.0, yshift=-42,
+                           xanchor="left", yanchor="top", showarrow=False, align="left", font={"size": 10})
     fig.update_xaxes(type="log", title_text="number of SCOPs", tickvals=list(marks))
     fig.update_yaxes(type="log", title_text="scanline error, px", exponentformat="power")
-    fig.update_layout(height=380, margin={"l": 60, "r": 10, "t": 30, "b": 40},
+    below = 14 * len(notes) + 10 if notes else 0  # the notes' lines under the axis title
+    fig.update_layout(height=380 + below, margin={"l": 60, "r": 10, "t": 30, "b": 40 + below},
                       legend={"font": {"size": 10}}, meta={"height_over_width": 0.8},
                       title={"text": "accuracy vs SCOP density (solid RMSE, dashed dr_max)",
                              "font": {"size": 12}})
