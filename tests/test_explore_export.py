@@ -339,6 +339,9 @@ def test_a_sweep_density_a_method_cannot_fit_is_named_with_its_reason(tmp_path, 
     from explorer.sources import load_source
 
     files = _export(tmp_path, "asmpc", ["--rpc", str(RPC_PHR), "--as-mpc"], capsys, methods="lrm,prm")
+    # a search method that is unavailable on the RPC itself (no scanlines) is no failure of the sweep
+    on_rpc = json.loads(_export(tmp_path, "rpc", ["--rpc", str(RPC_PHR)], capsys, methods="lrm,nr")["summary.json"])
+    assert "unavailable" in on_rpc["methods"]["nr"] and on_rpc["accuracy_vs_scops_failed"] == {}
     summary = json.loads(files["summary.json"])
     assert summary["accuracy_vs_scops_failed"] == {"prm": [{"n_scops": 10, "error": summary[
         "accuracy_vs_scops_failed"]["prm"][0]["error"]}]}

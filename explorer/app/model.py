@@ -544,8 +544,8 @@ class ExplorerModel:
             run = self.evaluate(name, s, max_points=self.sweep_points, density=d, fit=rec)
             if run.evaluation is not None:
                 out.append(run.evaluation)
-            elif failed is not None:
-                failed[d] = run.error or rec.error or "no evaluation"
+            elif failed is not None and not run.unavailable and (run.error or rec.error):
+                failed[d] = str(run.error or rec.error)
         return out
 
     def selection(self, s: Settings, runs: dict[str, MethodRun]) -> Selection:
