@@ -515,11 +515,15 @@ class Views:
 
     def _set_figure(self, key: str, fig: Any) -> None:
         h = self.handles[key]
-        h.figure = fig
         meta = fig.layout.meta
-        if isinstance(meta, dict) and "height_over_width" in meta:
-            # viser's client draws height = width * aspect (its docstring says width/height)
-            h.aspect = float(meta["height_over_width"])
+        # the figure and its height in one batch: the browser applies them in one render, one Plotly.react (sent
+        # apart, a new height -- the maps' legend grows or shrinks with the statuses shown -- drew the whole
+        # figure twice)
+        with self.server.atomic():
+            h.figure = fig
+            if isinstance(meta, dict) and "height_over_width" in meta:
+                # viser's client draws height = width * aspect (its docstring says width/height)
+                h.aspect = float(meta["height_over_width"])
 
     def _selection_text(self, sel: Selection) -> None:
         lines = [f"**{sel.source}**: row {sel.exact_row:.3f}, col {sel.exact_col:.3f}, height {sel.ground[2]:.1f} m"]
