@@ -451,6 +451,78 @@ def compare_twins(a: Path, b: Path, tol_px: float = 1e-6, tol_m: float = 1e-6) -
                   f"{moved or 'none'}"]
 
 
+_PAGE_STATE = """() => {
+  const gds = Array.from(document.querySelectorAll('.plotly-graph-div'));
+  const timing = gds[gds.length - 1];
+  return {figures: gds.length, drawn: gds.filter(gd => gd.querySelectorAll('.main-svg').length > 0).length,
+          images: gds[0].querySelectorAll('.heatmaplayer image, .hm image').length,
+          timing_x: timing.data[0].x, per_point: timing.data[1].y, fit: timing.data[0].y,
+          headings: Array.from(document.querySelectorAll('h2')).map(h => h.innerText.split(' ')[0])};
+}"""
+
+
+def check_pages(pages: list[Path]) -> dict[str, list[str]]:
+    """Each exported ``panels.html`` opened from disk in headless Chromium with the network cut (every request
+    that is not a local file is aborted and recorded): no request, no JavaScript error, every figure drawn, one
+    raster image per map, and the Timing panel filled from ``timing.js`` (a per-point time for every method of
+    ``timing.json``).  Returns the problems per page."""
+    from playwright.sync_api import sync_playwright
+
+    out: dict[str, list[str]] = {}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=["--headless", "--no-sandbox",
+                                                                               "--disable-gpu"])
+        for page_path in pages:
+            problems: list[str] = []
+            context = browser.new_context(viewport={"width": 1300, "height": 900}, offline=True)
+            requests: list[str] = []
+
+            def route(r, requests=requests) -> None:
+                if r.request.url.startswith(("file:", "data:", "blob:", "about:")):
+                    r.continue_()
+                else:
+                    requests.append(r.request.url)
+                    r.abort()
+
+            context.route("**/*", route)
+            page = context.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda exc, errors=errors: errors.append(str(exc)[:200]))
+            t0 = time.perf_counter()
+            page.goto(page_path.resolve().as_uri(), wait_until="load")
+            try:
+                page.wait_for_function("() => Array.from(document.querySelectorAll('.plotly-graph-div'))"
+                                       ".every(gd => gd.querySelectorAll('.main-svg').length > 0)", timeout=120_000)
+                page.wait_for_timeout(300)
+                opened_s = time.perf_counter() - t0
+                st = page.evaluate(_PAGE_STATE)
+            except Exception as exc:  # noqa: BLE001 -- reported, the next page is checked
+                problems.append(f"not drawn: {exc}"[:300])
+                context.close()
+                out[str(page_path)] = problems
+                continue
+            context.close()
+            timing = json.loads((page_path.parent / "timing.json").read_text())["methods"]
+            summary = json.loads((page_path.parent / "summary.json").read_text())
+            ran = [k for k, m in summary["methods"].items() if not m.get("unavailable")]
+            n_maps = 2 * len(ran) + (2 if summary.get("stand_in") else 0)
+            if requests or errors:
+                problems.append(f"network requests {requests[:3]}, JavaScript errors {errors[:3]}")
+            if st["drawn"] != st["figures"] or st["headings"][-1] != "Timing":
+                problems.append(f"{st['drawn']} of {st['figures']} figures drawn, headings {st['headings']}")
+            if st["images"] < n_maps:  # one raster per map, plus one per map with flagged points (their layer)
+                problems.append(f"{st['images']} map rasters drawn, {n_maps} maps")
+            filled = dict(zip(st["timing_x"], st["per_point"], strict=True))
+            for k in ran:
+                t = timing[k]
+                want = 1e6 * t["eval_s"] / t["n_evaluated"]
+                if filled.get(k) is None or abs(filled[k] - want) > 1e-9 * want:
+                    problems.append(f"Timing panel: {k} per point {filled.get(k)}, timing.json {want}")
+            out[str(page_path)] = problems + [f"opened in {opened_s:.2f} s"]
+        browser.close()
+    return out
+
+
 def run_case(case: Case, out_root: Path, extra: list[str], densities: tuple[int, ...]) -> dict:
     res: dict = {"name": case.name, "args": case.args, "note": case.note, "load_before": _load()}
     dirs = [out_root / case.name / x for x in ("a", "b")]
@@ -491,7 +563,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scps", type=int, default=None, help="fewer check points than the default (quicker)")
     ap.add_argument("--json", default=None)
     ap.add_argument("--list", action="store_true", help="list the cases and stop")
+    ap.add_argument("--browser", action="store_true",
+                    help="also open every export's panels.html in headless Chromium offline (check_pages)")
+    ap.add_argument("--pages", nargs="+", default=None,
+                    help="only open these exported panels.html in headless Chromium offline and check them")
     args = ap.parse_args(argv)
+    if args.pages:
+        checked = check_pages([Path(p) for p in args.pages])
+        bad = 0
+        for page, problems in checked.items():
+            bad += len(problems) > 1
+            print(f"{'FAIL' if len(problems) > 1 else 'ok  '} {page}: {'; '.join(problems)}", flush=True)
+        return 1 if bad else 0
     sys.path.insert(0, str(ROOT))
     from explorer.app.model import SCOP_DENSITIES
 
@@ -522,6 +605,15 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
         for p in res["problems"]:
             print(f"       - {p}", flush=True)
+    if args.browser:
+        pages = [work / "exports" / c.name / "a" / "panels.html" for c in cases
+                 if c.error is None and (work / "exports" / c.name / "a" / "panels.html").exists()]
+        for page, problems in check_pages(pages).items():
+            name = Path(page).parent.parent.name
+            results[name]["page"] = problems
+            results[name]["problems"] += problems[:-1]  # the last item is the time it took to open
+            print(f"{'FAIL' if len(problems) > 1 else 'ok  '} page {name}: {'; '.join(problems)}", flush=True)
+    failed = sum(bool(r["problems"]) for r in results.values())
     print(f"{len(cases) - failed} of {len(cases)} cases pass")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
