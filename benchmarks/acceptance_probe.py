@@ -18,6 +18,7 @@ Variants built (each from a real file; see :func:`build_cases`):
   package reads, written by GDAL (GeoTIFF RPC tags, a ``.RPB`` and an ``_RPC.TXT`` sidecar, via rasterio) and by
   hand (a GDAL VRT, an OSSIM ``.geom``, a DIMAP v2 XML with its validity boxes removed), 0-based and 1-based
   conventions (docs/conventions.md);
+* usgscsm's CTX ISD with the other lens distortion models (transverse, lrolrocnac, radtan);
 * every other RPC, DG XML and ISD of the repository's test data, exported with its defaults.
 
 Checks on each export (the issue's acceptance line, plus the "What to build" lines an export can show):
@@ -262,6 +263,23 @@ def build_rpcs(work: Path) -> dict[str, Path]:
     return out
 
 
+def build_isds(work: Path) -> dict[str, Path]:
+    """usgscsm's CTX ISD with the other lens distortion models usgscsm reads (small real-sized terms)."""
+    ctx = json.loads((DATA / "usgscsm" / "ctxLineScan.json").read_text())
+    models = {
+        "transverse": {"x": [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0],
+                       "y": [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-6]},
+        "lrolrocnac": {"coefficients": [1.81e-5]},
+        "radtan": {"coefficients": [-2e-3, 1e-5, 1e-5, -1e-5, 0.0]},
+    }
+    out = {}
+    for name, params in models.items():
+        ctx["optical_distortion"] = {name: params}
+        out[name] = work / f"ctx_{name}.json"
+        out[name].write_text(json.dumps(ctx))
+    return out
+
+
 def build_cases(work: Path) -> list[Case]:
     work.mkdir(parents=True, exist_ok=True)
     dems = build_dems(work)
@@ -308,6 +326,8 @@ def build_cases(work: Path) -> list[Case]:
     cases.append(Case("rpc-rpc_unsupported.xml", ["--rpc", str(RPC_DIR / "rpc_unsupported.xml")],
                       error="rpc_unsupported.xml"))
     cases.append(Case("dg-WV1", ["--dg", str(RPC_DIR / "rpc_WV1.xml")]))
+    for name, path in build_isds(work).items():
+        cases.append(Case(f"isd-ctx-{name}", ["--isd", str(path)], note=f"CTX with {name} distortion"))
     for f in ("usgscsm/ctxLineScan.json", "usgscsm/orbitalLineScan.json", "usgscsm/constVelocityLineScan.json",
               "ale/nhmvic_tdi_isd.json"):
         cases.append(Case(f"isd-{Path(f).stem}", ["--isd", str(DATA / f)]))
