@@ -408,6 +408,36 @@ def test_panels_html_opens_offline_and_is_deterministic(results):
             F.figures_html([], "export", scripts=[bad])
 
 
+def test_panels_html_keeps_the_arrays_exact_and_does_not_escape_base64():
+    """Issue 24 (pages under 5 MB on real files): plotly's HTML writer escapes every ``/`` as ``\\u002f`` (6 bytes
+    for 1), also inside the base64 of the arrays.  A map with many empty (NaN) cells -- a DEM covering two thirds
+    of a Pleiades image -- made a third of the probe's panels.html escapes (3.92 -> 4.67 MB).  The page now keeps
+    base64 unescaped; the arrays read back from the page, with Python's own JSON and base64 decoders, are the
+    figure's, bit for bit, NaN cells included; and no ``</script`` can appear inside them."""
+    import base64
+    import json
+    import re
+
+    import plotly.graph_objects as go
+
+    rng = np.random.default_rng(24)
+    z = rng.normal(size=(120, 150))
+    z[:, :70] = np.nan  # empty cells: NaN float64 bytes give a base64 '/' every 32 characters
+    fig = go.Figure(go.Heatmap(z=z, name="map"))
+    page = F.figures_html([("maps", fig)], "export")
+    written = fig.to_html(full_html=False, include_plotlyjs=False)
+    assert written.count("\\u002f") > 1000  # what plotly writes
+    assert "\\u002f" not in "".join(re.findall(r'"bdata":"([^"]*)"', page))
+    start = page.index("Plotly.newPlot(")
+    data, _ = json.JSONDecoder().raw_decode(page[page.index("[", start):])
+    (trace,) = data
+    enc = trace["z"]
+    shape = tuple(int(v) for v in str(enc["shape"]).strip("[]").split(","))
+    back = np.frombuffer(base64.b64decode(enc["bdata"]), dtype=np.dtype(enc["dtype"])).reshape(shape)
+    np.testing.assert_array_equal(back, z)  # NaN where NaN, every other value bit for bit
+    assert page.count("</script") == page.count("<script")
+
+
 def test_every_method_title_names_a_stand_in_truth_and_only_then(results):
     """``--as-mpc``: each method's map says its residuals are measured against the stand-in; the stand-in's
     own map (its error against the sensor) and maps against the sensor itself do not."""
