@@ -380,14 +380,18 @@ def check_export(a: Path, b: Path, stderr: str, densities: tuple[int, ...]) -> t
     if st and not (st.get("error") or _finite(st["rmse_row_px"], st["rmse_col_px"])):
         problems.append(f"stand-in not finite: {st}")
     sweep = summary.get("accuracy_vs_scops") or {}
+    named = {k: {e["n_scops"]: e["error"] for e in v} for k, v in (summary.get("accuracy_vs_scops_failed") or
+                                                                    {}).items()}
     for k, entries in sweep.items():
         if k not in ran or ran[k]["n_scops"] == 0:
             continue
         got = [e["n_scops"] for e in entries]
-        if got != list(densities):
-            problems.append(f"sweep {k}: SCOP counts {got}, not {list(densities)}")  # 2. (the sweep's counts)
+        # 2. (the sweep's counts): every density, or a density the method cannot fit, named with its reason
+        want = [d for d in densities if not named.get(k, {}).get(d)]
+        if got != want:
+            problems.append(f"sweep {k}: SCOP counts {got}, not {want}")
         if k == "mlp":
-            bad = [e["n_scops"] for e in entries if not _finite(e["rmse_px"])]
+            bad = [e["n_scops"] for e in entries if not _finite(e["rmse_px"])] + sorted(named.get(k, {}))
             if bad:
                 problems.append(f"mlp not finite in the sweep at {bad} SCOPs")
     if "mlp" in summary["methods"] and not sweep.get("mlp"):
@@ -430,6 +434,7 @@ def check_export(a: Path, b: Path, stderr: str, densities: tuple[int, ...]) -> t
                "methods": len(ran), "unavailable": sorted(set(summary["methods"]) - set(ran)),
                "dem_coverage": (summary["source"].get("dem_coverage") or {}).get("fraction"),
                "truth": summary.get("truth", {}).get("model"),
+               "sweep_failed": {k: sorted(v) for k, v in named.items()},
                "worst_rmse_px": max((max(m["rmse_row_px"], m["rmse_col_px"]) for m in ran.values()
                                      if _finite(m["rmse_row_px"], m["rmse_col_px"])), default=None)}
     return problems, figures
