@@ -213,6 +213,26 @@ def test_lighting_costs_a_software_webgl_browser_no_environment_map_and_no_shado
     assert len(ambient) == 1 and ambient[0].props.intensity > 0
 
 
+def test_maps_drawn_reports_are_read_and_an_update_without_a_browser_does_not_wait(server):
+    """The page's report (``drawn <revision>``, controls.DRAWN_SCRIPT) sets the newest revision drawn; other text is
+    ignored; each maps figure sent carries the next revision; with no browser open an update never waits for one."""
+    app = make_app(server)
+    rev = app.handles["maps"].figure.layout.meta["revision"]
+    assert rev >= 1 and app.maps_drawn == 0
+    app.handles["maps_drawn"].value = f"drawn {rev}"
+    assert app.maps_drawn == rev
+    app.handles["maps_drawn"].value = "not a report"
+    app.handles["maps_drawn"].value = "drawn 0"  # an older revision does not lower it
+    assert app.maps_drawn == rev
+    app.handles["density"].value = "30"
+    assert app.handles["maps"].figure.layout.meta["revision"] == rev + 1
+    app._maps_wait_rev = rev + 5  # never reported; no browser connected: the wait returns (not after an hour)
+    th = threading.Thread(target=app._wait_maps_drawn, args=(None, 3600.0), daemon=True)
+    th.start()
+    th.join(30)
+    assert not th.is_alive()
+
+
 def test_scene_nodes_and_counts(server):
     app = make_app(server)
     s = app.settings()

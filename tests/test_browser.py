@@ -690,3 +690,37 @@ def test_other_real_sources_are_framed_and_their_labels_are_apart(browser, tmp_p
     finally:
         stop.set()
         th.join(60)
+
+
+def test_the_page_reports_the_maps_it_drew_and_the_3d_view_follows(explorer, browser):
+    """Issue 24: the page types ``drawn <revision>`` into the hidden *Maps drawn* control once it has painted the maps
+    of that revision (``explorer.app.controls.DRAWN_SCRIPT``); an update sends its 3D part after that report (a
+    software-WebGL frame no longer comes between the maps' arrival and their drawing)."""
+    page = _open(browser, explorer.url)
+    uuid = explorer.handles["maps_drawn"]._impl.uuid
+    row_hidden = """(uuid) => {
+      let node = document.querySelector('label[for="' + uuid + '"]');
+      while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+      return node ? node.style.display === 'none' : null;
+    }"""
+    before = explorer.handles["density"].value
+    density = next(d for d in ("30", "50", "300") if d != before)
+    try:
+        explorer.handles["density"].value = density
+        assert explorer.wait_idle(120)
+        rev = explorer.handles["maps"].figure.layout.meta["revision"]
+        shown = """() => { const gd = document.querySelector('.js-plotly-plot');
+                           return gd && gd.layout && gd.layout.meta ? gd.layout.meta.revision : null; }"""
+        page.wait_for_function(f"() => ({shown})() === {rev}")
+        end = time.monotonic() + 60
+        while explorer.handles["maps_drawn"].value != f"drawn {rev}" and time.monotonic() < end:
+            time.sleep(0.05)
+        assert explorer.handles["maps_drawn"].value == f"drawn {rev}"
+        assert explorer.maps_drawn == rev
+        assert f"SCOPs ({len(explorer.model.scops(explorer.settings()))})" in page.locator(
+            ".js-plotly-plot").first.inner_text()
+        assert page.evaluate(row_hidden, uuid) is True  # the control is the page's, not the user's
+    finally:
+        explorer.handles["density"].value = before
+        assert explorer.wait_idle(120)
+        page.context.close()

@@ -69,10 +69,68 @@ CLICK_SCRIPT = r"""
 """
 
 
+DRAWN_SCRIPT = r"""
+(function () {
+  if (window.__pushbroomDrawn) { window.__pushbroomDrawn.uuid = '%(uuid)s'; return; }
+  const state = {uuid: '%(uuid)s', sent: null};
+  window.__pushbroomDrawn = state;
+  function row() {
+    const label = document.querySelector('label[for="' + state.uuid + '"]');
+    let node = label;
+    while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+    return node;
+  }
+  function report(gd) {
+    const meta = gd.layout && gd.layout.meta;
+    const rev = meta && meta.revision;
+    if (rev === undefined || rev === null || rev === state.sent) return;
+    const node = row();
+    const input = node ? node.querySelector('input') : null;
+    if (!input) return;
+    state.sent = rev;
+    /* after the next frame has painted them (a rAF callback runs before that frame's paint, a task after it) */
+    requestAnimationFrame(function () {
+      setTimeout(function () {
+        const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
+        setter.call(input, 'drawn ' + rev);
+        input.dispatchEvent(new Event('input', {bubbles: true}));
+      }, 0);
+    });
+  }
+  function attach() {
+    const node = row();
+    if (node && node.style.display !== 'none') node.style.display = 'none';
+    for (const gd of document.querySelectorAll('.js-plotly-plot')) {
+      if (typeof gd.on !== 'function') continue;
+      if (!gd.__pushbroomDrawn) {
+        gd.__pushbroomDrawn = true;
+        gd.on('plotly_afterplot', function () { report(gd); });
+      }
+      report(gd);  /* drawn before the listener was attached, or the control was not in the page yet */
+    }
+  }
+  setInterval(attach, 250);
+})();
+"""
+"""Tells the server which maps the page has drawn: after each Plotly drawing of a figure whose ``layout.meta`` has a
+``revision``, once the next frame has painted it, types ``drawn <revision>`` into the (hidden) text control ``uuid``
+(the handle ``maps_drawn``)."""
+
+
+def _script_html(script: str) -> str:
+    """HTML whose ``onerror`` runs ``script`` once the element is in the page."""
+    script = script.replace("\n", " ").replace('"', "&quot;")
+    return f'<img src="data:," alt="" style="display:none" onerror="{script}">'
+
+
 def click_bridge_html(uuid: str) -> str:
     """HTML whose ``onerror`` runs :data:`CLICK_SCRIPT` for the text control ``uuid``."""
-    script = (CLICK_SCRIPT % {"uuid": uuid}).replace("\n", " ").replace('"', "&quot;")
-    return f'<img src="data:," alt="" style="display:none" onerror="{script}">'
+    return _script_html(CLICK_SCRIPT % {"uuid": uuid})
+
+
+def drawn_bridge_html(uuid: str) -> str:
+    """HTML whose ``onerror`` runs :data:`DRAWN_SCRIPT` for the text control ``uuid``."""
+    return _script_html(DRAWN_SCRIPT % {"uuid": uuid})
 
 
 class ControlsHost(Protocol):
@@ -180,6 +238,10 @@ class Controls:
             h["sel_text"] = gui.add_markdown("")
         h["click_bridge"] = gui.add_html(click_bridge_html(h["pick"]._impl.uuid))
         h["cloud_text"] = gui.add_markdown("")
+        # the page reports here which maps it has drawn (its row hidden by the script): the 3D view's part of an
+        # update waits for it (explorer.app.views.Views.update)
+        h["maps_drawn"] = gui.add_text("Maps drawn", "", hint="set by the page: the revision of the maps it drew")
+        h["drawn_bridge"] = gui.add_html(drawn_bridge_html(h["maps_drawn"]._impl.uuid))
 
         self.panel = gui.add_panel()
         config = F.PLOTLY_CONFIG
@@ -294,4 +356,5 @@ class Controls:
         return int(m.group(1)) if m else None
 
 
-__all__ = ["CLICK_SCRIPT", "NO_DIFFERENCE", "Controls", "ControlsHost", "click_bridge_html", "color_options"]
+__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "Controls", "ControlsHost", "click_bridge_html",
+           "color_options", "drawn_bridge_html"]

@@ -206,6 +206,9 @@ class ExplorerApp(Views):
         self.handles: dict[str, Any] = self.controls.handles
         """The controls' handles by key (owned by :attr:`controls`)."""
         self.panel = self.controls.panel
+        self.maps_drawn = 0
+        """The newest maps revision (``layout.meta["revision"]``) a browser reported as drawn."""
+        self.handles["maps_drawn"].on_update(self.maps_drawn_reported)
         if compile_progress is not None:
             compile_progress.observers.append(self._show_compiling)
         self.server.scene.set_up_direction("+z")

@@ -30,6 +30,8 @@ from explorer.sources import stand_in_truth, table_coverage_text
 CANVAS_SETTLE_S = 10.0
 """A browser's canvas may still change shape (its panels docking) this long after it connected: its camera is
 reframed for the new shape even if its reports still carry an earlier pose."""
+MAPS_DRAWN_WAIT_S = 1.0
+"""At most this long an update waits for a browser to report its new maps drawn before it sends the 3D part."""
 SEND_WAIT_S = 0.1
 """How long an update waits for the browsers' connections to take the panels before it queues the 3D batch."""
 STATUS_NAME_CHARS = 48
@@ -143,6 +145,43 @@ class Views:
             while time.monotonic() < end and any(c < last for c in list(buffer.generator_cursors.values())):
                 time.sleep(0.002)
 
+    def maps_drawn_reported(self, _event: Any = None) -> None:
+        """The page typed ``drawn <revision>`` into the hidden *Maps drawn* control
+        (:data:`explorer.app.controls.DRAWN_SCRIPT`): a browser has drawn the maps of that revision."""
+        import re
+
+        m = re.fullmatch(r"drawn (\d+)", str(self.handles["maps_drawn"].value))
+        if m is None:
+            return
+        with self._lock:
+            self.maps_drawn = max(getattr(self, "maps_drawn", 0), int(m.group(1)))
+            self._lock.notify_all()
+
+    def _wait_maps_drawn(self, gen: int | None, timeout_s: float = MAPS_DRAWN_WAIT_S) -> None:
+        """Wait until an open browser reported the maps this update sent as drawn (at most ``timeout_s``; not at all
+        without a browser, nor when the update sent no maps, nor once a newer request arrived).
+
+        A browser without a GPU draws the 3D view in software: a frame takes 0.1-0.4 s of its page, and the maps
+        of a SCOP change sent beside the 3D nodes waited one or two such frames before Plotly drew them.  The 3D
+        part of the update follows the maps instead."""
+        rev = getattr(self, "_maps_wait_rev", None)
+        if rev is None:
+            return
+        try:
+            if not self.server.get_clients():
+                return
+        except Exception:
+            return
+        end = time.monotonic() + timeout_s
+        with self._lock:
+            while getattr(self, "maps_drawn", 0) < rev:
+                if (gen is not None and self._gen != gen) or getattr(self, "_closing", False):
+                    return
+                left = end - time.monotonic()
+                if left <= 0:
+                    return
+                self._lock.wait(left)
+
     def _changed(self, group: str, key: Hashable) -> bool:
         if self._sent.get(group) == key:
             return False
@@ -172,6 +211,7 @@ class Views:
         times: dict[str, float] = {}
         t_start = time.perf_counter()
         self._check(gen)
+        self._maps_wait_rev: int | None = None  # the maps this update sent, if any (_set_figure)
         for stage in ("scene", "methods", "panels"):
             t0 = time.perf_counter()
             getattr(self, f"_update_{stage}")(s, gen)
@@ -182,6 +222,8 @@ class Views:
         # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first -- in a batch of their
         # own (a batch without 3D nodes is applied at once; one with them waits for the next 3D frame)
         self._send_queued()
+        self._wait_maps_drawn(gen)
+        self._check(gen)
         with self.server.atomic():
             for stage in ("cloud", "selection"):
                 t0 = time.perf_counter()
@@ -516,6 +558,11 @@ class Views:
     def _set_figure(self, key: str, fig: Any) -> None:
         h = self.handles[key]
         meta = fig.layout.meta
+        if key == "maps":  # a revision the page reports once it has drawn them (maps_drawn_reported)
+            self._maps_revision = getattr(self, "_maps_revision", 0) + 1
+            meta = {**(meta if isinstance(meta, dict) else {}), "revision": self._maps_revision}
+            fig.layout.meta = meta
+            self._maps_wait_rev = self._maps_revision
         # the figure and its height in one batch: the browser applies them in one render, one Plotly.react (sent
         # apart, a new height -- the maps' legend grows or shrinks with the statuses shown -- drew the whole
         # figure twice)
