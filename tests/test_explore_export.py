@@ -359,3 +359,44 @@ def test_a_sweep_density_a_method_cannot_fit_is_named_with_its_reason(tmp_path, 
     sv = np.linalg.svd(np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y]), compute_uv=False)
     assert np.unique(np.round(scops.row, 6)).size == 2 and np.unique(np.round(z, 3)).size == 1
     assert sv[-1] < 1e-12 * sv[0]
+
+
+def test_check_points_an_rpc_rejects_on_its_dem_are_counted_and_explained(tmp_path, capsys):
+    """Issue 24 (found by benchmarks/acceptance_probe.py): the 2017 Pleiades DIMAP's own vendor RPC on its DEM kept
+    29,401 of 50,000 check points and said nothing (the DEM covers 100 % of the image).  The RPC's height range
+    is HEIGHT_OFF -+ HEIGHT_SCALE = 200 -+ 40 m (the file's ``RFM_Validity/Alt``, read here with ElementTree),
+    widened by the package's 10 % validity margin to 156..244 m, and 41 % of the terrain lies lower; those points
+    are rejected, not extrapolated, and now the summary and the page say how many and why.  Independent checks:
+    the kept points' ellipsoidal heights (pyproj, from the exported ECEF) are all inside the range read from the
+    XML, and the rigorous model's export on the same DEM and image grid has as many points outside it (within
+    1 %: the two models localise the grid 0.01 px apart)."""
+    import html
+    from xml.etree import ElementTree
+
+    from pyproj import Transformer
+
+    from explorer.rpc.model import VALIDITY_MARGIN
+
+    alt = ElementTree.parse(PHR_2017).getroot().find(".//Rational_Sensor_Model/Global_RFM/RFM_Validity/Alt")
+    offset, scale = float(alt.findtext("B")), float(alt.findtext("A"))
+    h_lo, h_hi = offset - (1 + VALIDITY_MARGIN) * scale, offset + (1 + VALIDITY_MARGIN) * scale  # 156..244 m
+    dem = ["--dem", str(DEM_2017), "--dem-datum", "egm96"]
+    rpc = json.loads((files := _export(tmp_path, "rpc", ["--rpc", str(PHR_2017), *dem], capsys, methods="lrm"))[
+        "summary.json"])
+    note = rpc["truth"]["check_points_left_out"]
+    m = re.match(r"([\d,]+) of ([\d,]+) check points .* outside the RPC's height range (\S+)\.\.(\S+) m\)", note)
+    assert m, note
+    left, simulated = (int(v.replace(",", "")) for v in m.groups()[:2])
+    assert (float(m.group(3)), float(m.group(4))) == (h_lo, h_hi) == (156.0, 244.0)
+    assert simulated - left == rpc["settings"]["scps_used"] and 0.3 < left / simulated < 0.5
+    assert html.escape(note) in files["panels.html"].decode()
+    to_geodetic = Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+    rows = list(csv.DictReader(files["residuals.csv"].decode().splitlines()))
+    h = to_geodetic.transform(*np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows]).T)[2]
+    assert h.min() >= h_lo - 1e-6 and h.max() <= h_hi + 1e-6
+    rigorous = _export(tmp_path, "dimap", ["--dimap", str(PHR_2017), *dem], capsys, methods="lrm")
+    summary = json.loads(rigorous["summary.json"])
+    assert summary["truth"]["check_points_left_out"] is None and summary["settings"]["scps_used"] == simulated
+    rows = [r for r in csv.DictReader(rigorous["residuals.csv"].decode().splitlines()) if r["method"] == "lrm"]
+    h = to_geodetic.transform(*np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows]).T)[2]
+    assert abs(int(((h < h_lo) | (h > h_hi)).sum()) - left) <= 0.01 * simulated

@@ -272,7 +272,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
                 "sweep_scps": int(model.sweep_points) if s.sweep else None}
     truth = {"model": source.get("truth", type(scene).__name__), "body": scene.body.to_dict(),
              "residuals": "estimated minus the sensor's own ground_to_image at each check point",
-             "check_points": "simulated by the sensor's own image_to_ground on its terrain"}
+             "check_points": "simulated by the sensor's own image_to_ground on its terrain",
+             "check_points_left_out": model.scp_note(s)}
     payload = {"source": source, "settings": settings, "truth": truth, "methods": summary,
                "accuracy_vs_scops": _sweep_summary(sweeps) if s.sweep else None,
                "accuracy_vs_scops_failed": ({k: [{"n_scops": int(d), "error": e} for d, e in sorted(v.items())]
@@ -318,6 +319,8 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         notes.append(table_coverage_text(source["table_coverage"]))
     if source.get("validity_note"):
         notes.append(f"RPC file: {source['validity_note']}")
+    if truth.get("check_points_left_out"):
+        notes.append(truth["check_points_left_out"])
     notes.append(f"Every file of this export is the same on every run with the same settings except "
                  f"{TIMING_JSON} and {TIMING_JS} (the measured times).")
     files["panels.html"] = F.figures_html(figs, "pushbroom explorer export", notes, scripts=[TIMING_JS]).encode()

@@ -342,6 +342,7 @@ class ExplorerModel:
         self._fits = _LRU(128)
         self._evals = _LRU(64, max_bytes=EVAL_CACHE_BYTES, weigh=run_nbytes)
         self._probes = _LRU(128)
+        self._scp_notes: dict[tuple, str | None] = {}
         self.counters: dict[str, int] = {"scene": 0, "scops": 0, "scps": 0, "fit": 0, "evaluate": 0}
         self.per_point_s: dict[tuple, float] = {}
         """Measured ground-to-image seconds per point by (method, params), from evaluations."""
@@ -375,8 +376,17 @@ class ExplorerModel:
         def make() -> PointSet:
             self.counters["scps"] += 1
             scene = self.scene(s)
-            return sensor_truth(scene, simulate_points(scene, int(s.scp_count), kind="scp", seed=self.seed))
+            notes: list[str] = []
+            kept = sensor_truth(scene, simulate_points(scene, int(s.scp_count), kind="scp", seed=self.seed), notes)
+            self._scp_notes[(s.scene_key, int(s.scp_count))] = notes[0] if notes else None
+            return kept
         return self._scps.get_or((s.scene_key, int(s.scp_count)), make)
+
+    def scp_note(self, s: Settings) -> str | None:
+        """Why check points simulated on the terrain were left out (the sensor rejected them), or None when
+        every one was kept (:func:`sensor_truth`)."""
+        self.scps(s)
+        return self._scp_notes.get((s.scene_key, int(s.scp_count)))
 
     # --------------------------------------------------------------- methods
     @staticmethod
@@ -588,9 +598,10 @@ class ExplorerModel:
         return sel
 
 
-def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
+def sensor_truth(scene: Any, scps: PointSet, notes: list[str] | None = None) -> PointSet:
     """The check points with the sensor's own ground to image as their exact (row, col) (the truth every
-    residual is measured against); points the sensor does not project onto its image are left out.  Points that
+    residual is measured against); points the sensor does not project onto its image are left out, and
+    ``notes`` (when given) receives how many and why (:func:`left_out_text`).  Points that
     carry the geodetic coordinates a sensor defined on them localised (an RPC: ``PointSet.geodetic``) are projected
     from those (:meth:`explorer.sensor.Sensor.project_geodetic`), not from their local ENU conversion."""
     if scps.geodetic is not None:
@@ -605,8 +616,41 @@ def sensor_truth(scene: Any, scps: PointSet) -> PointSet:
                          f"{getattr(scene, 'name', 'the sensor')!r} projects validly onto its image by the sensor's "
                          "own ground to image (its declared validity domain or image size rejects them all): "
                          "nothing can be measured")
+    if notes is not None and keep.size < len(scps):
+        notes.append(left_out_text(scene, scps, np.asarray(proj.valid, bool)))
     return PointSet(proj.row[keep], proj.col[keep], scps.ground[keep], scps.time[keep], scps.grid_shape,
                     None if scps.geodetic is None else scps.geodetic[keep])
+
+
+def left_out_text(scene: Any, scps: PointSet, valid: np.ndarray) -> str:
+    """The check points a sensor's own ground to image rejected, in words: how many, and for an RPC which part of
+    its domain they fall outside (its height range is ``HEIGHT_OFF -+ HEIGHT_SCALE`` unless the file declares one,
+    widened by :data:`explorer.rpc.model.VALIDITY_MARGIN`: a terrain lower or higher than the vendor's fit is
+    rejected there, not extrapolated)."""
+    n, k = len(valid), int(np.count_nonzero(~valid))
+    why = "outside its declared validity domain or off its image"
+    rpc = getattr(scene, "rpc", None)
+    if rpc is not None and scps.geodetic is not None:
+        from explorer.rpc.model import VALIDITY_MARGIN
+
+        lon, lat, h = scps.geodetic[~valid].T
+        d = rpc.domain  # the declared or normalisation bounds, which the RPC widens by VALIDITY_MARGIN x scale
+        mh, mlon, mlat = (VALIDITY_MARGIN * abs(v) for v in (rpc.height_scale, rpc.lon_scale, rpc.lat_scale))
+        h_lo, h_hi = d.h_min - mh, d.h_max + mh
+        parts = []
+        out_h = (h < h_lo) | (h > h_hi)
+        if out_h.any():
+            lo, hi = np.min(h[out_h]), np.max(h[out_h])
+            parts.append(f"{int(out_h.sum()):,} at ellipsoidal heights {lo:.0f}..{hi:.0f} m, outside the RPC's "
+                         f"height range {h_lo:g}..{h_hi:g} m")
+        out_box = ((lon < d.lon_min - mlon) | (lon > d.lon_max + mlon) | (lat < d.lat_min - mlat)
+                   | (lat > d.lat_max + mlat))
+        if out_box.any():
+            parts.append(f"{int(out_box.sum()):,} outside its longitude/latitude box")
+        if parts:
+            why = "; ".join(parts)
+    return (f"{k:,} of {n:,} check points simulated on the terrain ({100.0 * k / n:.1f} %) are left out: the "
+            f"sensor's own ground to image rejects them ({why}); the maps have no check point there")
 
 
 class _Recording:

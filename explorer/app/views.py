@@ -449,6 +449,9 @@ class Views:
                 notes.append(table_coverage_text(src.info["table_coverage"]).capitalize() + ".")
             if src.info.get("validity_note"):
                 notes.append(f"RPC file: {src.info['validity_note']}.")
+        left_out = self.model.scp_note(s)
+        if left_out:
+            notes.append(left_out.capitalize() + ".")
         self.handles["maps_note"].content = "  \n".join(f"*{t}*" for t in notes)
         text = summary_markdown(runs, len(scps))
         if pending:
