@@ -194,12 +194,17 @@ def run(args: argparse.Namespace) -> dict:
                 app.wait_idle(args.timeout)
                 runs = {n: (r.evaluation.n_evaluated if r.ok else 0) for n, r in app.runs.items()}
                 n_scps = len(app.model.scps(app.settings()))
+                stages = {k: float(v) for k, v in (getattr(app, "last_times", None) or {}).items()}
                 changes.append({"scops_chosen": d, "scops_shown": scops, "browser_s": dt,
-                                "app_update_s": app.last_update_s, "load": load, "rss_mib": _rss_mib(),
+                                "app_update_s": app.last_update_s, "app_stages_s": stages,
+                                "load": load, "rss_mib": _rss_mib(),
                                 "n_scps": n_scps, "evaluated": runs,
                                 "all_points": all(v == n_scps for v in runs.values())})
-                print(f"  SCOPs {d:>4} (shown {scops}): {dt:.2f} s in the browser, app {app.last_update_s:.2f} s, "
-                      f"load {load}, RSS {changes[-1]['rss_mib']:.0f} MiB, all points {changes[-1]['all_points']}",
+                wait = f" (of which {stages['maps_drawn_wait']:.2f} s waiting for the page's maps-drawn report)" \
+                    if "maps_drawn_wait" in stages else ""
+                print(f"  SCOPs {d:>4} (shown {scops}): {dt:.2f} s in the browser, app {app.last_update_s:.2f} s"
+                      f"{wait}, load {load}, RSS {changes[-1]['rss_mib']:.0f} MiB, "
+                      f"all points {changes[-1]['all_points']}",
                       flush=True)
             out["scop_change_summary"] = change_summary(changes)
             print("  SCOP changes: " + ", ".join(f"{c['browser_s']:.2f}" for c in changes)

@@ -206,7 +206,9 @@ class Views:
         -------
         dict
             Stage timings in seconds: scene, methods, cloud, panels, selection, total (the
-            scene and panels are up to date), sweep (accuracy-vs-density, after total).
+            scene and panels are up to date), sweep (accuracy-vs-density, after total);
+            maps_drawn_wait: how long the update waited for a browser to report its maps painted
+            (part of total; :meth:`_wait_maps_drawn`).
         """
         times: dict[str, float] = {}
         t_start = time.perf_counter()
@@ -221,8 +223,10 @@ class Views:
         # reaches the browser as ONE batch after the panels: a browser's WebGL redraws the whole view for each
         # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first -- in a batch of their
         # own (a batch without 3D nodes is applied at once; one with them waits for the next 3D frame)
+        t0 = time.perf_counter()
         self._send_queued()
         self._wait_maps_drawn(gen)
+        times["maps_drawn_wait"] = time.perf_counter() - t0  # the browser's time, not the app's
         self._check(gen)
         with self.server.atomic():
             for stage in ("cloud", "selection"):
