@@ -310,8 +310,11 @@ def _titles_when_complete(page, methods, scops: int, timeout: float = 240.0) -> 
     """The map titles once every method is drawn on all SCPs (no preview) with ``scops`` SCOPs."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        titles = page.evaluate(MAP_STATE)
-        text = page.locator(".js-plotly-plot").first.inner_text() if titles else ""
+        # titles and legend read in ONE evaluation: read apart, the page could draw the next figure in between
+        # (the titles of the 100-SCOP maps returned with the 50-SCOP legend)
+        state = page.evaluate(f"() => {{ const titles = ({MAP_STATE})(); const gd = document.querySelector("
+                              "'.js-plotly-plot'); return {titles: titles, text: gd ? gd.innerText : ''}; }")
+        titles, text = state["titles"], state["text"]
         if titles and all(any(t.startswith(f"{m} row: RMSE") and "all " in t for t in titles) for m in methods) \
                 and f"SCOPs ({scops})" in text:
             return titles
