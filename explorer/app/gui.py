@@ -43,6 +43,13 @@ DEBOUNCE_S = 0.25
 """A request waits until the controls have been still this long (a slider drag sends a value per
 frame; only the last is computed)."""
 
+BROWSER_CATCH_UP_S = 5.0
+"""After the first complete maps are sent, the held work (the long trainings, the accuracy sweep) waits until every
+open browser has taken in what was sent (:meth:`ExplorerApp._browsers_caught_up`), at most this long."""
+
+_CATCH_UP_KEY = "pushbroom-explorer-catch-up"
+"""The localStorage key read back from each browser by :meth:`ExplorerApp._browsers_caught_up` (never written)."""
+
 
 AMBIENT_INTENSITY = 1.2
 """The ambient light that stands in for the environment map on the few lit objects (the selected point's sphere,
@@ -544,5 +551,52 @@ class ExplorerApp(Views):
         if any(self.model.fit_key(n, s) not in fits.held for n in self.pending):
             return
         self.hold_long_fits = False
+        self._browsers_caught_up(BROWSER_CATCH_UP_S)
         fits.release()
+
+    def _browsers_caught_up(self, timeout_s: float) -> bool:
+        """Block until every open browser has taken in the messages sent so far, and drawn a frame after them.
+
+        A browser applies the server's messages in order, between the frames it draws; the first complete maps
+        and their 3D batch are several MB of figure and points for it to parse and draw (in software WebGL on a
+        machine without a GPU: seconds of CPU).  Work started on the same CPU before that (the long trainings:
+        torch imported, an MLP trained; the accuracy sweep) slowed the first maps on screen.  Each browser is
+        asked twice, in turn, for a localStorage value: its first answer comes when it has applied everything
+        sent before the question, the second one frame later.  Returns False when ``timeout_s`` passed, a newer
+        request arrived or the app closes (then it does not wait longer); True at once without browsers.  Only
+        when the held work starts depends on it, never what it computes.
+        """
+        try:
+            clients = list(self.server.get_clients().values())
+        except Exception:  # a server without clients (a test double): nothing to wait for
+            return True
+        clients = [c for c in clients if hasattr(c, "local_storage")]
+        if not clients:
+            return True
+        end = time.monotonic() + timeout_s
+        answered = threading.Event()
+
+        def ask() -> None:
+            try:
+                for _ in range(2):
+                    for client in clients:
+                        left = end - time.monotonic()
+                        if left <= 0:
+                            return
+                        with contextlib.suppress(Exception):  # a browser that left (or refuses localStorage)
+                            client.local_storage.get_item(_CATCH_UP_KEY, timeout=left)
+                answered.set()
+            finally:
+                with self._lock:
+                    self._lock.notify_all()
+
+        gen = self._gen
+        threading.Thread(target=ask, name="explorer-catch-up", daemon=True).start()
+        with self._lock:
+            while not answered.is_set() and self._gen == gen and not self._closing:
+                left = end - time.monotonic()
+                if left <= 0:
+                    break
+                self._lock.wait(left)
+        return answered.is_set()
 
