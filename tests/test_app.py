@@ -583,6 +583,72 @@ def test_long_trainings_start_once_the_first_maps_are_on_screen(server, monkeypa
         app.close()
 
 
+class _SlowBrowser:
+    """A browser double for :meth:`ExplorerApp._browsers_caught_up`: answers each localStorage question ``delay_s``
+    after it is asked (never, with ``delay_s=None``), recording when it was asked and when it answered."""
+
+    def __init__(self, delay_s: float | None) -> None:
+        self.delay_s = delay_s
+        self.asked: list[float] = []
+        self.answered: list[float] = []
+        self.local_storage = self
+
+    def get_item(self, key: str, timeout: float | None = None) -> str | None:
+        self.asked.append(time.monotonic())
+        if self.delay_s is None or (timeout is not None and timeout < self.delay_s):
+            time.sleep(timeout or 0.0)
+            raise TimeoutError("no answer")
+        time.sleep(self.delay_s)
+        self.answered.append(time.monotonic())
+        return None
+
+
+@pytest.mark.parametrize("delay_s", [0.6, None])
+def test_held_work_waits_until_the_browsers_have_taken_in_the_first_maps(server, monkeypatch, delay_s):
+    """The long trainings and the accuracy sweep start only once every open browser answered two questions asked
+    after the first complete maps were sent (it took them in and drew a frame after them), or, from a browser that
+    never answers, after BROWSER_CATCH_UP_S; what they compute is the same either way."""
+    from explorer.app import gui as gui_module
+
+    ToyLong.started.clear()
+    browser = _SlowBrowser(delay_s)
+    monkeypatch.setattr(ExplorerApp, "_open_browsers", lambda self: [browser])
+    monkeypatch.setattr(gui_module, "BROWSER_CATCH_UP_S", 1.5)
+    shown: list[float] = []
+    real_shown = ExplorerApp._maps_shown
+
+    def spy(self, s):
+        if "toy_poly" in self.runs and not shown:
+            shown.append(time.monotonic())
+        real_shown(self, s)
+
+    monkeypatch.setattr(ExplorerApp, "_maps_shown", spy)
+    sweeps: list[float] = []
+    real_sweep = ExplorerModel.sweep
+
+    def sweep_spy(self, *a, **kw):
+        sweeps.append(time.monotonic())
+        return real_sweep(self, *a, **kw)
+
+    monkeypatch.setattr(ExplorerModel, "sweep", sweep_spy)
+    app = make_app(server, methods=("toy_poly", "toy_long"), background=True, fit_wait_s=0.2, sweep=True)
+    try:
+        assert app.wait_idle(timeout=60)
+        assert app.runs["toy_long"].ok and app.runs["toy_poly"].ok and not app.pending
+        assert shown and ToyLong.started and sweeps  # the training at the shown SCOP count, the sweep's at the others
+        if delay_s is not None:  # two questions, the second asked after the first answer
+            assert len(browser.answered) == 2 and browser.asked[1] >= browser.answered[0]
+            assert browser.asked[0] >= shown[0]
+            start = browser.answered[1]
+        else:  # no answer: the held work starts when the wait is over
+            assert browser.answered == []
+            start = shown[0] + 1.5
+        assert min(ToyLong.started) >= start and min(sweeps) >= start
+        assert not app.fits.held and not app.hold_long_fits
+    finally:
+        app.close()
+
+
 def test_long_trainings_wait_while_a_preview_is_on_screen(server, monkeypatch):
     """Maps shown as a preview are not complete: its full evaluation runs on the fit threads, and a long training
     beside it would slow it; the training starts once the full maps are drawn."""

@@ -566,11 +566,7 @@ class ExplorerApp(Views):
         request arrived or the app closes (then it does not wait longer); True at once without browsers.  Only
         when the held work starts depends on it, never what it computes.
         """
-        try:
-            clients = list(self.server.get_clients().values())
-        except Exception:  # a server without clients (a test double): nothing to wait for
-            return True
-        clients = [c for c in clients if hasattr(c, "local_storage")]
+        clients = self._open_browsers()
         if not clients:
             return True
         end = time.monotonic() + timeout_s
@@ -599,4 +595,12 @@ class ExplorerApp(Views):
                     break
                 self._lock.wait(left)
         return answered.is_set()
+
+    def _open_browsers(self) -> list[Any]:
+        """The browsers connected now that can answer a localStorage question (viser's ``ClientHandle``)."""
+        try:
+            clients = list(self.server.get_clients().values())
+        except Exception:  # a server double without clients: nothing to wait for
+            return []
+        return [c for c in clients if hasattr(c, "local_storage")]
 

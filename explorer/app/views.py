@@ -255,6 +255,12 @@ class Views:
         t0 = time.perf_counter()
         self._update_sweep(s, gen)
         times["sweep"] = time.perf_counter() - t0
+        if any(self.model.cached_fit(n, s) is not None for n in self.pending):
+            # a training shown as pending landed while the sweep waited for it (the sweep at the shown SCOP count
+            # shares its fit; a fit the update waits for redraws nothing when it lands): show it
+            with self._lock:
+                self._gen += 1
+                self._lock.notify_all()
         self.last_times = times
         busy = self.fits is not None and self.fits.busy
         self._status(self._done_text(self.runs, self.pending, scps) + (" (training in the background)" if busy else ""),
