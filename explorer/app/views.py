@@ -229,7 +229,7 @@ class Views:
         times["maps_drawn_wait"] = time.perf_counter() - t0  # the browser's time, not the app's
         self._check(gen)
         with self.server.atomic():
-            for stage in ("cloud", "selection"):
+            for stage in ("frame", "cloud", "selection"):
                 t0 = time.perf_counter()
                 getattr(self, f"_update_{stage}")(s, gen)
                 times[stage] = time.perf_counter() - t0
@@ -268,14 +268,22 @@ class Views:
         return times
 
     def _update_scene(self, s: Settings, gen: int | None) -> None:
-        """Scene, SCOPs and SCPs; ground (DEM mesh), orbit and camera on a new scene / frame."""
-        B, m = self._B, self.model  # noqa: N806
+        """Scene, SCOPs and SCPs (the 3D view's ground, orbit and camera: :meth:`_update_frame`)."""
+        m = self.model
         self._status(f"building scene {status_name(s.preset)}", 2)
         scene = m.scene(s)
         self._check(gen)
         m.scops(s)
         m.scps(s)
         self.scene = scene
+
+    def _update_frame(self, s: Settings, gen: int | None) -> None:
+        """The 3D view's frame on a new scene / frame: ground (DEM mesh), orbit and camera.
+
+        Drawn in the 3D batch after the panels: the maps do not need it, and for a sensor without scanlines the
+        drawn scene is an MPC fitted first (:meth:`_drawn_scene`, tenths of a second)."""
+        B, m = self._B, self.model  # noqa: N806
+        scene = m.scene(s)
         frame_key = self._frame_key(s)
         if self._changed("frame", frame_key):
             drawn = self._drawn_scene(s)  # the sensor, or for one without scanlines (an RPC) an MPC fitted to it
