@@ -174,7 +174,8 @@ def run_case(name: str, page, args: argparse.Namespace, port: int) -> dict:
     out["compile_lines"] = len(compiled)
     print(f"  {name:>14}: command->URL {out['command_to_url_s']:.2f} s (load {out['load_start']}; CPU "
           f"{out['cpu_to_url_s']:.2f} s), URL->maps {out['first_maps_s']:.2f} s (load {out['maps_load']}; the "
-          f"command's CPU {out['cpu_url_to_maps_s']:.2f} s, the browser's {out['browser_cpu_url_to_maps_s']:.2f} s), whole {out['command_to_maps_s']:.2f} s"
+          f"command's CPU {out['cpu_url_to_maps_s']:.2f} s, the browser's {out['browser_cpu_url_to_maps_s']:.2f} s), "
+          f"whole {out['command_to_maps_s']:.2f} s"
           + (f"  [compiled kernels: {len(compiled)} lines]" if compiled else ""), flush=True)
     return out
 

@@ -229,7 +229,7 @@ class ExplorerApp(Views):
             self.fits = FitPool(self._lock, self._fit_done)
             self._worker = threading.Thread(target=self._work, name="explorer-worker", daemon=True)
             self._worker.start()
-            self.request_update()
+            self.request_update(debounce=False)  # no slider moves yet: nothing to wait for
             threading.Thread(target=self._discover_methods, args=(wanted,), name="explorer-discover",
                              daemon=True).start()
         else:
@@ -268,7 +268,7 @@ class ExplorerApp(Views):
             self.controls.set_mlp_defaults(control_default("layers", order, 1), control_default("neurons", order, 10))
         h["methods_note"].content = ("" if not err else f"*some method modules failed to load: {err}*")
         self.method_names = names
-        self._methods_gen = self.request_update()
+        self._methods_gen = self.request_update(debounce=False)
         self.methods_ready.set()
 
     def wait_methods(self, timeout: float = 120.0) -> int:
