@@ -588,6 +588,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scps", type=int, default=None, help="fewer check points than the default (quicker)")
     ap.add_argument("--json", default=None)
     ap.add_argument("--list", action="store_true", help="list the cases and stop")
+    ap.add_argument("--keep", action="store_true", help="keep the first export's residuals.csv of every case")
     ap.add_argument("--browser", action="store_true",
                     help="also open every export's panels.html in headless Chromium offline (check_pages)")
     ap.add_argument("--pages", nargs="+", default=None,
@@ -640,6 +641,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{'FAIL' if len(problems) > 1 else 'ok  '} page {name}: {'; '.join(problems)}", flush=True)
     failed = sum(bool(r["problems"]) for r in results.values())
     print(f"{len(cases) - failed} of {len(cases)} cases pass")
+    if not args.keep:  # ~120 MB each at the default 50,000 SCPs (the other files stay for a look)
+        for c in cases:
+            (work / "exports" / c.name / "a" / "residuals.csv").unlink(missing_ok=True)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(results, indent=1, sort_keys=True))
