@@ -154,6 +154,13 @@ class ANNMethod(ThreeStageMethod):
     max_val_rmse_px : float
         Validation RMSE above which the training missed its accuracy goal (1.0 px): ``fit_info["converged"]``
         False, one log line, the map's title; its best model still answers (as ``mlp``).
+    goal_px : float
+        Training RMSE at which the training stops (1e-6 px).  With few SCOPs the network has more weights
+        than training points and fits them exactly: without a goal it went on to the targets' float64
+        rounding (~1e-14 px), where each step is decided by the last bits of the arithmetic, and two
+        trainings on the same SCOPs in one process ended at different epochs with maps that differed in
+        the 9th digit (usgscsm's orbital ISD at 30 SCOPs).  1e-6 px is far below anything a map shows
+        and far above that rounding (~1e-12 px at 10,000 rows).
     use_height, seed, train_fraction, domain_margin, height_tolerance_m
         See :class:`ThreeStageMethod`.
     """
@@ -161,14 +168,15 @@ class ANNMethod(ThreeStageMethod):
     name = "ann"
     label = "ANN-BSD"
     reference = REFERENCE_2021
-    EXTRA = {"neurons": 10, "max_epochs": 200, "max_fail": 6, "device": "cpu", "max_val_rmse_px": 1.0}
+    EXTRA = {"neurons": 10, "max_epochs": 200, "max_fail": 6, "device": "cpu", "max_val_rmse_px": 1.0,
+             "goal_px": 1e-6}
 
     def _fit_error_model(self, u: np.ndarray, dr: np.ndarray) -> None:
         p = self.params
         self.network, info = fit_network(
             u, dr, (int(p["neurons"]),), name=self.name, seed=p["seed"],
             train_fraction=p["train_fraction"], max_epochs=p["max_epochs"], max_fail=p["max_fail"],
-            device=p["device"],
+            device=p["device"], goal_rmse=float(p["goal_px"]),
         )
         info["train_rmse_px"] = info.pop("train_rmse")
         info["val_rmse_px"] = info.pop("val_rmse")
