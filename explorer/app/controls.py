@@ -117,6 +117,61 @@ DRAWN_SCRIPT = r"""
 (the handle ``maps_drawn``)."""
 
 
+PLOTLY_SIZE_SCRIPT = r"""
+(function () {
+  if (window.__pushbroomPlotlySize) return;
+  window.__pushbroomPlotlySize = true;
+  function wrap(P) {
+    if (!P || typeof P.react !== 'function' || P.react.__pushbroomSized) return P;
+    const react = P.react;
+    function same(a, b) {
+      const ka = Object.keys(a), kb = Object.keys(b);
+      return ka.length === kb.length && ka.every(function (k) { return a[k] === b[k]; });
+    }
+    const sized = function (gd, data, layout, config) {
+      const last = gd && gd.__pushbroomSized;
+      if (gd) gd.__pushbroomSized = null;
+      /* the component's second call, once measured: the figure already drawn at that size */
+      if (last && last.data === data && last.config === config && layout && same(last.layout, layout)) {
+        return Promise.resolve(gd);
+      }
+      const hw = layout && layout.meta && layout.meta.height_over_width;
+      const box = gd && gd.parentElement;
+      if (layout && layout.width === 0 && typeof hw === 'number' && hw > 0 && box) {
+        const w = box.getBoundingClientRect().width;
+        if (w > 0) {
+          layout = Object.assign({}, layout, {width: w, height: w * hw});
+          gd.__pushbroomSized = {data: data, layout: layout, config: config};
+        }
+      }
+      return react.call(this, gd, data, layout, config);
+    };
+    sized.__pushbroomSized = true;
+    P.react = sized;
+    return P;
+  }
+  if (window.Plotly) { wrap(window.Plotly); return; }
+  const before = Object.getOwnPropertyDescriptor(window, 'Plotly');  /* another hook's: kept, fed the wrapped one */
+  let plotly;
+  Object.defineProperty(window, 'Plotly', {configurable: true, enumerable: true,
+    get: before && before.get ? before.get : function () { return plotly; },
+    set: before && before.set ? function (v) { before.set.call(window, wrap(v)); }
+                              : function (v) { plotly = wrap(v); }});
+})();
+"""
+"""Draws a figure viser's Plotly component mounts before it measured its box at the box's size at once.
+
+The component first calls ``Plotly.react`` with ``width`` 0 (its size not yet measured) and again once its
+``ResizeObserver`` reported the box: a 1.4 MB maps figure was drawn twice, the second time (0.15-0.35 s in software,
+after the 3D view's first frame) inside the first SCOP change after loading.  For a figure whose ``layout.meta`` has
+``height_over_width`` (the explorer's figures; the handle's ``aspect`` is set from it), a call with width 0 uses the
+box's width (the component's ``Paper``: the plot's parent element, what the observer reports) and that height; the
+component's second call then asks for the same figure (the same ``data`` and ``config`` objects, every layout entry
+the same) at that size and is answered without a redraw (Plotly's own ``react`` re-decodes the base64 arrays and
+redraws the whole figure even then: 0.3 s).  Runs before plotly.min.js
+(a setter on ``window.Plotly``) or wraps it when already loaded."""
+
+
 def _script_html(script: str) -> str:
     """HTML whose ``onerror`` runs ``script`` once the element is in the page."""
     script = script.replace("\n", " ").replace('"', "&quot;")
@@ -245,6 +300,10 @@ class Controls:
 
         self.panel = gui.add_panel()
         config = F.PLOTLY_CONFIG
+        with contextlib.suppress(Exception):  # viser's own message; before the first figure (and plotly.min.js)
+            from viser._messages import RunJavascriptMessage
+
+            gui._websock_interface.queue_message(RunJavascriptMessage(source=PLOTLY_SIZE_SCRIPT))
         with self.panel.add_tab("Residual maps"):
             h["maps"] = gui.add_plotly(F.empty_figure("computing..."), aspect=0.5, config=config)
             h["maps_note"] = gui.add_markdown("")
@@ -356,5 +415,5 @@ class Controls:
         return int(m.group(1)) if m else None
 
 
-__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "Controls", "ControlsHost", "click_bridge_html",
-           "color_options", "drawn_bridge_html"]
+__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "Controls", "ControlsHost",
+           "click_bridge_html", "color_options", "drawn_bridge_html"]
