@@ -726,3 +726,65 @@ def test_the_page_reports_the_maps_it_drew_and_the_3d_view_follows(explorer, bro
         explorer.handles["density"].value = before
         assert explorer.wait_idle(120)
         page.context.close()
+
+
+PLOTLY_DRAWS = """
+window.__plotlyDraws = [];
+(function () {
+  /* every Plotly.react that reaches Plotly lays the figure out anew: a new gd._fullLayout object */
+  const seen = new WeakSet();
+  let plotly;
+  Object.defineProperty(window, 'Plotly', {configurable: true, enumerable: true, get: function () { return plotly; },
+    set: function (v) {
+      if (v && v.react && !v.__counted) {
+        const react = v.react;
+        v.react = function (gd) {
+          const out = react.apply(this, arguments);
+          const fl = gd && gd._fullLayout;
+          if (fl && !seen.has(fl)) {
+            seen.add(fl);
+            window.__plotlyDraws.push(fl.meta && fl.meta.revision !== undefined ? fl.meta.revision : null);
+          }
+          return out;
+        };
+        v.__counted = true;
+      }
+      plotly = v;
+    }});
+})();
+"""
+
+
+def test_maps_a_page_opens_after_they_were_computed_are_drawn_once_at_their_size(explorer, browser):
+    """Issue 24 (the first SCOP change after loading): viser's Plotly component mounts a figure before it has measured
+    its box and draws it at width 0, then again once measured -- a whole maps figure drawn twice, the second time
+    inside the first SCOP change.  A page opened after the maps were computed (the app idle, as here) lays them out
+    once (Plotly makes a new ``_fullLayout`` for each drawing; counted per ``meta.revision``), at its box's width and
+    ``aspect`` height."""
+    assert explorer.wait_idle(120)
+    rev = explorer.handles["maps"].figure.layout.meta["revision"]
+    aspect = float(explorer.handles["maps"].aspect)
+    context = browser.new_context(viewport={"width": 1400, "height": 900})
+    context.add_init_script(PLOTLY_DRAWS)
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    try:
+        page.goto(explorer.url)
+        page.wait_for_function(BIG_CANVAS)
+        page.wait_for_function(f"""() => {{ const gd = document.querySelector('.js-plotly-plot');
+            return gd && gd.layout && gd.layout.meta && gd.layout.meta.revision === {rev}; }}""")
+        _wait_drawn(page)  # the 3D view's first frames are done: the component has long measured its box
+        end = time.monotonic() + 60
+        while explorer.handles["maps_drawn"].value != f"drawn {rev}" and time.monotonic() < end:
+            time.sleep(0.05)
+        time.sleep(1.0)
+        draws = page.evaluate("window.__plotlyDraws")
+        size = page.evaluate("""() => { const gd = document.querySelector('.js-plotly-plot');
+            return [gd._fullLayout.width, gd._fullLayout.height, gd.parentElement.getBoundingClientRect().width]; }""")
+    finally:
+        context.close()
+    assert draws.count(rev) == 1, draws
+    width, height, box = size
+    assert box > 100
+    assert width == pytest.approx(box, abs=1e-6)
+    assert height == pytest.approx(box * aspect, abs=1e-6)
