@@ -944,6 +944,73 @@ def test_reset_view_frames_every_client_on_the_footprint(server):
     assert max(footprint_share(corners, Pose)) >= 0.5
 
 
+def test_two_camera_reports_at_once_leave_the_browser_at_the_pose_recorded_for_it(server):
+    """Issue 24 (a CTX ISD's browser test failed under load): viser runs each camera report's callback in a pool
+    thread of its own. The call for the first report (the wide canvas, before the panels docked) computes its
+    pose; the call for the next report (the docked canvas) runs meanwhile. The browser must end at the pose the
+    app recorded for it, framed for the docked canvas: interleaved, the docked pose went out first and the wide
+    one last, and a young browser at neither pose was never framed again. A fake browser: what it receives is
+    kept apart from what it reports."""
+    from explorer.scene3d.camera import VIEW_FOV_Y, frame_footprint
+
+    app = make_app(server)
+    pos0, look0, _ = app.camera_pose
+    in_first, second_sent = threading.Event(), threading.Event()
+
+    class Camera:
+        def __init__(self) -> None:
+            self.image_width, self.image_height, self.fov = 1400, 900, VIEW_FOV_Y  # before the panels dock
+            self.reported = {"position": np.array(pos0), "look_at": np.array(look0)}  # the server's initial camera
+            self.received: list[tuple] = []  # the poses sent to the browser, in order
+            self.far = self.near = None
+
+        position = property(lambda self: self.reported["position"],
+                            lambda self, v: self.received.append(("position", tuple(v))))
+        look_at = property(lambda self: self.reported["look_at"],
+                           lambda self, v: self.received.append(("look_at", tuple(v))))
+
+    class Client:
+        client_id = 7
+
+        def __init__(self) -> None:
+            self.camera, self.calls = Camera(), 0
+
+        @contextlib.contextmanager
+        def atomic(self):
+            self.calls += 1
+            if self.calls == 1:  # the first report's call, its pose computed: the second report's call runs now
+                in_first.set()
+                second_sent.wait(2.0)  # (serialised, it cannot send before this one: wait no longer than that)
+            yield
+            if self.calls >= 2:
+                second_sent.set()
+
+    client = Client()
+    server.get_clients = lambda: {7: client}
+    app._client_since[7] = time.monotonic()  # just connected
+    first = threading.Thread(target=app._client_camera_reported, args=(client,))
+    first.start()
+    assert in_first.wait(30)
+    client.camera.image_width = 512  # the panels docked: the next report, still at the initial camera
+    second = threading.Thread(target=app._client_camera_reported, args=(client,))
+    second.start()
+    first.join(30)
+    second.join(30)
+    assert not first.is_alive() and not second.is_alive()
+    # the truth: the footprint framed for the docked canvas, computed here from the app's framing
+    ground, track, _ = app._framing
+    want = frame_footprint(ground, track, aspect=512 / 900, fov_y=VIEW_FOV_Y)
+    sent = dict(client.camera.received[-2:])  # the last pose the browser received
+    assert np.allclose(sent["position"], want.position) and np.allclose(sent["look_at"], want.look_at)
+    assert np.allclose(app.client_poses[7][0], want.position)  # the pose recorded as this browser's
+    assert app._framed_clients[7][1] == pytest.approx(512 / 900)
+    # and the browser, now reporting that pose for that canvas, is left there
+    client.camera.reported = {"position": np.array(sent["position"]), "look_at": np.array(sent["look_at"])}
+    n = len(client.camera.received)
+    app._client_camera_reported(client)
+    assert len(client.camera.received) == n
+
+
 def test_controls_reach_the_app_through_its_public_methods_only(server):
     """Issue 23: the controls own their handles and call only the host's public methods (a host that has
     nothing else receives every request)."""

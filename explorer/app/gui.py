@@ -166,6 +166,10 @@ class ExplorerApp(Views):
         """Per browser (client id): (position, look_at, far, near) of its last framing, for its own canvas."""
         self._framed_clients: dict[Any, tuple] = {}
         self._client_since: dict[Any, float] = {}
+        self._camera_lock = threading.RLock()
+        """Held while a framing is decided and sent: viser runs each camera report's callback in its own pool
+        thread, and two of them interleaved sent a browser two poses in the other order
+        (:meth:`_client_camera_reported`)."""
         self.label_layout: dict[str, Any] = {}
         """Per 3D label: (anchor, box px, point), the box in the first view laid out (the first open browser's,
         else the default canvas's; :meth:`_label_views`), None when hidden."""

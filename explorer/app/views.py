@@ -102,6 +102,7 @@ class Views:
         label_alternatives: dict[str, tuple]
         _framed_clients: dict[Any, tuple]
         _client_since: dict[Any, float]
+        _camera_lock: Any
         _framing: tuple[np.ndarray, np.ndarray, np.ndarray | None]
         exports: int
         fits: Any
@@ -755,8 +756,16 @@ class Views:
     def _client_camera_reported(self, client: Any) -> None:
         """A browser's camera reported (its canvas size among it): frame the footprint for that canvas once
         per scene, and again when the canvas changes shape (the panels dock after the first report) while
-        the camera is still where the framing put it -- once the user has moved it, it is left alone."""
-        with contextlib.suppress(Exception):
+        the camera is still where the framing put it -- once the user has moved it, it is left alone.
+
+        viser calls this in a pool thread per report, so two reports' calls can run at once: the decision, the
+        pose and its sending are one step under ``_camera_lock``. Interleaved (seen under load, a CTX ISD's
+        browser test), the call for the first report (the wide canvas before the panels docked) computed its pose,
+        the call for the next (the docked canvas) computed and sent its own, recorded as this browser's, and
+        then the first one's pose went out last: the browser stayed at a pose that was neither the recorded one
+        nor the initial camera, which a young browser's reports may carry, so nothing framed it again."""
+        framed = False
+        with contextlib.suppress(Exception), self._camera_lock:
             cam = client.camera
             w, h = float(cam.image_width), float(cam.image_height)
             if self.camera_pose is None or not (w > 0 and h > 0):
@@ -780,7 +789,10 @@ class Views:
                     return
             self._framed_clients[client.client_id] = (key, w / h)
             self._apply_camera([client])
-            self._layout_labels()  # the labels fit this browser's view too
+            framed = True
+        if framed:  # the labels fit this browser's view too (outside the lock: it takes its own)
+            with contextlib.suppress(Exception):
+                self._layout_labels()
 
     def _frame_camera(self, scene: Scene, key: Hashable, *, refined: bool = False) -> None:
         """Point the initial camera at the footprint and, on a new scene, every open browser's; ``refined``: the
@@ -791,11 +803,12 @@ class Views:
         self.server.initial_camera.look_at = look
         self.server.initial_camera.position = pos
         if self._changed("camera", key):
-            self._apply_camera(list(self.server.get_clients().values()))
-            for cid, client in self.server.get_clients().items():
-                with contextlib.suppress(Exception):
-                    cam = client.camera
-                    self._framed_clients[cid] = (key, float(cam.image_width) / float(cam.image_height))
+            with self._camera_lock:  # not between a camera report's decision and its sending
+                self._apply_camera(list(self.server.get_clients().values()))
+                for cid, client in self.server.get_clients().items():
+                    with contextlib.suppress(Exception):
+                        cam = client.camera
+                        self._framed_clients[cid] = (key, float(cam.image_width) / float(cam.image_height))
 
     def reset_view(self) -> None:
         """Frame the current footprint and track again in every open browser."""
