@@ -813,7 +813,8 @@ class Views:
     def reset_view(self) -> None:
         """Frame the current footprint and track again in every open browser."""
         if self.camera_pose is not None:
-            self._apply_camera(list(self.server.get_clients().values()))
+            with self._camera_lock:  # not between a camera report's decision and its sending
+                self._apply_camera(list(self.server.get_clients().values()))
 
     # ----------------------------------------------------------------- export
     def export_bytes(self, s: Settings | None = None) -> bytes:
