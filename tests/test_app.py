@@ -944,6 +944,24 @@ def test_reset_view_frames_every_client_on_the_footprint(server):
     assert max(footprint_share(corners, Pose)) >= 0.5
 
 
+class _FakeBrowserCamera:
+    """A browser's camera as the app sees it: what it *reports* (``reported``) kept apart from what the app sends it
+    (``received``, in order); a 1400 x 900 canvas (before the panels dock) at the server's initial camera."""
+
+    def __init__(self, pos0, look0) -> None:
+        from explorer.scene3d.camera import VIEW_FOV_Y
+
+        self.image_width, self.image_height, self.fov = 1400, 900, VIEW_FOV_Y
+        self.reported = {"position": np.array(pos0), "look_at": np.array(look0)}
+        self.received: list[tuple] = []
+        self.far = self.near = None
+
+    position = property(lambda self: self.reported["position"],
+                        lambda self, v: self.received.append(("position", tuple(v))))
+    look_at = property(lambda self: self.reported["look_at"],
+                       lambda self, v: self.received.append(("look_at", tuple(v))))
+
+
 def test_two_camera_reports_at_once_leave_the_browser_at_the_pose_recorded_for_it(server):
     """Issue 24 (a CTX ISD's browser test failed under load): viser runs each camera report's callback in a pool
     thread of its own. The call for the first report (the wide canvas, before the panels docked) computes its
@@ -957,23 +975,11 @@ def test_two_camera_reports_at_once_leave_the_browser_at_the_pose_recorded_for_i
     pos0, look0, _ = app.camera_pose
     in_first, second_sent = threading.Event(), threading.Event()
 
-    class Camera:
-        def __init__(self) -> None:
-            self.image_width, self.image_height, self.fov = 1400, 900, VIEW_FOV_Y  # before the panels dock
-            self.reported = {"position": np.array(pos0), "look_at": np.array(look0)}  # the server's initial camera
-            self.received: list[tuple] = []  # the poses sent to the browser, in order
-            self.far = self.near = None
-
-        position = property(lambda self: self.reported["position"],
-                            lambda self, v: self.received.append(("position", tuple(v))))
-        look_at = property(lambda self: self.reported["look_at"],
-                           lambda self, v: self.received.append(("look_at", tuple(v))))
-
     class Client:
         client_id = 7
 
         def __init__(self) -> None:
-            self.camera, self.calls = Camera(), 0
+            self.camera, self.calls = _FakeBrowserCamera(pos0, look0), 0
 
         @contextlib.contextmanager
         def atomic(self):
@@ -1022,23 +1028,11 @@ def test_a_browser_that_applied_an_earlier_framing_last_is_framed_again_a_moved_
     app = make_app(server)
     pos0, look0, _ = app.camera_pose
 
-    class Camera:
-        def __init__(self) -> None:
-            self.image_width, self.image_height, self.fov = 1400, 900, VIEW_FOV_Y
-            self.reported = {"position": np.array(pos0), "look_at": np.array(look0)}
-            self.received: list[tuple] = []
-            self.far = self.near = None
-
-        position = property(lambda self: self.reported["position"],
-                            lambda self, v: self.received.append(("position", tuple(v))))
-        look_at = property(lambda self: self.reported["look_at"],
-                           lambda self, v: self.received.append(("look_at", tuple(v))))
-
     class Client:
         client_id = 8
 
         def __init__(self) -> None:
-            self.camera = Camera()
+            self.camera = _FakeBrowserCamera(pos0, look0)
 
         @contextlib.contextmanager
         def atomic(self):
