@@ -1320,3 +1320,41 @@ def test_as_mpc_maps_name_the_stand_in_they_are_measured_against(server):
     assert method_titles and all(t.endswith("; against the STAND-IN MPC (--as-mpc))") for t in method_titles)
     stand_in = [t for t in titles if t.startswith(f"{STAND_IN_METHOD}:")]
     assert stand_in and not any(t.endswith("(--as-mpc))") for t in stand_in), titles
+
+
+def test_a_browser_whose_only_camera_report_is_its_first_is_framed(server):
+    """Issue 24 (browser tests in CI: a wide window's browser never framed, at the server's initial camera).
+    viser counts a browser as connected on its first camera report, runs a plain connect callback in its thread
+    pool and at once hands that report to the camera callbacks registered so far. When the pool has an idle
+    thread (a server that has served browsers before) the report went out before the app's callback was
+    registered, and a browser whose canvas never changes shape sends no other. Clients speaking viser's
+    websocket protocol (no browser) each send exactly one camera report, one after another; each must be
+    framed for its canvas -- the truth: the footprint framed by :func:`explorer.scene3d.camera.frame_footprint`
+    for the reported aspect."""
+    import msgspec
+    from websockets.sync.client import connect
+
+    from explorer.scene3d.camera import VIEW_FOV_Y, frame_footprint
+
+    app = make_app(server)
+    pos0, look0, _ = app.camera_pose
+    ground, track, _ = app._framing
+    for width in (1400, 1800, 1200):  # the later browsers find idle threads in viser's pool
+        report = {"type": "ViewerCameraMessage", "wxyz": [1.0, 0.0, 0.0, 0.0], "position": [float(v) for v in pos0],
+                  "fov": float(VIEW_FOV_Y), "near": 0.001, "far": 5000.0, "image_height": 900,
+                  "image_width": width, "look_at": [float(v) for v in look0], "up_direction": [0.0, 0.0, 1.0]}
+        before = set(app.client_poses)
+        with connect(f"ws://127.0.0.1:{server.get_port()}", subprotocols=[f"viser-v{viser.__version__}"],
+                     max_size=None) as ws:
+            ws.send(msgspec.msgpack.encode(report))
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 10 and not set(app.client_poses) - before:  # set once framed
+                with contextlib.suppress(TimeoutError):
+                    ws.recv(timeout=0.1)  # keep reading what the server sends
+            new = set(app.client_poses) - before
+            assert new, f"the browser with a {width} x 900 canvas was never framed"
+            (cid,) = new
+            want = frame_footprint(ground, track, aspect=width / 900, fov_y=VIEW_FOV_Y)
+            assert app._framed_clients[cid][1] == pytest.approx(width / 900)
+            assert np.allclose(app.client_poses[cid][0], want.position)
+            assert np.allclose(app.client_poses[cid][1], want.look_at)

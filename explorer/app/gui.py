@@ -239,7 +239,15 @@ class ExplorerApp(Views):
         else:
             self._discover_methods(wanted)
 
-    def _client_connected(self, client: Any) -> None:
+    async def _client_connected(self, client: Any) -> None:
+        """Listen to a new browser's camera reports (each one frames it for its canvas).
+
+        A coroutine, so that viser runs it inline, before it hands the browser's FIRST camera report to the
+        camera callbacks: viser counts a browser as connected on that report, runs a plain connect callback in
+        its thread pool and goes straight on to the report's camera callbacks -- usually before the pool thread
+        had registered ours. That report was lost, and a browser whose canvas never changes shape sends no
+        other: it stayed at the server's initial camera, never framed (seen in CI, a wide window). Only quick,
+        non-blocking work here: it runs on viser's event loop."""
         self._client_since[client.client_id] = time.monotonic()
         client.camera.on_update(lambda cam: self._client_camera_reported(cam.client))
 
