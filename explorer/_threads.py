@@ -82,13 +82,13 @@ def run_in_parts(run: Callable[[slice], None], n: int, *, align: int, min_points
 
 # ----------------------------------------------------------------------------- BLAS threads
 #: The OpenBLAS thread setters and getters numpy's wheels export (scipy-openblas, 64-bit or 32-bit integers, or a
-#: system OpenBLAS); the first pair found in a loaded OpenBLAS library is used.
+#: system OpenBLAS); in each loaded OpenBLAS library the first pair found is used.
 _OPENBLAS_SYMBOLS = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
                      ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"),
                      ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
                      ("openblas_set_num_threads", "openblas_get_num_threads"))
 _BLAS_LOCK = threading.Lock()
-_blas_state: dict = {"api": None, "looked": False, "depth": 0, "saved": None}
+_blas_state: dict = {"apis": None, "modules": -1, "depth": 0, "saved": None}
 
 
 def _openblas_libraries() -> list[str]:
@@ -109,23 +109,44 @@ def _openblas_libraries() -> list[str]:
     return paths
 
 
+def _openblas_apis() -> list[tuple[Callable[[int], None], Callable[[], int]]]:
+    """(set, get) of the thread count of every OpenBLAS loaded in the process, numpy's first ([] when none is
+    found).  numpy and scipy each bundle their own OpenBLAS (scipy-openblas64 and scipy-openblas32): setting only
+    the first library found -- scipy's, when scipy was imported first -- left numpy's on its threads."""
+    import sys
+
+    apis = _blas_state["apis"]
+    if apis is not None and (_blas_state["depth"] or _blas_state["modules"] == len(sys.modules)):
+        return apis  # looked since the last import (a library is loaded by an import), or inside a block
+    import numpy as np
+
+    numpy_libs = os.path.realpath(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs"))
+    found: dict[str, tuple[Callable[[int], None], Callable[[], int]]] = {}
+    for path in _openblas_libraries():
+        real = os.path.realpath(path)
+        if real in found:
+            continue
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for set_name, get_name in _OPENBLAS_SYMBOLS:
+            setter, getter = getattr(lib, set_name, None), getattr(lib, get_name, None)
+            if setter is not None and getter is not None:
+                setter.argtypes, setter.restype = [ctypes.c_int], None
+                getter.argtypes, getter.restype = [], ctypes.c_int
+                found[real] = (setter, getter)
+                break
+    order = sorted(found, key=lambda real: not real.startswith(numpy_libs + os.sep))  # numpy's first (stable)
+    apis = [found[real] for real in order]
+    _blas_state["apis"], _blas_state["modules"] = apis, len(sys.modules)
+    return apis
+
+
 def _openblas_api() -> tuple[Callable[[int], None], Callable[[], int]] | None:
     """(set, get) of numpy's OpenBLAS thread count, or None when numpy does not use an OpenBLAS found here."""
-    if not _blas_state["looked"]:
-        _blas_state["looked"] = True
-        for path in _openblas_libraries():
-            try:
-                lib = ctypes.CDLL(path)
-            except OSError:
-                continue
-            for set_name, get_name in _OPENBLAS_SYMBOLS:
-                setter, getter = getattr(lib, set_name, None), getattr(lib, get_name, None)
-                if setter is not None and getter is not None:
-                    setter.argtypes, setter.restype = [ctypes.c_int], None
-                    getter.argtypes, getter.restype = [], ctypes.c_int
-                    _blas_state["api"] = (setter, getter)
-                    return _blas_state["api"]
-    return _blas_state["api"]
+    apis = _openblas_apis()
+    return apis[0] if apis else None
 
 
 def blas_thread_count() -> int | None:
@@ -137,26 +158,29 @@ def blas_thread_count() -> int | None:
 
 @contextlib.contextmanager
 def blas_threads(n: int = 1) -> Iterator[None]:
-    """Run numpy's linear algebra (OpenBLAS) on ``n`` threads inside the block, then restore the setting.
+    """Run numpy's and scipy's linear algebra (every OpenBLAS loaded) on ``n`` threads inside the block, then
+    restore the setting.
 
     Many small least-squares solves (a few hundred rows, tens of columns) are where OpenBLAS's threads cost more
     than they give: on the shared 2-core machine (load 12-17) the 760 solves of ``ogp``'s genetic term selection
     on 700 x 21 designs took 4.3 s with OpenBLAS's 2 threads and 0.17 s with one.  The setting is process-wide:
-    nested and concurrent blocks share it (the first sets it, the last out restores it).  A no-op when numpy's
-    BLAS is not an OpenBLAS found in the process (then nothing is changed).
+    nested and concurrent blocks share it (the first sets it, the last out restores it).  A no-op when no
+    OpenBLAS is found in the process (then nothing is changed).
     """
     with _BLAS_LOCK:
-        api = _openblas_api()
-        if api is not None:
+        apis = _openblas_apis()
+        if apis:
             if _blas_state["depth"] == 0:
-                _blas_state["saved"] = int(api[1]())
-                api[0](max(1, int(n)))
+                _blas_state["saved"] = [int(get()) for _, get in apis]
+                for setter, _ in apis:
+                    setter(max(1, int(n)))
             _blas_state["depth"] += 1
     try:
         yield
     finally:
-        if api is not None:
+        if apis:
             with _BLAS_LOCK:
                 _blas_state["depth"] -= 1
                 if _blas_state["depth"] == 0:
-                    api[0](int(_blas_state["saved"]))
+                    for (setter, _), saved in zip(apis, _blas_state["saved"], strict=True):
+                        setter(int(saved))

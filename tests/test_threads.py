@@ -84,3 +84,49 @@ def test_blas_threads_sets_openblas_to_one_thread_and_restores_it_nested_and_acr
     with pytest.raises(RuntimeError), _threads.blas_threads(1):
         raise RuntimeError("restored on error too")
     assert _threads.blas_thread_count() == before
+
+
+_EVERY_OPENBLAS = r"""
+import ctypes, glob, os, sys
+import scipy.linalg  # scipy's own OpenBLAS loaded (and listed in the process's maps) before numpy's is looked up
+import numpy as np
+from explorer import _threads
+
+def counts(set_to=None):
+    out = {}
+    for pkg in ("numpy", "scipy"):
+        mod = sys.modules[pkg]
+        for path in glob.glob(os.path.join(os.path.dirname(mod.__file__), os.pardir, pkg + ".libs", "*openblas*")):
+            lib = ctypes.CDLL(path)
+            for suffix in ("64_", ""):
+                get = getattr(lib, "scipy_openblas_get_num_threads" + suffix, None)
+                if get is not None:
+                    if set_to is not None:
+                        getattr(lib, "scipy_openblas_set_num_threads" + suffix)(ctypes.c_int(set_to))
+                    get.restype = ctypes.c_int
+                    out[pkg] = get()
+                    break
+    return out
+
+before = counts(set_to=2)
+with _threads.blas_threads(1):
+    inside = counts()
+print(before, inside, counts())
+"""
+
+
+def test_blas_threads_sets_numpys_and_scipys_openblas_when_scipy_was_imported_first():
+    """numpy and scipy bundle one OpenBLAS each; with scipy imported first only scipy's was set (numpy's lstsq kept
+    its threads: nn-rfm's fits 2x the CPU at load 4).  Read back from each package's own library file."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _EVERY_OPENBLAS], capture_output=True, text=True, timeout=120,
+                         check=True).stdout
+    before, inside, after = (eval(part) for part in out.strip().replace("} {", "}|{").split("|"))
+    if "numpy" not in before or before["numpy"] < 2:
+        pytest.skip(f"numpy's OpenBLAS not found or on one thread here: {before}")
+    assert inside["numpy"] == 1
+    if "scipy" in inside:
+        assert inside["scipy"] == 1
+    assert after == before

@@ -28,6 +28,7 @@ from typing import ClassVar
 import numpy as np
 
 from explorer import _log
+from explorer._threads import blas_threads
 from explorer.errors import MethodUnavailableError, NotFittedError, UnknownNameError, as_points
 from explorer.geometry.kernels import CollinearityParams, collinearity_params_or_none, columns_at_rows
 from explorer.methods._compiled import inside_flags
@@ -153,10 +154,15 @@ class BestScanlineMethod(ABC):
         if self.needs_fit:
             if len(control) == 0:
                 raise ValueError(f"{self.name}: no control points to fit")
-            self._fit(control)
-            if self.column_source == "collinearity" and not has_line_geometry(self.scene):
-                self._column_model = PairColumnModel(control, self.name)
-                self.fit_info["column_model"] = self._column_model.info()
+            # one OpenBLAS thread: a fit is many small solves (the RFM of nn-rfm, ogp's term selection, the
+            # PairColumnModel), where a second thread costs more than it gives -- 6-250x per least-squares solve
+            # on the shared 2-core machine (0.2 s instead of 0.8 ms per 760 x 39 solve at load 4), the default
+            # export's CPU 25-31 s -> 17 s; the results are the same to the bit (tests/methods/test_fit_threads.py)
+            with blas_threads(1):
+                self._fit(control)
+                if self.column_source == "collinearity" and not has_line_geometry(self.scene):
+                    self._column_model = PairColumnModel(control, self.name)
+                    self.fit_info["column_model"] = self._column_model.info()
         self._fitted = True
         return self
 
