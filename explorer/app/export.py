@@ -197,7 +197,7 @@ def _markdown_html(text: str) -> str:
 def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
                  fits: dict[str, FitRecord] | None = None, stand_in: StandIn | None = None,
                  sweep_fit: Callable[[str, int], FitRecord | None] | None = None,
-                 native_pixels: bool = False) -> dict[str, bytes]:
+                 native_pixels: bool = False, workers: int = 1) -> dict[str, bytes]:
     """Compute the export of ``s`` on ``scene`` (every SCP) and return ``{file name: bytes}``.
 
     Parameters
@@ -220,11 +220,77 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         method :data:`STAND_IN_METHOD` and as a map beside the methods'.
     native_pixels : bool
         Add the camera's ``line, sample`` columns (a USGS CSM source).
+    workers : int
+        Processes for the accuracy-vs-SCOPs sweep: 2 or more starts a second process
+        (:class:`explorer.app.sweep_pool.SweepPool`) that refits the learned methods at the other densities while
+        this one computes the maps, then shares the rest; the files are the same bytes as with 1 (serial).
+        Without ``sweep_fit`` only.
     """
+    model = ExplorerModel(preview_after_s=None, seed=seed, scenes={s.preset: scene})
+    pool = None
+    if s.sweep and workers > 1 and sweep_fit is None:
+        # the sweep's refits at the other densities start now on a second process, while the maps are computed here
+        from explorer.app.sweep_pool import SweepPool
+
+        pool = SweepPool(scene, s, seed, model.sweep_points, _pool_jobs(model, s))
+    try:
+        return _export_files(model, pool, scene, s, source=source, seed=seed, fits=fits, stand_in=stand_in,
+                             sweep_fit=sweep_fit, native_pixels=native_pixels)
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def _pool_jobs(model: ExplorerModel, s: Settings) -> list[tuple[str, int]]:
+    """The sweep jobs a second process may take: every learned method's densities but the maps' own (whose fit
+    the maps make anyway), the longest first (long trainings, then more SCOPs)."""
+    from explorer.methods import registry
+
+    reg = registry()
+    jobs = [(name, d) for name in s.methods for d in model.sweep_densities(name)
+            if reg[name].needs_fit and d != int(s.scop_density)]
+    return sorted(jobs, key=lambda j: (not reg[j[0]].long_fit, -j[1]))
+
+
+def _sweep_with_pool(model: ExplorerModel, pool: Any, s: Settings) -> tuple[dict[str, list[Evaluation]],
+                                                                             dict[str, dict[int, str]]]:
+    """The sweep of every method of ``s``, its jobs shared with ``pool``'s worker; the same evaluations, in the
+    same order, as :meth:`ExplorerModel.sweep` method by method."""
+    from explorer.app.model import sweep_results
+
+    def compute(name: str, density: int) -> tuple[str, Any]:
+        return model.sweep_point(name, s, density, lambda d: model.fit(name, s, d, purpose=SWEEP_PURPOSE))
+
+    done: dict[tuple[str, int], tuple[str, Any]] = {}
+    shared = {job: k for k, job in enumerate(pool.jobs)}
+    for name in s.methods:  # the jobs only this process does: the maps' density (fits cached) and fit-free methods
+        for d in model.sweep_densities(name):
+            if (name, d) not in shared:
+                done[(name, d)] = compute(name, d)
+    while (k := pool.claim()) is not None:
+        done[pool.jobs[k]] = compute(*pool.jobs[k])
+    for k, result in pool.collect().items():
+        done[pool.jobs[k]] = result
+    sweeps: dict[str, list[Evaluation]] = {}
+    failed: dict[str, dict[int, str]] = {}
+    for name in s.methods:
+        failed[name] = {}
+        points = []
+        for d in model.sweep_densities(name):
+            if (name, d) not in done:  # taken by the worker but never delivered: computed here
+                done[(name, d)] = compute(name, d)
+            points.append((d, done[(name, d)]))
+        sweeps[name] = sweep_results(points, failed[name])
+    return sweeps, failed
+
+
+def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, source: dict, seed: int,
+                  fits: dict[str, FitRecord] | None, stand_in: StandIn | None,
+                  sweep_fit: Callable[[str, int], FitRecord | None] | None,
+                  native_pixels: bool) -> dict[str, bytes]:
     from explorer.app.model import MethodRun, summary_markdown
     from explorer.panels import figures as F  # noqa: N812
 
-    model = ExplorerModel(preview_after_s=None, seed=seed, scenes={s.preset: scene})
     scops = model.scops(s)
     scps = model.scps(s)  # re-projected by the sensor's own ground_to_image (sensor_truth), as in the GUI
     evaluations: dict[str, Evaluation] = {}
@@ -246,7 +312,9 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
     t_sweep = time.perf_counter()
     sweeps: dict[str, list[Evaluation]] = {}
     sweep_failed: dict[str, dict[int, str]] = {}
-    for name in (s.methods if s.sweep else ()):
+    if pool is not None:
+        sweeps, sweep_failed = _sweep_with_pool(model, pool, s)
+    for name in (s.methods if s.sweep and pool is None else ()):
         def get_fit(density: int, name: str = name) -> FitRecord:
             return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(
                 name, s, density, purpose=SWEEP_PURPOSE)
@@ -340,7 +408,8 @@ def default_file_methods() -> list[str]:
 
 
 def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = None, scops: int = 100,
-               scps: int = 50_000, seed: int = 0, sweep: bool = True, log: Any = print) -> dict[str, Path]:
+               scps: int = 50_000, seed: int = 0, sweep: bool = True, log: Any = print,
+               workers: int | None = None) -> dict[str, Path]:
     """``pushbroom explore ... --export DIR``: compute and write the export's files into ``out_dir``.
 
     Parameters
@@ -357,6 +426,8 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
         Include the accuracy-vs-SCOPs sweep (the GUI's default; ``--no-sweep`` leaves it out).
     log : callable
         Progress lines.
+    workers : int, optional
+        Processes for the sweep (:func:`export_files`); default 2 when this process may use two CPUs, else 1.
 
     Returns
     -------
@@ -390,8 +461,12 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     s = Settings(preset=label, scop_density=int(scops), scp_count=int(scps), methods=tuple(methods),
                  color_method=methods[0] if methods else None, sweep=bool(sweep))
     t0 = time.perf_counter()
+    if workers is None:
+        from explorer.app.sweep_pool import cpus_available
+
+        workers = min(2, cpus_available())
     files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,
-                         native_pixels=source.kind == "isd")
+                         native_pixels=source.kind == "isd", workers=workers)
     out = Path(out_dir)
     # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a
     # failure, SIGTERM or a full disk the folder holds the previous complete export or nothing

@@ -537,6 +537,27 @@ class ExplorerModel:
                              status=status)
         return self._evals.get_or(key, make)
 
+    @staticmethod
+    def sweep_densities(name: str, densities: tuple[int, ...] = SCOP_DENSITIES) -> tuple[int, ...]:
+        """The SCOP densities the sweep of ``name`` visits: every one, or the first alone for a method that needs
+        no fit (its result does not depend on the SCOPs)."""
+        return tuple(densities) if registry()[name].needs_fit else tuple(densities[:1])
+
+    def sweep_point(self, name: str, s: Settings, density: int,
+                    get_fit: Callable[[int], FitRecord | None] | None = None) -> tuple[str, Any]:
+        """One point of the sweep of ``name``: ``("ok", Evaluation)`` on ``sweep_points`` SCPs at ``density`` SCOPs,
+        ``("failed", reason)`` where the fit or evaluation failed, ``("none", None)`` for a fit not ready
+        (``get_fit`` returned None) or a method the sensor cannot serve (:meth:`sweep`)."""
+        rec = get_fit(density) if get_fit is not None else self.fit(name, s, density, purpose=SWEEP_PURPOSE)
+        if rec is None:
+            return ("none", None)
+        run = self.evaluate(name, s, max_points=self.sweep_points, density=density, fit=rec)
+        if run.evaluation is not None:
+            return ("ok", run.evaluation)
+        if not run.unavailable and (run.error or rec.error):
+            return ("failed", str(run.error or rec.error))
+        return ("none", None)
+
     def sweep(self, name: str, s: Settings, densities=SCOP_DENSITIES,
               get_fit: Callable[[int], FitRecord | None] | None = None,
               failed: dict[int, str] | None = None) -> list[Evaluation]:
@@ -545,18 +566,8 @@ class ExplorerModel:
         fit or evaluation failed (e.g. too few SCOPs to determine the model) has no evaluation; ``failed``,
         when given, receives its reason (density -> error text), so the panel can say why its point is
         missing."""
-        cls = registry()[name]
-        out = []
-        for d in (densities if cls.needs_fit else densities[:1]):
-            rec = get_fit(d) if get_fit is not None else self.fit(name, s, d, purpose=SWEEP_PURPOSE)
-            if rec is None:
-                continue
-            run = self.evaluate(name, s, max_points=self.sweep_points, density=d, fit=rec)
-            if run.evaluation is not None:
-                out.append(run.evaluation)
-            elif failed is not None and not run.unavailable and (run.error or rec.error):
-                failed[d] = str(run.error or rec.error)
-        return out
+        points = [(d, self.sweep_point(name, s, d, get_fit)) for d in self.sweep_densities(name, densities)]
+        return sweep_results(points, failed)
 
     def selection(self, s: Settings, runs: dict[str, MethodRun]) -> Selection:
         """Resolve ``s.selection`` and trace the colour method on it."""
@@ -596,6 +607,18 @@ class ExplorerModel:
             except Exception:  # tracing is a nicety; the result stays valid without it
                 sel.trace_rows = None
         return sel
+
+
+def sweep_results(points: list[tuple[int, tuple[str, Any]]], failed: dict[int, str] | None = None) -> list[Evaluation]:
+    """The evaluations of a method's sweep from its points ``(density, ExplorerModel.sweep_point(...))`` in density
+    order; ``failed`` receives the reasons of the failed densities."""
+    out = []
+    for density, (kind, value) in points:
+        if kind == "ok":
+            out.append(value)
+        elif kind == "failed" and failed is not None:
+            failed[density] = value
+    return out
 
 
 def sensor_truth(scene: Any, scps: PointSet, notes: list[str] | None = None) -> PointSet:

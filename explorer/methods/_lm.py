@@ -350,32 +350,55 @@ class LMResult:
     final_objective: float = float("nan")
 
 
-def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor,
-             weight_decay: float = 0.0) -> torch.Tensor:
-    """Solve ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` (Cholesky, least squares if singular).
+@dataclass
+class _NormalEquations:
+    """The parts of a Levenberg-Marquardt step that do not depend on ``mu``, built once per epoch
+    (:func:`_normal_equations`): the product ``J^T J`` (or ``J J^T`` when the parameters outnumber the errors)
+    and the right-hand side.  Before, each damping tried in an epoch (two on average: one rejected, one taken)
+    recomputed them -- half the training's time at 1,000 SCOPs -- with the same inputs, so the same bits."""
 
-    Without weight decay and with more parameters P than errors N it uses the equivalent
-    ``d = J^T (J J^T + mu I)^-1 e`` (an N x N system).
-    """
+    jac: torch.Tensor
+    product: torch.Tensor
+    rhs: torch.Tensor
+    weight_decay: float
+    dual: bool
+    """True: the ``N x N`` form ``d = J^T (J J^T + mu I)^-1 e``."""
+
+
+def _normal_equations(jac: torch.Tensor, err: torch.Tensor, theta: torch.Tensor,
+                      weight_decay: float = 0.0) -> _NormalEquations:
+    """``J^T J`` and ``J^T e - lambda theta`` of one epoch (``J J^T`` and ``e`` when there are more parameters than
+    errors and no weight decay)."""
     n, p = jac.shape
     if weight_decay:
-        a = jac.T @ jac
-        a.diagonal().add_(mu + weight_decay)
-        rhs = jac.T @ err - weight_decay * theta
-    elif p <= n:
-        a = jac.T @ jac
-        a.diagonal().add_(mu)
-        rhs = jac.T @ err
-    else:
-        a = jac @ jac.T
-        a.diagonal().add_(mu)
-        rhs = err
+        return _NormalEquations(jac, jac.T @ jac, jac.T @ err - weight_decay * theta, weight_decay, False)
+    if p <= n:
+        return _NormalEquations(jac, jac.T @ jac, jac.T @ err, 0.0, False)
+    return _NormalEquations(jac, jac @ jac.T, err, 0.0, True)
+
+
+def _damped_step(normal: _NormalEquations, mu: float) -> torch.Tensor:
+    """The step of damping ``mu`` (Cholesky, least squares if singular) from an epoch's normal equations."""
+    a = normal.product.clone()
+    a.diagonal().add_(mu + normal.weight_decay if normal.weight_decay else mu)
+    rhs = normal.rhs
     chol, info = torch.linalg.cholesky_ex(a)
     if int(info) != 0:
         sol = torch.linalg.lstsq(a, rhs[:, None]).solution[:, 0]
     else:
         sol = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
-    return sol if (p <= n or weight_decay) else jac.T @ sol
+    return normal.jac.T @ sol if normal.dual else sol
+
+
+def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor,
+             weight_decay: float = 0.0) -> torch.Tensor:
+    """Solve ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` (Cholesky, least squares if singular).
+
+    Without weight decay and with more parameters P than errors N it uses the equivalent
+    ``d = J^T (J J^T + mu I)^-1 e`` (an N x N system).  One step; :func:`lm_minimise` builds the normal
+    equations once per epoch (:func:`_normal_equations`) and tries each damping on them.
+    """
+    return _damped_step(_normal_equations(jac, err, theta, weight_decay), mu)
 
 
 def lm_minimise(
@@ -463,8 +486,9 @@ def lm_minimise(
             stop, started = "min_grad", epoch - 1
             break
         improved = False
+        normal = _normal_equations(jf, err, theta, lam)  # the same for every damping tried in this epoch
         while mu <= mu_max:
-            cand = theta + _lm_step(jf, err, mu, theta, lam)
+            cand = theta + _damped_step(normal, mu)
             with torch.no_grad():
                 cerr = errors(cand)
             cperf = objective(cerr, cand)

@@ -1,0 +1,176 @@
+"""The export's accuracy-vs-SCOPs sweep on a second process (no viser, no plotly).
+
+The sweep refits every learned method at every SCOP density (:data:`explorer.app.model.SCOP_DENSITIES`) and
+evaluates each fit on the same seeded check points: independent jobs, most of a file's default export (issue 24:
+the DIMAP export 26-50 s, the sweep 15-39 s of it).  Their trainings are Python loops of small torch / numpy
+operations, bound by the interpreter lock, so threads do not run them side by side (measured: no gain); a
+second process does.
+
+:class:`SweepPool` starts **one spawned** worker process (a fork is not safe: the parent has already run numba's
+and torch's OpenMP regions, and a forked child that starts one is terminated by numba -- "fork() called from a
+process already using GNU OpenMP").  The worker receives the sensor pickled (the same object, bit for bit: no
+file is read again), the settings, the seed and the job list; it builds its own
+:class:`~explorer.app.model.ExplorerModel` and claims jobs one at a time from a shared counter, as the parent
+does once its maps are done, so whichever process is free takes the next job (the longest first).  Each job
+is :meth:`ExplorerModel.sweep_point`, the same function in both processes on the same inputs: the results are
+the same whichever process computed them, and they are combined in the order of the serial sweep -- the export is
+byte-identical to the serial one (tests/test_sweep_pool.py compares them bit for bit).
+
+If the worker cannot start (a sensor that does not pickle, no second CPU), dies, or is silent for
+:data:`SILENT_S`, the parent computes the jobs it did not deliver: the pool only changes when a result is
+ready, never what it is.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from explorer import _log
+
+SILENT_S = 300.0
+"""Seconds without any result from the worker after which the parent stops waiting and computes its jobs."""
+
+
+def cpus_available() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _worker(payload: bytes, counter: Any, conn: Any, parent_pid: int) -> None:
+    """The worker process: claim jobs from ``counter`` and send ``(index, result)`` for each, then ``None``."""
+    from explorer.app.model import SWEEP_PURPOSE, ExplorerModel
+
+    try:
+        scene, s, seed, sweep_points, jobs = pickle.loads(payload)
+        model = ExplorerModel(preview_after_s=None, seed=seed, sweep_points=sweep_points, scenes={s.preset: scene})
+        while os.getppid() == parent_pid:
+            with counter.get_lock():
+                k = int(counter.value)
+                counter.value = k + 1
+            if k >= len(jobs):
+                break
+            name, density = jobs[k]
+
+            def get_fit(d: int, name: str = name) -> Any:
+                return model.fit(name, s, d, purpose=SWEEP_PURPOSE)
+
+            result = model.sweep_point(name, s, density, get_fit)
+            conn.send((k, result))
+        conn.send(None)
+    except (BrokenPipeError, EOFError, KeyboardInterrupt):  # the parent is gone or stopping: nothing to say
+        pass
+    finally:
+        conn.close()
+
+
+class SweepPool:
+    """A second process computing sweep jobs ``(method, density)`` beside the caller (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Sensor
+        Pickled to the worker.
+    settings : Settings
+    seed, sweep_points : int
+        As the caller's :class:`~explorer.app.model.ExplorerModel`.
+    jobs : sequence of (str, int)
+        Method and SCOP density of each job, the longest first (both processes take them in this order).
+    """
+
+    def __init__(self, scene: Any, settings: Any, seed: int, sweep_points: int,
+                 jobs: Sequence[tuple[str, int]]) -> None:
+        self.jobs = list(jobs)
+        self.results: dict[int, tuple[str, Any]] = {}
+        self._process: Any = None
+        self._conn: Any = None
+        self._counter: Any = None
+        self._next = 0  # the caller's own count when there is no worker
+        self.error: str | None = None
+        """Why the worker did not start or did not finish (None: it delivered every job it took)."""
+        if not self.jobs:
+            return
+        try:
+            payload = pickle.dumps((scene, settings, int(seed), int(sweep_points), self.jobs),
+                                   protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:  # a sensor that does not pickle: the caller does every job
+            self.error = f"the sensor does not pickle ({type(exc).__name__}: {exc})"
+            return
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self._counter = ctx.Value("q", 0)
+        self._conn, child = ctx.Pipe(duplex=False)
+        self._process = ctx.Process(target=_worker, args=(payload, self._counter, child, os.getpid()),
+                                    name="pushbroom-sweep", daemon=True)
+        try:
+            self._process.start()
+        except Exception as exc:  # pragma: no cover - no process could be started
+            self.error = f"no worker process ({type(exc).__name__}: {exc})"
+            self._process = None
+        finally:
+            child.close()
+
+    def claim(self) -> int | None:
+        """The next job for the caller (its index in :attr:`jobs`), or None when every job is taken."""
+        if self._counter is None:
+            k, self._next = self._next, self._next + 1
+            return k if k < len(self.jobs) else None
+        with self._counter.get_lock():
+            k = int(self._counter.value)
+            if k >= len(self.jobs):
+                return None
+            self._counter.value = k + 1
+        return k
+
+    def collect(self) -> dict[int, tuple[str, Any]]:
+        """Wait for the worker's results (until it says it is done, dies, or is silent for :data:`SILENT_S`) and
+        return them by job index.  Jobs it took but did not deliver are absent: the caller computes them."""
+        if self._conn is None:
+            return self.results
+        last = time.monotonic()
+        try:
+            while True:
+                if self._conn.poll(1.0):
+                    try:
+                        msg = self._conn.recv()
+                    except (EOFError, OSError):
+                        self.error = "the worker process ended before sending every result"
+                        break
+                    if msg is None:
+                        break
+                    self.results[int(msg[0])] = msg[1]
+                    last = time.monotonic()
+                elif self._process is not None and not self._process.is_alive() and not self._conn.poll(0):
+                    self.error = f"the worker process ended (exit code {self._process.exitcode})"
+                    break
+                elif time.monotonic() - last > SILENT_S:
+                    self.error = f"the worker process was silent for {SILENT_S:g} s"
+                    break
+        finally:
+            self.close()
+        if self.error:
+            _log.warn(f"accuracy-vs-SCOPs sweep: {self.error}; its remaining jobs were computed here")
+        return self.results
+
+    def close(self) -> None:
+        """Stop the worker (if it still runs) and release the pipe."""
+        if self._process is not None:
+            if self._process.is_alive():
+                self._process.join(timeout=5.0)
+            if self._process.is_alive():
+                self._process.terminate()
+                self._process.join(timeout=5.0)
+            self._process = None
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+
+__all__ = ["SILENT_S", "SweepPool", "cpus_available"]

@@ -1,0 +1,84 @@
+"""explorer.app.sweep_pool: the export's accuracy-vs-SCOPs sweep shared with a second (spawned) process gives the
+same files, byte for byte, as the serial sweep (the independent truth: ``workers=1``, the path used before), and
+a worker that cannot start or dies leaves its jobs to the caller."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from explorer.app import export as export_module
+from explorer.app.model import ExplorerModel, Settings
+from explorer.app.sweep_pool import SweepPool
+from explorer.presets import build_scene
+
+RUN_DEPENDENT = ("timing.json", "timing.js")
+SETTINGS = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm", "prm", "ann", "ogp", "nr"),
+                    color_method="lrm", sweep=True)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene("WSU", relief_m=300.0, relief_seed=1)
+
+
+def test_parallel_sweep_export_equals_the_serial_one_bit_for_bit(scene, monkeypatch):
+    delivered: list[int] = []
+    collect = SweepPool.collect
+
+    def spy(self):
+        out = collect(self)
+        delivered.append(len(out))
+        return out
+
+    monkeypatch.setattr(SweepPool, "collect", spy)
+    serial = export_module.export_files(scene, SETTINGS, source={"label": "WSU"}, seed=3, workers=1)
+    assert delivered == []  # serial: no pool
+    parallel = export_module.export_files(scene, SETTINGS, source={"label": "WSU"}, seed=3, workers=2)
+    assert len(delivered) == 1 and delivered[0] >= 1  # the worker computed some of the sweep
+    for name in serial:
+        if name not in RUN_DEPENDENT:
+            assert parallel[name] == serial[name], name
+    sweep = json.loads(serial["summary.json"])["accuracy_vs_scops"]
+    assert [p["n_scops"] for p in sweep["ogp"]] == [10, 20, 30, 50, 100, 300, 500, 1000]
+    assert len(sweep["nr"]) == 1  # a fit-free method: one point
+
+
+def _sweeps_equal(a: dict, b: dict) -> None:
+    assert list(a) == list(b)
+    for name in a:
+        assert [e.n_scops for e in a[name]] == [e.n_scops for e in b[name]]
+        for x, y in zip(a[name], b[name], strict=True):
+            assert np.array_equal(x.residual_row, y.residual_row, equal_nan=True)
+            assert np.array_equal(x.residual_col, y.residual_col, equal_nan=True)
+
+
+def _serial(scene, s):
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    return {name: model.sweep(name, s) for name in s.methods}
+
+
+def test_a_worker_that_dies_leaves_its_jobs_to_the_caller(scene):
+    s = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm", "ann"), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    pool = SweepPool(scene, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+    assert pool._process is not None
+    pool._process.kill()  # before it delivered anything
+    pool._process.join(30)
+    sweeps, failed = export_module._sweep_with_pool(model, pool, s)
+    assert pool.error and "ended" in pool.error
+    _sweeps_equal(sweeps, _serial(scene, s))
+
+
+def test_a_sensor_that_does_not_pickle_is_swept_by_the_caller_alone(scene):
+    s = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm",), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    unpicklable = lambda: None  # noqa: E731
+    pool = SweepPool(unpicklable, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+    assert pool._process is None and "does not pickle" in str(pool.error)
+    assert [pool.claim() for _ in range(len(pool.jobs) + 2)] == [*range(len(pool.jobs)), None, None]
+    pool2 = SweepPool(unpicklable, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+    sweeps, _ = export_module._sweep_with_pool(model, pool2, s)
+    _sweeps_equal(sweeps, _serial(scene, s))
