@@ -82,3 +82,24 @@ def test_a_sensor_that_does_not_pickle_is_swept_by_the_caller_alone(scene):
     pool2 = SweepPool(unpicklable, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
     sweeps, _ = export_module._sweep_with_pool(model, pool2, s)
     _sweeps_equal(sweeps, _serial(scene, s))
+
+
+def test_the_worker_runs_on_while_the_caller_is_busy(scene):
+    """A result (5,000 check points' residuals) is larger than a pipe's buffer: the caller reads the worker's
+    results as they come (a reader thread), so the worker goes on to its next job while the caller is still busy
+    with the maps -- before, it blocked on its first result until the caller collected."""
+    import time
+
+    s = Settings(preset="WSU", scop_density=50, scp_count=10_000, methods=("lrm", "prm"), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    pool = SweepPool(scene, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+    try:
+        deadline = time.monotonic() + 120.0
+        while pool._counter.value <= len(pool.jobs) and time.monotonic() < deadline:  # the caller claims nothing
+            time.sleep(0.1)
+        assert pool._counter.value > len(pool.jobs), "the worker stopped before taking every job"
+        results = pool.collect()
+    finally:
+        pool.close()
+    assert sorted(results) == list(range(len(pool.jobs)))
+    assert all(kind == "ok" and value.n_evaluated == 5000 for kind, value in results.values())

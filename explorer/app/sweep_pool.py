@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -92,6 +93,10 @@ class SweepPool:
         self._conn: Any = None
         self._counter: Any = None
         self._next = 0  # the caller's own count when there is no worker
+        self._reader: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self._last = 0.0
+        self._finished = False
         self.error: str | None = None
         """Why the worker did not start or did not finish (None: it delivered every job it took)."""
         if not self.jobs:
@@ -111,11 +116,16 @@ class SweepPool:
                                     name="pushbroom-sweep", daemon=True)
         try:
             self._process.start()
-        except Exception as exc:  # pragma: no cover - no process could be started
+        except Exception as exc:  # pragma: no cover - no process could be started (e.g. a script without a main guard)
             self.error = f"no worker process ({type(exc).__name__}: {exc})"
             self._process = None
+            self._counter = None
         finally:
             child.close()
+        if self._process is not None:
+            self._last = time.monotonic()
+            self._reader = threading.Thread(target=self._read, name="pushbroom-sweep-reader", daemon=True)
+            self._reader.start()
 
     def claim(self) -> int | None:
         """The next job for the caller (its index in :attr:`jobs`), or None when every job is taken."""
@@ -129,45 +139,56 @@ class SweepPool:
             self._counter.value = k + 1
         return k
 
+    def _read(self) -> None:
+        """The reader thread: receive the worker's results as they come (a result is larger than a pipe's buffer:
+        unread, the worker would block on its first send until the caller collects)."""
+        conn = self._conn
+        try:
+            while True:
+                msg = conn.recv()
+                if msg is None:
+                    self._finished = True
+                    return
+                with self._lock:
+                    self.results[int(msg[0])] = msg[1]
+                    self._last = time.monotonic()
+        except (EOFError, OSError):
+            self.error = "the worker process ended before sending every result"
+        except Exception as exc:  # pragma: no cover - a result that does not unpickle
+            self.error = f"the worker's result could not be read ({type(exc).__name__}: {exc})"
+
     def collect(self) -> dict[int, tuple[str, Any]]:
         """Wait for the worker's results (until it says it is done, dies, or is silent for :data:`SILENT_S`) and
         return them by job index.  Jobs it took but did not deliver are absent: the caller computes them."""
-        if self._conn is None:
+        reader = self._reader
+        if reader is None:
             return self.results
-        last = time.monotonic()
         try:
-            while True:
-                if self._conn.poll(1.0):
-                    try:
-                        msg = self._conn.recv()
-                    except (EOFError, OSError):
-                        self.error = "the worker process ended before sending every result"
-                        break
-                    if msg is None:
-                        break
-                    self.results[int(msg[0])] = msg[1]
-                    last = time.monotonic()
-                elif self._process is not None and not self._process.is_alive() and not self._conn.poll(0):
-                    self.error = f"the worker process ended (exit code {self._process.exitcode})"
-                    break
-                elif time.monotonic() - last > SILENT_S:
+            while reader.is_alive():
+                reader.join(1.0)
+                with self._lock:
+                    silent = time.monotonic() - self._last
+                if reader.is_alive() and silent > SILENT_S:
                     self.error = f"the worker process was silent for {SILENT_S:g} s"
                     break
         finally:
             self.close()
         if self.error:
             _log.warn(f"accuracy-vs-SCOPs sweep: {self.error}; its remaining jobs were computed here")
-        return self.results
+        with self._lock:
+            return dict(self.results)
 
     def close(self) -> None:
         """Stop the worker (if it still runs) and release the pipe."""
         if self._process is not None:
             if self._process.is_alive():
-                self._process.join(timeout=5.0)
+                self._process.join(timeout=5.0 if self._finished else 0.0)
             if self._process.is_alive():
                 self._process.terminate()
                 self._process.join(timeout=5.0)
             self._process = None
+        if self._reader is not None:
+            self._reader.join(timeout=5.0)  # the pipe's end closed by the worker's exit: the reader returns
         if self._conn is not None:
             self._conn.close()
             self._conn = None
