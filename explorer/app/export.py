@@ -308,6 +308,27 @@ def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, s
             evaluations[name], status[name] = ev, st
         summary[name] = method_summary(ev, st, rec, err)
         timing[name] = method_timing(ev, rec)
+    maps = dict(evaluations)
+    map_status = dict(status)
+    stand_in_summary: dict[str, Any] | None = None
+    if stand_in is not None:
+        ev_s, st_s = evaluate_stand_in(stand_in, scps, STAND_IN_METHOD)
+        maps[STAND_IN_METHOD], map_status[STAND_IN_METHOD] = ev_s, st_s
+        stand_in_summary = {"model": stand_in.label, "against": source.get("truth"),
+                            **method_summary(ev_s, st_s, FitRecord(None, 0.0, 0, {}), None)}
+        for k in ("n_scops", "ce_per_point", "warnings", "n_refused", "n_not_converged"):
+            stand_in_summary.pop(k, None)
+    # what does not depend on the sweep is made before it (with a second process, while it trains on)
+    body_fixed = scene.frame.enu_to_ecef(scps.ground)
+    residuals_csv_bytes = residuals_csv(maps, map_status, scps, body_fixed, native_pixels)
+    map_figs: list[tuple] = []
+    if maps:
+        labels = {STAND_IN_METHOD: f"stand-in: {stand_in.label}"} if stand_in is not None else None
+        map_figs.append((f"Residual maps (row and column; every check point, cell {s.aggregate})" + (
+            "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
+            F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
+                            component="row and column", status=map_status, aggregate=s.aggregate, labels=labels,
+                            against=stand_in_truth(source))))
     # the GUI's accuracy-vs-SCOPs panel: the same sweep (ExplorerModel.sweep), fits at every density
     t_sweep = time.perf_counter()
     sweeps: dict[str, list[Evaluation]] = {}
@@ -323,16 +344,6 @@ def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, s
         sweeps[name] = model.sweep(name, s, get_fit=get_fit, failed=sweep_failed[name])
     sweep_failed = {k: v for k, v in sweep_failed.items() if v}
     sweep_s = time.perf_counter() - t_sweep
-    maps = dict(evaluations)
-    map_status = dict(status)
-    stand_in_summary: dict[str, Any] | None = None
-    if stand_in is not None:
-        ev_s, st_s = evaluate_stand_in(stand_in, scps, STAND_IN_METHOD)
-        maps[STAND_IN_METHOD], map_status[STAND_IN_METHOD] = ev_s, st_s
-        stand_in_summary = {"model": stand_in.label, "against": source.get("truth"),
-                            **method_summary(ev_s, st_s, FitRecord(None, 0.0, 0, {}), None)}
-        for k in ("n_scops", "ce_per_point", "warnings", "n_refused", "n_not_converged"):
-            stand_in_summary.pop(k, None)
     settings = {"methods": list(s.methods), "scops": int(s.scop_density), "scops_used": len(scops),
                 "scps": int(s.scp_count), "scps_used": len(scps), "seed": int(seed),
                 "mlp_layers": int(s.mlp_layers), "mlp_neurons": int(s.mlp_neurons),
@@ -352,18 +363,10 @@ def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, s
                       "units": {"fit_s": "s", "eval_s": "s (ground to image of n_evaluated check points)",
                                 "sweep_s": "s (the accuracy-vs-SCOPs sweep: its fits and evaluations)"}}
     timing_text = json.dumps(timing_payload, indent=1, sort_keys=True, allow_nan=False)
-    body_fixed = scene.frame.enu_to_ecef(scps.ground)
     files = {"summary.json": (json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n").encode(),
-             "residuals.csv": residuals_csv(maps, map_status, scps, body_fixed, native_pixels)}
+             "residuals.csv": residuals_csv_bytes}
     colors = F.method_colors(list(s.methods))
-    figs: list[tuple] = []
-    if maps:
-        labels = {STAND_IN_METHOD: f"stand-in: {stand_in.label}"} if stand_in is not None else None
-        figs.append((f"Residual maps (row and column; every check point, cell {s.aggregate})" + (
-            "; the stand-in's error against the sensor beside the methods'" if stand_in is not None else ""),
-            F.residual_maps(maps, scps, control=scops, shape=scene.shape, mode="per method",
-                            component="row and column", status=map_status, aggregate=s.aggregate, labels=labels,
-                            against=stand_in_truth(source))))
+    figs: list[tuple] = list(map_figs)
     if sweeps:
         figs.append((f"Accuracy vs SCOP density (each method refitted at every density, evaluated on "
                      f"{min(model.sweep_points, len(scps)):,} check points)",
