@@ -61,11 +61,12 @@ def _children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def run_once(root: Path, case: str, out: Path, python: str) -> dict:
-    """One export of ``case`` by the checkout ``root`` into ``out`` (replaced)."""
+def run_once(root: Path, case: str, out: Path, python: str, extra: list[str] | None = None) -> dict:
+    """One export of ``case`` by the checkout ``root`` into ``out`` (replaced); ``extra``: options added (not the
+    default command then: for floor figures such as ``--no-sweep``)."""
     if out.exists():
         shutil.rmtree(out)
-    cmd = [python, "-m", "explorer", "explore", *CASES[case], "--export", str(out)]
+    cmd = [python, "-m", "explorer", "explore", *CASES[case], *(extra or []), "--export", str(out)]
     env = dict(os.environ, PYTHONPATH=str(root), PYTHONUNBUFFERED="1")
     load_before, cpu0, t0 = _load(), _children_cpu(), time.perf_counter()
     proc = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True, check=False)
@@ -90,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeat", type=int, default=3, help="runs per checkout (interleaved)")
     p.add_argument("--warm", action="store_true", help="one unrecorded run per checkout first (kernel compiles)")
     p.add_argument("--python", default=sys.executable)
+    p.add_argument("--extra", default="", help="options added to the command (e.g. '--no-sweep'): NOT the default "
+                                               "command then, a floor figure")
     p.add_argument("--json", help="write the results here")
     args = p.parse_args(argv)
     roots = [Path(r).resolve() for r in (args.root or [str(ROOT)])]
@@ -99,11 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.warm:
             for k, root in enumerate(roots):
-                run_once(root, args.case, tmp / f"warm{k}", args.python)
+                run_once(root, args.case, tmp / f"warm{k}", args.python, args.extra.split())
         for rep in range(args.repeat):
             for k, root in enumerate(roots):
                 out = tmp / f"r{k}"
-                rec = run_once(root, args.case, out, args.python)
+                rec = run_once(root, args.case, out, args.python, args.extra.split())
                 files = _files(out)
                 first.setdefault(k, files)
                 rec.update(root=str(root), repeat=rep, identical_to_first_run=files == first[k],
@@ -121,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                               "cpu_s_median": statistics.median(r["cpu_s"] for r in mine),
                               "load_range": [min(r["load_before"] for r in mine), max(r["load_after"] for r in mine)]}
     result = {"benchmark": "explorer_export", "case": args.case,
-              "command": f"pushbroom explore {' '.join(CASES[args.case])} --export DIR",
+              "command": f"pushbroom explore {' '.join([*CASES[args.case], *args.extra.split()])} --export DIR",
               "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                           "python": platform.python_version()},
               "when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "runs": runs, "summary": summary}

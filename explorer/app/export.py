@@ -107,19 +107,23 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     head_fmt = "%.17g,%.17g"
     heads = [head_fmt % rc for rc in zip(shared[0].tolist(), shared[1].tolist(), strict=True)]
     tails = [tail_fmt % v for v in zip(*(c.tolist() for c in shared[2:]), strict=True)]
-    finite = all(bool(np.isfinite(c).all()) for c in shared)
+    shared_finite = all(bool(np.isfinite(c).all()) for c in shared)
     for name, ev in evaluations.items():
         idx = np.asarray(ev.evaluated_index)
         pos = at[idx].tolist()
         rr = np.asarray(ev.residual_row, dtype=np.float64)
         rc_ = np.asarray(ev.residual_col, dtype=np.float64)
-        finite = finite and bool(np.isfinite(rr).all()) and bool(np.isfinite(rc_).all())
         fmt = name.replace("%", "%%") + ",%d,%s,%.17g,%.17g,%s,%s"
         labels = [names[k] for k in np.asarray(status[name]).tolist()]
-        lines.extend(fmt % line for line in zip(idx.tolist(), [heads[p] for p in pos], rr.tolist(), rc_.tolist(),
-                                                labels, [tails[p] for p in pos], strict=True))
+        mine = [fmt % line for line in zip(idx.tolist(), [heads[p] for p in pos], rr.tolist(), rc_.tolist(), labels,
+                                           [tails[p] for p in pos], strict=True)]
+        if shared_finite:  # only the lines with a non-finite residual have a field to empty (a field never spans
+            # lines, so this is the whole text's replacement, line by line: 10 lines instead of 117 MB scanned)
+            for i in np.flatnonzero(~(np.isfinite(rr) & np.isfinite(rc_))).tolist():
+                mine[i] = _empty_non_finite(mine[i] + "\n")[:-1]
+        lines.extend(mine)
     text = "\n".join(lines) + "\n"
-    if not finite:
+    if not shared_finite:
         text = _empty_non_finite(text)
     return text.encode()
 
