@@ -44,12 +44,13 @@ def cpus_available() -> int:
         return os.cpu_count() or 1
 
 
-def _worker(payload: bytes, counter: Any, conn: Any, parent_pid: int) -> None:
-    """The worker process: claim jobs from ``counter`` and send ``(index, result)`` for each, then ``None``."""
+def _worker(counter: Any, conn: Any, parent_pid: int) -> None:
+    """The worker process: receive the work (the pickled sensor, settings and jobs) on ``conn``, claim jobs from
+    ``counter`` and send ``(index, result)`` for each, then ``None``."""
     from explorer.app.model import SWEEP_PURPOSE, ExplorerModel
 
     try:
-        scene, s, seed, sweep_points, jobs = pickle.loads(payload)
+        scene, s, seed, sweep_points, jobs = pickle.loads(conn.recv_bytes())
         model = ExplorerModel(preview_after_s=None, seed=seed, sweep_points=sweep_points, scenes={s.preset: scene})
         while os.getppid() == parent_pid:
             with counter.get_lock():
@@ -111,8 +112,13 @@ class SweepPool:
 
         ctx = mp.get_context("spawn")
         self._counter = ctx.Value("q", 0)
-        self._conn, child = ctx.Pipe(duplex=False)
-        self._process = ctx.Process(target=_worker, args=(payload, self._counter, child, os.getpid()),
+        # duplex: the work goes to the worker and its results come back on one connection.  The work (the sensor,
+        # megabytes) is sent by the reader thread, not as the process's arguments: those are written before
+        # start() returns, and a pipe holds 64 KiB, so the caller waited for the new interpreter to start and
+        # read them (0.6 s on the DIMAP export)
+        self._conn, child = ctx.Pipe(duplex=True)
+        self._payload: bytes | None = payload
+        self._process = ctx.Process(target=_worker, args=(self._counter, child, os.getpid()),
                                     name="pushbroom-sweep", daemon=True)
         try:
             self._process.start()
@@ -140,10 +146,13 @@ class SweepPool:
         return k
 
     def _read(self) -> None:
-        """The reader thread: receive the worker's results as they come (a result is larger than a pipe's buffer:
-        unread, the worker would block on its first send until the caller collects)."""
+        """The reader thread: send the worker its work, then receive its results as they come (a result is larger
+        than a pipe's buffer: unread, the worker would block on its first send until the caller collects)."""
         conn = self._conn
         try:
+            payload, self._payload = self._payload, None
+            assert payload is not None
+            conn.send_bytes(payload)
             while True:
                 msg = conn.recv()
                 if msg is None:
