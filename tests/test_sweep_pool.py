@@ -103,3 +103,14 @@ def test_the_worker_runs_on_while_the_caller_is_busy(scene):
         pool.close()
     assert sorted(results) == list(range(len(pool.jobs)))
     assert all(kind == "ok" and value.n_evaluated == 5000 for kind, value in results.values())
+
+
+def test_no_worker_when_memory_is_short(scene, monkeypatch):
+    """Below WORKER_MEMORY available (PUSHBROOM_MEMORY_LIMIT, the memory guard's figure) the caller sweeps alone."""
+    monkeypatch.setenv("PUSHBROOM_MEMORY_LIMIT", "1G")
+    s = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm",), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    pool = SweepPool(scene, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+    assert pool._process is None and "of memory available" in str(pool.error)
+    sweeps, _ = export_module._sweep_with_pool(model, pool, s)
+    _sweeps_equal(sweeps, _serial(scene, s))

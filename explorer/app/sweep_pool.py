@@ -36,6 +36,11 @@ SILENT_S = 300.0
 """Seconds without any result from the worker after which the parent stops waiting and computes its jobs."""
 
 
+WORKER_MEMORY = 2 * 2**30
+"""Memory (bytes, :func:`explorer.memory.available_memory`) below which no worker is started: the worker of the
+DIMAP export with its DEM held 0.4 GB beside the command's 0.9 GB."""
+
+
 def cpus_available() -> int:
     """CPUs this process may run on."""
     try:
@@ -101,6 +106,12 @@ class SweepPool:
         self.error: str | None = None
         """Why the worker did not start or did not finish (None: it delivered every job it took)."""
         if not self.jobs:
+            return
+        from explorer.memory import available_memory, format_bytes
+
+        if available_memory() < WORKER_MEMORY:  # the same results serially rather than a machine swapping
+            self.error = (f"{format_bytes(available_memory())} of memory available, below the "
+                          f"{format_bytes(WORKER_MEMORY)} a worker process is given")
             return
         try:
             payload = pickle.dumps((scene, settings, int(seed), int(sweep_points), self.jobs),
@@ -203,4 +214,4 @@ class SweepPool:
             self._conn = None
 
 
-__all__ = ["SILENT_S", "SweepPool", "cpus_available"]
+__all__ = ["SILENT_S", "WORKER_MEMORY", "SweepPool", "cpus_available"]
