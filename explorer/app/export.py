@@ -365,7 +365,8 @@ def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, s
     timing_payload = {"methods": timing, "about": RUN_DEPENDENT[TIMING_JSON],
                       "sweep_s": float(sweep_s) if s.sweep else None,
                       "units": {"fit_s": "s", "eval_s": "s (ground to image of n_evaluated check points)",
-                                "sweep_s": "s (the accuracy-vs-SCOPs sweep: its fits and evaluations)"}}
+                                "sweep_s": "s (the accuracy-vs-SCOPs sweep: its fits and evaluations, wall time after "
+                                           "the maps; with a second process its refits begin during the maps)"}}
     timing_text = json.dumps(timing_payload, indent=1, sort_keys=True, allow_nan=False)
     files = {"summary.json": (json.dumps(payload, indent=1, sort_keys=True, allow_nan=False) + "\n").encode(),
              "residuals.csv": residuals_csv_bytes}
