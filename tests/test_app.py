@@ -233,44 +233,6 @@ def test_maps_drawn_reports_are_read_and_an_update_without_a_browser_does_not_wa
     assert not th.is_alive()
 
 
-def _maps_hold_and_cloud_ids(app, server) -> tuple[int, list[int], int]:
-    """Buffer ids (the order the browsers get them in, one opened later too) of the last maps figure, of every
-    message telling the page to hold its figures (controls.HOLD_PLOTS_SCRIPT) and of the last message of the SCP
-    cloud node."""
-    from viser import _messages
-
-    from explorer.app.controls import HOLD_PLOTS_SCRIPT
-
-    buffer = server._websock_server._broadcast_buffer
-    maps_uuid = app.handles["maps"]._impl.uuid
-    maps = [k for k, m in buffer.message_from_id.items() if isinstance(m, _messages.GuiUpdateMessage)
-            and m.uuid == maps_uuid and "_plotly_json_str" in m.updates]
-    hold = HOLD_PLOTS_SCRIPT.split("%")[0]  # up to the cap
-    holds = sorted(k for k, m in buffer.message_from_id.items() if isinstance(m, _messages.RunJavascriptMessage)
-                   and m.source.startswith(hold))
-    cloud = [k for k, m in buffer.message_from_id.items() if getattr(m, "name", None) == "/points/scps"]
-    return max(maps), holds, max(cloud)
-
-
-def test_the_first_update_sends_the_3d_view_before_the_maps_a_change_the_maps_first(server):
-    """The first update with methods sends its 3D view (its SCP cloud among it), then tells the browsers to hold the
-    figures until they have drawn it, then its maps: a browser draws the view's first frames (its WebGL programs
-    linked, in software 0.3-1 s) before it shows the maps, not inside the first SCOP change after them -- a browser
-    opened later too (the messages reach it in this order).  A SCOP change sends its maps first, the 3D batch after
-    them, and holds nothing."""
-    from explorer.app.controls import HOLD_PLOTS_SCRIPT
-    from explorer.app.views import HOLD_PLOTS_CAP_S
-
-    app = make_app(server)
-    maps, holds, cloud = _maps_hold_and_cloud_ids(app, server)
-    assert len(holds) == 1 and cloud < holds[0] < maps
-    buffer = server._websock_server._broadcast_buffer
-    assert buffer.message_from_id[holds[0]].source == HOLD_PLOTS_SCRIPT % {"cap_ms": round(1000 * HOLD_PLOTS_CAP_S)}
-    app.handles["density"].value = "30"  # the cloud's colours change with the SCOPs
-    maps, holds_now, cloud = _maps_hold_and_cloud_ids(app, server)
-    assert holds_now == holds and maps < cloud
-
-
 def test_scene_nodes_and_counts(server):
     app = make_app(server)
     s = app.settings()

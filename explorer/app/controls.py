@@ -117,23 +117,6 @@ DRAWN_SCRIPT = r"""
 (the handle ``maps_drawn``)."""
 
 
-HOLD_PLOTS_SCRIPT = r"""
-(function () {
-  const hold = {done: false};
-  hold.promise = new Promise(function (resolve) {
-    function release() { if (!hold.done) { hold.done = true; resolve(); } }
-    function after(f) { requestAnimationFrame(function () { setTimeout(f, 0); }); }
-    after(function () { after(release); });
-    setTimeout(release, %(cap_ms)d);
-  });
-  window.__pushbroomHold = hold;
-})();
-"""
-"""Run in the page right after the first 3D view's batch (viser's ``RunJavascriptMessage``, applied in the order sent,
-a browser opened later included): Plotly figures drawn from now on (:data:`PLOTLY_SIZE_SCRIPT` holds them) wait
-until two frames have painted -- the first may come before React mounted the new nodes --, at most ``cap_ms``."""
-
-
 PLOTLY_SIZE_SCRIPT = r"""
 (function () {
   if (window.__pushbroomPlotlySize) return;
@@ -146,20 +129,6 @@ PLOTLY_SIZE_SCRIPT = r"""
       return ka.length === kb.length && ka.every(function (k) { return a[k] === b[k]; });
     }
     const sized = function (gd, data, layout, config) {
-      const hold = window.__pushbroomHold;
-      if (gd && hold && !hold.done) {  /* the 3D view's first frames first (HOLD_PLOTS_SCRIPT): the newest call */
-        /* drawn through Plotly.react again: any other wrapper of it sees the call that draws */
-        gd.__pushbroomHeld = function () { return P.react.call(P, gd, data, layout, config); };
-        if (!gd.__pushbroomHeldDraw) {
-          gd.__pushbroomHeldDraw = hold.promise.then(function () {
-            const draw = gd.__pushbroomHeld;
-            gd.__pushbroomHeld = null;
-            gd.__pushbroomHeldDraw = null;
-            return draw();
-          });
-        }
-        return gd.__pushbroomHeldDraw;
-      }
       const last = gd && gd.__pushbroomSized;
       if (gd) gd.__pushbroomSized = null;
       /* the component's second call, once measured: the figure already drawn at that size */
@@ -199,9 +168,8 @@ after the 3D view's first frame) inside the first SCOP change after loading.  Fo
 box's width (the component's ``Paper``: the plot's parent element, what the observer reports) and that height; the
 component's second call then asks for the same figure (the same ``data`` and ``config`` objects, every layout entry
 the same) at that size and is answered without a redraw (Plotly's own ``react`` re-decodes the base64 arrays and
-redraws the whole figure even then: 0.3 s).  While :data:`HOLD_PLOTS_SCRIPT` holds the figures, each figure's
-newest call waits for the release.  Runs before plotly.min.js (a setter on ``window.Plotly``) or wraps it when
-already loaded."""
+redraws the whole figure even then: 0.3 s).  Runs before plotly.min.js
+(a setter on ``window.Plotly``) or wraps it when already loaded."""
 
 
 def _script_html(script: str) -> str:
@@ -447,5 +415,5 @@ class Controls:
         return int(m.group(1)) if m else None
 
 
-__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "HOLD_PLOTS_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "Controls",
-           "ControlsHost", "click_bridge_html", "color_options", "drawn_bridge_html"]
+__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "Controls", "ControlsHost",
+           "click_bridge_html", "color_options", "drawn_bridge_html"]

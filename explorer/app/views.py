@@ -32,8 +32,6 @@ CANVAS_SETTLE_S = 10.0
 reframed for the new shape even if its reports still carry an earlier pose."""
 MAPS_DRAWN_WAIT_S = 1.0
 """At most this long an update waits for a browser to report its new maps drawn before it sends the 3D part."""
-HOLD_PLOTS_CAP_S = 3.0
-"""A browser holds the first maps at most this long for the 3D view's first frames (:meth:`Views._hold_plots`)."""
 SEND_WAIT_S = 0.1
 SENT_POSES_KEPT = 8
 """How many earlier framings sent to a browser are remembered (a report at one of them is a stale framing)."""
@@ -162,18 +160,6 @@ class Views:
             self.maps_drawn = max(getattr(self, "maps_drawn", 0), int(m.group(1)))
             self._lock.notify_all()
 
-    def _hold_plots(self) -> None:
-        """Have every browser, a browser opened later too (the message stays in its backlog, in the order sent),
-        hold the Plotly figures sent after this call until it has drawn two frames of the 3D view sent before it
-        (:data:`explorer.app.controls.HOLD_PLOTS_SCRIPT`, at most :data:`HOLD_PLOTS_CAP_S`)."""
-        from explorer.app.controls import HOLD_PLOTS_SCRIPT
-
-        with contextlib.suppress(Exception):  # viser's own message; another version only loses the hold
-            from viser._messages import RunJavascriptMessage
-
-            self.server.gui._websock_interface.queue_message(
-                RunJavascriptMessage(source=HOLD_PLOTS_SCRIPT % {"cap_ms": round(1000 * HOLD_PLOTS_CAP_S)}))
-
     def _wait_maps_drawn(self, gen: int | None, timeout_s: float = MAPS_DRAWN_WAIT_S) -> None:
         """Wait until an open browser reported the maps this update sent as drawn (at most ``timeout_s``; not at all
         without a browser, nor when the update sent no maps, nor once a newer request arrived).
@@ -225,42 +211,33 @@ class Views:
             Stage timings in seconds: scene, methods, cloud, panels, selection, total (the
             scene and panels are up to date), sweep (accuracy-vs-density, after total);
             maps_drawn_wait: how long the update waited for a browser to report its maps painted
-            (part of total; :meth:`_wait_maps_drawn`; the first update with methods sends the 3D view before the
-            maps instead, and does not wait).
+            (part of total; :meth:`_wait_maps_drawn`).
         """
         times: dict[str, float] = {}
         t_start = time.perf_counter()
         self._check(gen)
         self._maps_wait_rev: int | None = None  # the maps this update sent, if any (_set_figure)
-        for stage in ("scene", "methods"):
+        for stage in ("scene", "methods", "panels"):
             t0 = time.perf_counter()
             getattr(self, f"_update_{stage}")(s, gen)
             times[stage] = time.perf_counter() - t0
             self._check(gen)
-        # the first update with methods (the first maps) sends the 3D view BEFORE the maps, and the browsers hold
-        # the maps until they have drawn it: a browser's first frames of the view (its WebGL programs linked, the
-        # SCP cloud drawn the first time; in software 0.3-1 s of the page) then come before the maps are on screen
-        # -- drawn after them, they ran inside the first SCOP change after loading, whose maps waited for them
-        three_first = bool(s.methods) and not self.__dict__.get("_3d_first_sent", False)
-        if three_first:
-            self._3d_first_sent = True
-            self._update_3d(s, gen, times)
-            self._hold_plots()
+        # what the 3D view shows of the new results (the SCOPs, the cloud's colours, the selection, the labels)
+        # reaches the browser as ONE batch after the panels: a browser's WebGL redraws the whole view for each
+        # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first -- in a batch of their
+        # own (a batch without 3D nodes is applied at once; one with them waits for the next 3D frame)
         t0 = time.perf_counter()
-        self._update_panels(s, gen)
-        times["panels"] = time.perf_counter() - t0
+        self._send_queued()
+        self._wait_maps_drawn(gen)
+        times["maps_drawn_wait"] = time.perf_counter() - t0  # the browser's time, not the app's
         self._check(gen)
-        if not three_first:
-            # what the 3D view shows of the new results (the SCOPs, the cloud's colours, the selection, the labels)
-            # reaches the browser as ONE batch after the panels: a browser's WebGL redraws the whole view for each
-            # batch (in software, 0.1-0.5 s a frame, the page waiting), and the maps come first -- in a batch of
-            # their own (a batch without 3D nodes is applied at once; one with them waits for the next 3D frame)
-            t0 = time.perf_counter()
-            self._send_queued()
-            self._wait_maps_drawn(gen)
-            times["maps_drawn_wait"] = time.perf_counter() - t0  # the browser's time, not the app's
-            self._check(gen)
-            self._update_3d(s, gen, times)
+        with self.server.atomic():
+            for stage in ("frame", "cloud", "selection"):
+                t0 = time.perf_counter()
+                getattr(self, f"_update_{stage}")(s, gen)
+                times[stage] = time.perf_counter() - t0
+                self._check(gen)
+            self._layout_labels()
         self.last_update_s = time.perf_counter() - t_start
         times["total"] = self.last_update_s
         if self.request_started is not None:
@@ -292,17 +269,6 @@ class Views:
         self._status(self._done_text(self.runs, self.pending, scps) + (" (training in the background)" if busy else ""),
                      100.0 if not busy else 85.0, busy=busy)
         return times
-
-    def _update_3d(self, s: Settings, gen: int | None, times: dict[str, float]) -> None:
-        """The 3D view's part of an update in one batch: its frame, the SCOPs and SCP cloud, the selection and the
-        labels' layout (stage times into ``times``)."""
-        with self.server.atomic():
-            for stage in ("frame", "cloud", "selection"):
-                t0 = time.perf_counter()
-                getattr(self, f"_update_{stage}")(s, gen)
-                times[stage] = time.perf_counter() - t0
-                self._check(gen)
-            self._layout_labels()
 
     def _update_scene(self, s: Settings, gen: int | None) -> None:
         """Scene, SCOPs and SCPs (the 3D view's ground, orbit and camera: :meth:`_update_frame`)."""
