@@ -114,3 +114,35 @@ def test_no_worker_when_memory_is_short(scene, monkeypatch):
     assert pool._process is None and "of memory available" in str(pool.error)
     sweeps, _ = export_module._sweep_with_pool(model, pool, s)
     _sweeps_equal(sweeps, _serial(scene, s))
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_by_the_worker(tmp_path):
+    """A spawned child imports the parent's main script first; a user's script calling ``run_export`` without an
+    ``if __name__ == "__main__":`` guard was run again, whole, in the worker (the export computed twice, the
+    script's top-level line printed by two processes). The script here prints its process id at top level and
+    counts the sweep jobs the worker delivered: one process runs the script, and the worker still works."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "no_guard.py"
+    script.write_text(
+        "import os\n"
+        "import explorer.app.sweep_pool as sp\n"
+        "from explorer.app.export import run_export\n"
+        "from explorer.sources import load_source\n"
+        "collect = sp.SweepPool.collect\n"
+        "def spy(self):\n"
+        "    out = collect(self)\n"
+        "    print('DELIVERED', len(out), self.error, flush=True)\n"
+        "    return out\n"
+        "sp.SweepPool.collect = spy\n"
+        "print('TOP LEVEL', os.getpid(), flush=True)\n"
+        f"run_export(load_source('preset', 'WSU'), {str(tmp_path / 'out')!r}, methods=['lrm', 'ann'], scps=2000,\n"
+        "           workers=2, log=lambda line: None)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert len([ln for ln in lines if ln.startswith("TOP LEVEL")]) == 1, out.stdout
+    delivered = [ln.split() for ln in lines if ln.startswith("DELIVERED")]
+    assert len(delivered) == 1 and int(delivered[0][1]) >= 1 and delivered[0][2] == "None", out.stdout
+    assert (tmp_path / "out" / "summary.json").exists()

@@ -23,11 +23,13 @@ ready, never what it is.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
+import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 from explorer import _log
@@ -75,6 +77,35 @@ def _worker(counter: Any, conn: Any, parent_pid: int) -> None:
         pass
     finally:
         conn.close()
+
+
+@contextlib.contextmanager
+def _main_not_replayed() -> Iterator[None]:
+    """Start a spawned process without it running the caller's ``__main__`` again.
+
+    A spawned child first imports the parent's main script (as ``__mp_main__``) so that functions defined there
+    can be unpickled; :func:`_worker` lives in this module and needs none of it.  A user's script that calls
+    :func:`explorer.app.export.run_export` without an ``if __name__ == "__main__":`` guard was run again, whole,
+    in the worker -- the export computed twice, by the child before it took any job (seen: a script's top-level
+    line printed by two processes).  The main module's file and spec are hidden while the process starts
+    (``multiprocessing.spawn.get_preparation_data`` reads them then, and only then), so the child imports only
+    this package."""
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    missing = object()
+    file, spec = main.__dict__.get("__file__", missing), main.__dict__.get("__spec__", missing)
+    with contextlib.suppress(AttributeError, TypeError):
+        main.__dict__.pop("__file__", None)
+        main.__spec__ = None
+    try:
+        yield
+    finally:
+        if file is not missing:
+            main.__file__ = file
+        if spec is not missing:
+            main.__spec__ = spec
 
 
 class SweepPool:
@@ -132,7 +163,8 @@ class SweepPool:
         self._process = ctx.Process(target=_worker, args=(self._counter, child, os.getpid()),
                                     name="pushbroom-sweep", daemon=True)
         try:
-            self._process.start()
+            with _main_not_replayed():
+                self._process.start()
         except Exception as exc:  # pragma: no cover - no process could be started (e.g. a script without a main guard)
             self.error = f"no worker process ({type(exc).__name__}: {exc})"
             self._process = None
