@@ -21,9 +21,17 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 
-__all__ = ["blas_thread_count", "blas_threads", "n_threads", "run_in_parts"]
+__all__ = ["blas_thread_count", "blas_threads", "cpus_available", "n_threads", "run_in_parts"]
 
 _POOL: ThreadPoolExecutor | None = None
+
+
+def cpus_available() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
 
 
 def n_threads() -> int:
@@ -33,7 +41,7 @@ def n_threads() -> int:
 
         return max(1, int(numba.get_num_threads()))
     except ImportError:  # pragma: no cover - numba missing
-        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+        return max(1, cpus_available())
 
 
 def _forget_pool() -> None:

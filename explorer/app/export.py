@@ -470,7 +470,7 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
                  color_method=methods[0] if methods else None, sweep=bool(sweep))
     t0 = time.perf_counter()
     if workers is None:
-        from explorer.app.sweep_pool import cpus_available
+        from explorer._threads import cpus_available
 
         workers = min(2, cpus_available())
     files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,

@@ -166,6 +166,7 @@ class ExplorerApp(Views):
         """Per browser (client id): (position, look_at, far, near) of its last framing, for its own canvas."""
         self._framed_clients: dict[Any, tuple] = {}
         self._client_since: dict[Any, float] = {}
+        self._poses_sent: dict[Any, list] = {}  # per browser: earlier framings sent to it (a report at one is stale)
         self._camera_lock = threading.RLock()
         """Held while a framing is decided and sent: viser runs each camera report's callback in its own pool
         thread, and two of them interleaved sent a browser two poses in the other order

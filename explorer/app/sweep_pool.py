@@ -43,14 +43,6 @@ WORKER_MEMORY = 2 * 2**30
 DIMAP export with its DEM held 0.4 GB beside the command's 0.9 GB."""
 
 
-def cpus_available() -> int:
-    """CPUs this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def _worker(counter: Any, conn: Any, parent_pid: int) -> None:
     """The worker process: receive the work (the pickled sensor, settings and jobs) on ``conn``, claim jobs from
     ``counter`` and send ``(index, result)`` for each, then ``None``."""
@@ -246,4 +238,4 @@ class SweepPool:
             self._conn = None
 
 
-__all__ = ["SILENT_S", "WORKER_MEMORY", "SweepPool", "cpus_available"]
+__all__ = ["SILENT_S", "WORKER_MEMORY", "SweepPool"]

@@ -33,9 +33,9 @@ reframed for the new shape even if its reports still carry an earlier pose."""
 MAPS_DRAWN_WAIT_S = 1.0
 """At most this long an update waits for a browser to report its new maps drawn before it sends the 3D part."""
 SEND_WAIT_S = 0.1
+"""How long an update waits for the browsers' connections to take the panels before it queues the 3D batch."""
 SENT_POSES_KEPT = 8
 """How many earlier framings sent to a browser are remembered (a report at one of them is a stale framing)."""
-"""How long an update waits for the browsers' connections to take the panels before it queues the 3D batch."""
 STATUS_NAME_CHARS = 48
 """Scene names longer than this are shortened in the status line (the Scene control shows them whole)."""
 
@@ -104,6 +104,7 @@ class Views:
         label_alternatives: dict[str, tuple]
         _framed_clients: dict[Any, tuple]
         _client_since: dict[Any, float]
+        _poses_sent: dict[Any, list]
         _camera_lock: Any
         _framing: tuple[np.ndarray, np.ndarray, np.ndarray | None]
         exports: int
@@ -740,7 +741,7 @@ class Views:
         cid = getattr(client, "client_id", id(client))
         earlier = self.client_poses.get(cid)
         if earlier is not None and earlier[0] != out[0]:  # poses sent before: a report at one of them is stale
-            sent = self.__dict__.setdefault("_poses_sent", {}).setdefault(cid, [])
+            sent = self._poses_sent.setdefault(cid, [])
             sent[:] = [*sent[-(SENT_POSES_KEPT - 1):], earlier[0]]
         self.client_poses[cid] = out
         if canvas is not None:  # the canvas this pose frames: the labels are laid out in it
@@ -796,7 +797,7 @@ class Views:
                 # not a user's move, which never lands within 1e-6 on a pose the app sent: frame it again
                 lost = lost or (not at_ours and any(
                     np.allclose(cam.position, p, atol=1e-6, rtol=1e-6)
-                    for p in getattr(self, "_poses_sent", {}).get(client.client_id, ())))
+                    for p in self._poses_sent.get(client.client_id, ())))
                 if not lost and (not (at_ours or at_initial or young) or abs(done[1] - w / h) <= 1e-3 * done[1]):
                     return
             self._framed_clients[client.client_id] = (key, w / h)

@@ -378,7 +378,9 @@ def _normal_equations(jac: torch.Tensor, err: torch.Tensor, theta: torch.Tensor,
 
 
 def _damped_step(normal: _NormalEquations, mu: float) -> torch.Tensor:
-    """The step of damping ``mu`` (Cholesky, least squares if singular) from an epoch's normal equations."""
+    """The step of damping ``mu`` from an epoch's normal equations: ``(J^T J + (mu + lambda) I) d = J^T e -
+    lambda theta`` (Cholesky, least squares if singular); without weight decay and with more parameters than
+    errors the equivalent ``d = J^T (J J^T + mu I)^-1 e`` (an N x N system)."""
     a = normal.product.clone()
     a.diagonal().add_(mu + normal.weight_decay if normal.weight_decay else mu)
     rhs = normal.rhs
@@ -388,17 +390,6 @@ def _damped_step(normal: _NormalEquations, mu: float) -> torch.Tensor:
     else:
         sol = torch.cholesky_solve(rhs[:, None], chol)[:, 0]
     return normal.jac.T @ sol if normal.dual else sol
-
-
-def _lm_step(jac: torch.Tensor, err: torch.Tensor, mu: float, theta: torch.Tensor,
-             weight_decay: float = 0.0) -> torch.Tensor:
-    """Solve ``(J^T J + (mu + lambda) I) d = J^T e - lambda theta`` (Cholesky, least squares if singular).
-
-    Without weight decay and with more parameters P than errors N it uses the equivalent
-    ``d = J^T (J J^T + mu I)^-1 e`` (an N x N system).  One step; :func:`lm_minimise` builds the normal
-    equations once per epoch (:func:`_normal_equations`) and tries each damping on them.
-    """
-    return _damped_step(_normal_equations(jac, err, theta, weight_decay), mu)
 
 
 def lm_minimise(
