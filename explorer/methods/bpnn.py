@@ -80,6 +80,38 @@ def _normaliser(values: np.ndarray, min_scale: float) -> tuple[float, float, boo
 MIN_EQUATIONS_PER_PARAMETER = 2.0
 
 
+def too_few_points(name: str, hidden: Sequence[int], n_points: int, n_outputs: int, n_weights: int) -> str | None:
+    """The refusal of a training that cannot succeed, decided before it starts, or None to train.
+
+    A network of ``n_weights`` weights fitted on ``n_points`` points of ``n_outputs`` outputs each has ``n_points
+    n_outputs`` equations; with fewer than :data:`MIN_EQUATIONS_PER_PARAMETER` per weight it interpolates its control
+    points and nothing tells its values between them (690-770 px on check points with 4 control points and 38
+    weights), so its answers are never trusted -- and training it (1,000-2,000 Levenberg-Marquardt steps) would be
+    spent on a network whose every answer is then marked not converged.
+
+    Parameters
+    ----------
+    name : str
+        The method or model, first word of the message.
+    hidden : sequence of int
+        Hidden layer sizes (named in the message).
+    n_points, n_outputs, n_weights : int
+        Training points (after any validation split), outputs per point, weights of the network.
+
+    Returns
+    -------
+    str or None
+        The one-line reason (what the method logs), or None when there are enough equations.
+    """
+    n_equations = int(n_points) * int(n_outputs)
+    if n_equations >= MIN_EQUATIONS_PER_PARAMETER * n_weights:
+        return None
+    need = int(np.ceil(MIN_EQUATIONS_PER_PARAMETER * n_weights / n_outputs))
+    return (f"{name} (hidden {list(hidden)}): {n_points} training points give {n_equations} equations for {n_weights} "
+            f"weights; it cannot generalise from so few points and its answers are marked not converged (need at "
+            f"least {need} training points, or fewer hidden nodes)")
+
+
 class MLPRegressor:
     """Small fully connected network ``R^d_in -> R^d_out`` trained by Levenberg-Marquardt (torch, float64).
 
@@ -117,11 +149,12 @@ class MLPRegressor:
     Attributes
     ----------
     fit_info : dict
-        ``converged``, ``stop`` (plateau, validation, mu_max, goal or max_iter), ``iterations``,
+        ``converged``, ``stop`` (plateau, validation, mu_max, goal, max_iter, or too_few_points: the training
+        refused before its first step, :func:`too_few_points`), ``iterations``,
         ``restart`` (index of the winner), ``train_rms`` per output (target units),
         ``validation_rms`` when a validation split is used, ``n_parameters``, ``too_few_points``
-        (fewer than :data:`MIN_EQUATIONS_PER_PARAMETER` training equations per weight: also
-        ``converged = False``).  Warnings are logged on the ``explorer`` logger (one line).
+        (fewer than :data:`MIN_EQUATIONS_PER_PARAMETER` training equations per weight: not trained, the first
+        start kept, ``converged = False``).  Warnings are logged on the ``explorer`` logger (one line).
     """
 
     def __init__(
@@ -326,11 +359,20 @@ class MLPRegressor:
             u_val, t_val = u[val_idx], t[val_idx]
             u, t = u[tr_idx], t[tr_idx]
         best = None
+        # decided before any training: too few equations for the weights is refused without a Levenberg-Marquardt
+        # step; the network keeps its first start (random hidden layers, least-squares output layer: what a training
+        # stopped at its first epoch returns) and every answer is marked not converged
+        refusal = too_few_points(self.name, self.hidden, int(u.shape[0]), int(t.shape[1]), self.n_parameters)
         with torch_threads(1):
-            for k in range(self.n_restarts):
+            for k in range(1 if refusal else self.n_restarts):
                 gen = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
-                theta, info = self._levenberg_marquardt(self._init_output_layer(self._init_theta(gen), u, t),
-                                                        u, t, u_val, t_val)
+                theta = self._init_output_layer(self._init_theta(gen), u, t)
+                info: dict[str, Any]
+                if refusal:
+                    info = {"iterations": 0, "stop": "too_few_points", "loss": float("nan"), "window_decrease": 0.0,
+                            "val_loss": None}
+                else:
+                    theta, info = self._levenberg_marquardt(theta, u, t, u_val, t_val)
                 score = info["val_loss"] if u_val is not None else info["loss"]
                 if best is None or score < best[0]:
                     best = (score, theta, info, k)
@@ -349,8 +391,7 @@ class MLPRegressor:
         # fewer equations than MIN_EQUATIONS_PER_PARAMETER per weight: the network interpolates the
         # control points and nothing tells its values between them (690-770 px on check points with
         # 4 control points and 38 weights)
-        n_equations = int(u.shape[0]) * int(t.shape[1])
-        too_few = n_equations < MIN_EQUATIONS_PER_PARAMETER * self.n_parameters
+        too_few = refusal is not None
         self.fit_info = {
             "converged": converged and not too_few, "stop": info["stop"], "iterations": info["iterations"],
             "restart": k, "window_decrease": info["window_decrease"],
@@ -360,11 +401,8 @@ class MLPRegressor:
         if ev is not None:
             self.fit_info["validation_rms"] = np.sqrt(np.mean(ev**2, axis=0)).tolist()
             self.fit_info["n_validation"] = int(ev.shape[0])
-        if too_few:
-            need = int(np.ceil(MIN_EQUATIONS_PER_PARAMETER * self.n_parameters / t.shape[1]))
-            _log.warn(f"{self.name} (hidden {list(self.hidden)}): {u.shape[0]} training points give {n_equations} "
-                      f"equations for {self.n_parameters} weights; it cannot generalise from so few points and its "
-                      f"answers are marked not converged (need at least {need} training points, or fewer hidden nodes)")
+        if refusal is not None:
+            _log.warn(refusal)
         elif not converged:
             _log.warn(f"{self.name}: network training stopped at max_iter={self.max_iter} while the error still fell "
                       f"by {100 * info['window_decrease']:.0f} % over the last {self.window} steps "

@@ -12,8 +12,8 @@ import logging
 import numpy as np
 import pytest
 
-from explorer.methods import create
-from explorer.methods.bpnn import MIN_EQUATIONS_PER_PARAMETER, BPNetworkGeometryModel
+from explorer.methods import bpnn, create
+from explorer.methods.bpnn import MIN_EQUATIONS_PER_PARAMETER, BPNetworkGeometryModel, LineOfSightNetwork
 from explorer.points import simulate_points
 from explorer.presets import build_scene
 
@@ -85,3 +85,55 @@ def test_a_goal_missed_with_enough_points_answers_with_the_best_model(wsu, name,
     assert b.valid.all() and b.converged.all()
     np.testing.assert_array_equal(a.row, b.row)
     assert np.max(np.abs(b.row - check.row)) < 0.05
+
+
+@pytest.mark.parametrize(("network", "weights"), [(BPNetworkGeometryModel, 38), (LineOfSightNetwork, 47)])
+def test_a_training_that_cannot_succeed_is_refused_before_its_first_step(network, weights, monkeypatch, caplog):
+    """Issue 24: too few equations for the weights is decided before the training, not after 1,000-2,000 wasted
+    Levenberg-Marquardt steps.  The weights counted by hand (the truth): Yue's network with 6 hidden nodes on (row,
+    col, Z) -> (X, Y) has 3*6+6 + 6*2+2 = 38; nn-rfm's line-of-sight network with 7 on (row, col) has 2*7+7 + 7*2+2
+    plus 2 x 5 linear terms = 47; 2 equations per point, so 37 / 46 points are refused without any step and 38 / 47
+    are trained."""
+    calls = []
+    original = bpnn.lm_minimise
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(bpnn, "lm_minimise", counting)
+    rng = np.random.default_rng(1)
+    hidden = 6 if weights == 38 else 7
+    for n, refused in ((weights - 1, True), (weights, False)):
+        calls.clear()
+        caplog.clear()
+        row, col, z = rng.uniform(0, 1000, n), rng.uniform(0, 1000, n), rng.uniform(0, 100, n)
+        net = network(hidden, max_iter=20, seed=0, name="nn-rfm")
+        with caplog.at_level(logging.WARNING, logger="explorer"):
+            net.fit(row, col, z, 2.0 * row + 0.1 * z + 1e-4 * row * col, 3.0 * col - 0.2 * z)
+        assert net.n_parameters == weights
+        lines = [r.getMessage() for r in caplog.records if r.name.startswith("explorer")]
+        if refused:
+            assert calls == [] and net.fit_info["iterations"] == 0 and net.fit_info["stop"] == "too_few_points"
+            assert net.fit_info["too_few_points"] is True and net.fit_info["converged"] is False
+            assert lines == [f"nn-rfm (hidden [{hidden}]): {n} training points give {2 * n} equations for {weights} "
+                             f"weights; it cannot generalise from so few points and its answers are marked not "
+                             f"converged (need at least {weights} training points, or fewer hidden nodes)"]
+        else:
+            assert calls == [1] and net.fit_info["iterations"] > 0
+            assert net.fit_info["too_few_points"] is False
+            assert not any("cannot generalise" in ln for ln in lines)
+        assert bpnn.too_few_points("nn-rfm", [hidden], n, 2, weights) == (lines[0] if refused else None)
+
+
+def test_refused_methods_answer_not_converged_everywhere(wsu):
+    """The sweep's rows of a refused density stay "not converged" (issue 24): bpnn and nn-rfm on 20 SCOPs (40
+    equations for 42 / 47 weights) fit without a training step and flag every answer."""
+    scops = simulate_points(wsu, 20, kind="scop")
+    check = simulate_points(wsu, 100, kind="scp")
+    for name in ("bpnn", "nn-rfm"):
+        method = create(name, wsu, seed=0).fit(scops)
+        info = method.fit_info.get("network", method.fit_info)
+        assert info["stop"] == "too_few_points" and info["iterations"] == 0
+        res = method.ground_to_image(check.ground)
+        assert not res.converged.any() and not res.valid.any()
