@@ -146,3 +146,96 @@ def test_a_script_without_a_main_guard_is_not_run_again_by_the_worker(tmp_path):
     delivered = [ln.split() for ln in lines if ln.startswith("DELIVERED")]
     assert len(delivered) == 1 and int(delivered[0][1]) >= 1 and delivered[0][2] == "None", out.stdout
     assert (tmp_path / "out" / "summary.json").exists()
+
+
+def test_an_early_worker_gives_the_serial_export_bit_for_bit(scene, monkeypatch):
+    """``explore --export`` starts the worker before the source is loaded (SweepPool.early: it imports meanwhile)
+    and gives it the jobs once the sensor is there: the files are the serial export's (the independent truth,
+    ``workers=1``), the pool reports no error, and it is closed by the export."""
+    errors: list[str | None] = []
+    collect = SweepPool.collect
+
+    def spy(self):
+        out = collect(self)
+        errors.append(self.error)
+        return out
+
+    monkeypatch.setattr(SweepPool, "collect", spy)
+    serial = export_module.export_files(scene, SETTINGS, source={"label": "WSU"}, seed=3, workers=1)
+    early = SweepPool.early(list(SETTINGS.methods))
+    assert early._process is not None and early._process.is_alive()  # running before it has any work
+    parallel = export_module.export_files(scene, SETTINGS, source={"label": "WSU"}, seed=3, workers=2,
+                                          early_pool=early)
+    assert errors == [None] and early._process is None
+    for name in serial:
+        if name not in RUN_DEPENDENT:
+            assert parallel[name] == serial[name], name
+
+
+def test_an_early_worker_computes_the_serial_sweep(scene):
+    """The early worker (torch imported first for ann, a network) takes every job when the caller claims none;
+    its results equal the serial sweep's bit for bit."""
+    import time
+
+    s = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm", "ann"), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    pool = SweepPool.early(list(s.methods))
+    try:
+        pool.submit(scene, s, 3, model.sweep_points, export_module._pool_jobs(model, s))
+        deadline = time.monotonic() + 300.0
+        while pool._counter.value <= len(pool.jobs) and time.monotonic() < deadline:  # the caller claims nothing
+            time.sleep(0.1)
+        assert pool._counter.value > len(pool.jobs), "the worker stopped before taking every job"
+        sweeps, _ = export_module._sweep_with_pool(model, pool, s)
+    finally:
+        pool.close()
+    assert pool.error is None and sorted(pool.results) == list(range(len(pool.jobs)))
+    _sweeps_equal(sweeps, _serial(scene, s))
+
+
+def test_an_early_worker_without_work_is_stopped(scene):
+    """An early worker given no job (no sweep, one CPU, a sensor that does not pickle) is stopped and the caller
+    does every job itself; an export that does not reach the sweep (a refused source) closes it too."""
+    s = Settings(preset="WSU", scop_density=50, scp_count=3000, methods=("lrm",), sweep=True)
+    model = ExplorerModel(preview_after_s=None, seed=3, scenes={s.preset: scene})
+    early = SweepPool.early(["lrm"])
+    process = early._process
+    early.submit(lambda: None, s, 3, model.sweep_points, export_module._pool_jobs(model, s))  # does not pickle
+    assert early._process is None and not process.is_alive() and "does not pickle" in str(early.error)
+    sweeps, _ = export_module._sweep_with_pool(model, early, s)
+    _sweeps_equal(sweeps, _serial(scene, s))
+
+    early = SweepPool.early(["lrm"])
+    process = early._process
+    early.submit(scene, s, 3, model.sweep_points, [])  # no job
+    assert early._process is None and not process.is_alive() and early.claim() is None
+
+    early = SweepPool.early(["lrm"])
+    process = early._process
+    export_module.export_files(scene, Settings(preset="WSU", scop_density=50, scp_count=500, methods=("lrm",),
+                                               sweep=False), source={"label": "WSU"}, seed=3, workers=2,
+                               early_pool=early)  # no sweep: nothing for the worker
+    assert early._process is None and not process.is_alive()
+
+
+def test_explore_export_of_a_refused_source_leaves_no_worker(tmp_path, monkeypatch):
+    """The early worker of ``explore --export`` is stopped when the source is refused (the error as before)."""
+    from explorer.app import export as export_mod
+    from explorer.cli import main
+
+    started: list = []
+    early = export_mod.early_sweep_pool
+
+    def spy(methods, sweep):
+        pool = early(methods, sweep)
+        started.append((pool, pool._process if pool is not None else None))
+        return pool
+
+    monkeypatch.setattr(export_mod, "early_sweep_pool", spy)
+    rc = main(["explore", "--scene", str(tmp_path / "missing.json"), "--export", str(tmp_path / "out")])
+    assert rc == 2
+    assert len(started) == 1
+    pool, process = started[0]
+    if process is not None:  # a machine with two CPUs: it was started, and is stopped
+        assert pool._process is None and not process.is_alive()
+    assert not (tmp_path / "out").exists()

@@ -201,7 +201,7 @@ def _markdown_html(text: str) -> str:
 def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
                  fits: dict[str, FitRecord] | None = None, stand_in: StandIn | None = None,
                  sweep_fit: Callable[[str, int], FitRecord | None] | None = None,
-                 native_pixels: bool = False, workers: int = 1) -> dict[str, bytes]:
+                 native_pixels: bool = False, workers: int = 1, early_pool: Any = None) -> dict[str, bytes]:
     """Compute the export of ``s`` on ``scene`` (every SCP) and return ``{file name: bytes}``.
 
     Parameters
@@ -229,6 +229,9 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         (:class:`explorer.app.sweep_pool.SweepPool`) that refits the learned methods at the other densities while
         this one computes the maps, then shares the rest; the files are the same bytes as with 1 (serial).
         Without ``sweep_fit`` only.
+    early_pool : SweepPool, optional
+        A pool started before the sensor was loaded (:meth:`~explorer.app.sweep_pool.SweepPool.early`; its worker
+        has imported meanwhile): given the sweep's jobs here, or stopped when this export has none for it.
     """
     model = ExplorerModel(preview_after_s=None, seed=seed, scenes={s.preset: scene})
     pool = None
@@ -236,7 +239,14 @@ def export_files(scene: Any, s: Settings, *, source: dict, seed: int = 0,
         # the sweep's refits at the other densities start now on a second process, while the maps are computed here
         from explorer.app.sweep_pool import SweepPool
 
-        pool = SweepPool(scene, s, seed, model.sweep_points, _pool_jobs(model, s))
+        jobs = _pool_jobs(model, s)
+        if early_pool is not None:
+            pool, early_pool = early_pool, None
+            pool.submit(scene, s, seed, model.sweep_points, jobs)
+        else:
+            pool = SweepPool(scene, s, seed, model.sweep_points, jobs)
+    if early_pool is not None:  # no sweep to share
+        early_pool.close()
     try:
         return _export_files(model, pool, scene, s, source=source, seed=seed, fits=fits, stand_in=stand_in,
                              sweep_fit=sweep_fit, native_pixels=native_pixels)
@@ -417,7 +427,7 @@ def default_file_methods() -> list[str]:
 
 def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = None, scops: int = 100,
                scps: int = 50_000, seed: int = 0, sweep: bool = True, log: Any = print,
-               workers: int | None = None) -> dict[str, Path]:
+               workers: int | None = None, early_pool: Any = None) -> dict[str, Path]:
     """``pushbroom explore ... --export DIR``: compute and write the export's files into ``out_dir``.
 
     Parameters
@@ -436,6 +446,8 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
         Progress lines.
     workers : int, optional
         Processes for the sweep (:func:`export_files`); default 2 when this process may use two CPUs, else 1.
+    early_pool : SweepPool, optional
+        The sweep's worker started before the source was loaded (:func:`early_sweep_pool`); closed here if unused.
 
     Returns
     -------
@@ -474,7 +486,7 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
 
         workers = min(2, cpus_available())
     files = export_files(scene, s, source=source.to_dict(), seed=seed, stand_in=source.stand_in,
-                         native_pixels=source.kind == "isd", workers=workers)
+                         native_pixels=source.kind == "isd", workers=workers, early_pool=early_pool)
     out = Path(out_dir)
     # written as a whole (a temporary folder renamed into place, locked against concurrent writers): after a
     # failure, SIGTERM or a full disk the folder holds the previous complete export or nothing
@@ -485,5 +497,21 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
     return written
 
 
+def early_sweep_pool(methods: list[str] | None, sweep: bool) -> Any:
+    """The accuracy-vs-SCOPs sweep's worker process of ``explore --export``, started before the source is loaded so
+    that it imports the package (and torch for a network) meanwhile (:meth:`SweepPool.early`); None without a
+    sweep or a second CPU.  ``methods``: the user's, or None for the defaults (:func:`default_file_methods` of a
+    file, :data:`~explorer.app.model.DEFAULT_METHODS` of a preset: both are named, the source is not loaded yet).
+    Pass it to :func:`run_export`, and close it if the export is not reached."""
+    from explorer._threads import cpus_available
+
+    if not sweep or min(2, cpus_available()) < 2:
+        return None
+    from explorer.app.model import DEFAULT_METHODS
+    from explorer.app.sweep_pool import SweepPool
+
+    return SweepPool.early(list(methods) if methods else [*default_file_methods(), *DEFAULT_METHODS])
+
+
 __all__ = ["CSV_COLUMNS", "RUN_DEPENDENT", "export_files", "method_summary", "method_timing", "residuals_csv",
-           "run_export", "sensor_truth"]
+           "run_export", "sensor_truth", "early_sweep_pool"]

@@ -303,7 +303,12 @@ def run_explore(args: Any) -> int:
     units = needed_units("explore", source=kind, methods=methods if methods is not None else DEFAULT_METHODS,
                          dem=bool(getattr(args, "dem", None)))
     progress = CompileProgress(expected_compiles(units), [TerminalLine()]).install()
+    early_pool = None
     try:
+        if export is not None:  # the sweep's worker imports while the source loads (closed below if unused)
+            from explorer.app.export import early_sweep_pool
+
+            early_pool = early_sweep_pool(methods, sweep=not getattr(args, "no_sweep", False))
         source = source_from_args(args)
         scops = getattr(args, "scops", None) or 100
         scps = getattr(args, "scps", None) or 50_000
@@ -312,7 +317,7 @@ def run_explore(args: Any) -> int:
             from explorer.app.export import run_export
 
             run_export(source, export, methods=methods, scops=scops, scps=scps, seed=seed,
-                       sweep=not getattr(args, "no_sweep", False))
+                       sweep=not getattr(args, "no_sweep", False), early_pool=early_pool)
             return 0
         if methods is not None:
             from explorer.methods import available
@@ -330,6 +335,8 @@ def run_explore(args: Any) -> int:
                      model=ExplorerModel(seed=seed), scp_count=scps, scop_density=scops, compile_progress=progress,
                      sweep=not getattr(args, "no_sweep", False))
     finally:
+        if early_pool is not None:  # a source or a setting refused: the worker stops
+            early_pool.close()
         progress.uninstall()
         progress.finish()
 

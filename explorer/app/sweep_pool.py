@@ -43,12 +43,14 @@ WORKER_MEMORY = 2 * 2**30
 DIMAP export with its DEM held 0.4 GB beside the command's 0.9 GB."""
 
 
-def _worker(counter: Any, conn: Any, parent_pid: int) -> None:
-    """The worker process: receive the work (the pickled sensor, settings and jobs) on ``conn``, claim jobs from
-    ``counter`` and send ``(index, result)`` for each, then ``None``."""
+def _worker(counter: Any, conn: Any, parent_pid: int, methods: tuple[str, ...] = ()) -> None:
+    """The worker process: import what the jobs of ``methods`` need (while the caller may still be loading the
+    sensor), receive the work (the pickled sensor, settings and jobs) on ``conn``, claim jobs from ``counter`` and
+    send ``(index, result)`` for each, then ``None``."""
     from explorer.app.model import SWEEP_PURPOSE, ExplorerModel
 
     try:
+        _import_for(methods)
         scene, s, seed, sweep_points, jobs = pickle.loads(conn.recv_bytes())
         model = ExplorerModel(preview_after_s=None, seed=seed, sweep_points=sweep_points, scenes={s.preset: scene})
         while os.getppid() == parent_pid:
@@ -69,6 +71,21 @@ def _worker(counter: Any, conn: Any, parent_pid: int) -> None:
         pass
     finally:
         conn.close()
+
+
+def _import_for(methods: Sequence[str]) -> None:
+    """Import the method modules, and torch when one of ``methods`` trains a network (``long_fit``: torch takes
+    about 1.3 s to import), so that a worker started early has done it before its first job."""
+    if not methods:
+        return
+    from explorer.methods import registry
+
+    reg = registry()
+    if any(reg[m].long_fit for m in methods if m in reg):
+        import importlib
+
+        with contextlib.suppress(ImportError):  # without torch the training says so itself
+            importlib.import_module("torch")
 
 
 @contextlib.contextmanager
@@ -114,34 +131,85 @@ class SweepPool:
         Method and SCOP density of each job, the longest first (both processes take them in this order).
     """
 
+    jobs: list[tuple[str, int]]
+    results: dict[int, tuple[str, Any]]
+    error: str | None
+    """Why the worker did not start or did not finish (None: it delivered every job it took)."""
+    _process: Any
+    _conn: Any
+    _counter: Any
+    _next: int  # the caller's own count when there is no worker
+    _reader: threading.Thread | None
+    _payload: bytes | None
+
     def __init__(self, scene: Any, settings: Any, seed: int, sweep_points: int,
                  jobs: Sequence[tuple[str, int]]) -> None:
+        self._reset()
         self.jobs = list(jobs)
-        self.results: dict[int, tuple[str, Any]] = {}
-        self._process: Any = None
-        self._conn: Any = None
-        self._counter: Any = None
+        if not self.jobs or not self._memory_ok():
+            return
+        payload = self._pickled(scene, settings, seed, sweep_points)
+        if payload is not None:
+            self._spawn(())
+            self._send(payload)
+
+    @classmethod
+    def early(cls, methods: Sequence[str] = ()) -> SweepPool:
+        """A pool whose worker process starts now, before the sensor is loaded: it imports the package (and torch
+        for a network of ``methods``) while the caller loads, then waits for :meth:`submit` (issue 24: the DIMAP
+        export's worker spent its first 2 s importing after the sensor was loaded)."""
+        pool = cls.__new__(cls)
+        pool._reset()
+        if pool._memory_ok():
+            pool._spawn(tuple(methods))
+        return pool
+
+    def submit(self, scene: Any, settings: Any, seed: int, sweep_points: int,
+               jobs: Sequence[tuple[str, int]]) -> None:
+        """Give the worker of :meth:`early` its work (as the constructor's arguments); with no job, or a sensor that
+        does not pickle, the worker is stopped and the caller does every job."""
+        self.jobs = list(jobs)
+        if self._process is None:
+            return
+        payload = self._pickled(scene, settings, seed, sweep_points) if self.jobs else None
+        if payload is None:  # the worker is stopped (it has only imported)
+            self.close()
+            self._counter = None
+            return
+        self._send(payload)
+
+    def _reset(self) -> None:
+        self.jobs = []
+        self.results = {}
+        self._process = None
+        self._conn = None
+        self._counter = None
         self._next = 0  # the caller's own count when there is no worker
-        self._reader: threading.Thread | None = None
+        self._reader = None
         self._lock = threading.Lock()
         self._last = 0.0
         self._finished = False
-        self.error: str | None = None
-        """Why the worker did not start or did not finish (None: it delivered every job it took)."""
-        if not self.jobs:
-            return
+        self._payload = None
+        self.error = None
+
+    def _memory_ok(self) -> bool:
         from explorer.memory import available_memory, format_bytes
 
         if available_memory() < WORKER_MEMORY:  # the same results serially rather than a machine swapping
             self.error = (f"{format_bytes(available_memory())} of memory available, below the "
                           f"{format_bytes(WORKER_MEMORY)} a worker process is given")
-            return
+            return False
+        return True
+
+    def _pickled(self, scene: Any, settings: Any, seed: int, sweep_points: int) -> bytes | None:
         try:
-            payload = pickle.dumps((scene, settings, int(seed), int(sweep_points), self.jobs),
-                                   protocol=pickle.HIGHEST_PROTOCOL)
+            return pickle.dumps((scene, settings, int(seed), int(sweep_points), self.jobs),
+                                protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as exc:  # a sensor that does not pickle: the caller does every job
             self.error = f"the sensor does not pickle ({type(exc).__name__}: {exc})"
-            return
+            return None
+
+    def _spawn(self, methods: tuple[str, ...]) -> None:
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
@@ -151,8 +219,7 @@ class SweepPool:
         # start() returns, and a pipe holds 64 KiB, so the caller waited for the new interpreter to start and
         # read them (0.6 s on the DIMAP export)
         self._conn, child = ctx.Pipe(duplex=True)
-        self._payload: bytes | None = payload
-        self._process = ctx.Process(target=_worker, args=(self._counter, child, os.getpid()),
+        self._process = ctx.Process(target=_worker, args=(self._counter, child, os.getpid(), methods),
                                     name="pushbroom-sweep", daemon=True)
         try:
             with _main_not_replayed():
@@ -163,10 +230,15 @@ class SweepPool:
             self._counter = None
         finally:
             child.close()
-        if self._process is not None:
-            self._last = time.monotonic()
-            self._reader = threading.Thread(target=self._read, name="pushbroom-sweep-reader", daemon=True)
-            self._reader.start()
+
+    def _send(self, payload: bytes) -> None:
+        """Start the reader thread, which sends ``payload`` to the worker, then reads its results."""
+        if self._process is None:
+            return
+        self._payload = payload
+        self._last = time.monotonic()
+        self._reader = threading.Thread(target=self._read, name="pushbroom-sweep-reader", daemon=True)
+        self._reader.start()
 
     def claim(self) -> int | None:
         """The next job for the caller (its index in :attr:`jobs`), or None when every job is taken."""
