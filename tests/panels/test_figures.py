@@ -408,6 +408,43 @@ def test_panels_html_opens_offline_and_is_deterministic(results):
             F.figures_html([], "export", scripts=[bad])
 
 
+def test_panels_html_equals_the_validated_copies_path(results):
+    """figures_html makes one validated copy of each figure instead of two (the first only read the trace types):
+    the page is the same bytes as before -- each figure written from its own validated copy (``go.Figure(fig)``,
+    ``update_layout(width, height)``, ``fig.to_html``) -- for the maps, the sweep, the deferred timing bars with
+    their post-script, a figure given as a dict, and an HTML block; the caller's figures are left unchanged."""
+    import html
+
+    import plotly.graph_objects as go
+
+    scene, scops, scps, evs = results
+    sweep = {"toy_poly": [dataclasses.replace(evs["toy_poly"], n_scops=n) for n in (10, 20)]}
+    figs = [("maps", F.residual_maps(evs, scps, control=scops, shape=scene.shape, component="row and column")),
+            ("sweep", F.accuracy_vs_density(sweep)),
+            ("table", "<table><tr><td>a &amp; b</td></tr></table>"),
+            ("timing", F.timing_bars(evs, deferred=True), F.timing_fill_script(list(evs))),
+            ("a dict", {"data": [{"type": "bar", "x": [1, 2], "y": [np.nan, -0.0]}], "layout": {"title": "d"}})]
+    page = F.figures_html(figs, "export", ["note & more"], scripts=["timing.js"])
+
+    parts = ["<h1>export</h1>", "<p>note &amp; more</p>", '<script src="timing.js"></script>']
+    copies = [go.Figure(e[1]) for e in figs if not isinstance(e[1], str)]
+    parts.append('<script type="text/javascript">' + F._plotlyjs_for(copies) + "</script>")
+    for k, entry in enumerate(figs):
+        parts.append(f"<h2>{html.escape(entry[0])}</h2>")
+        if isinstance(entry[1], str):
+            parts.append(entry[1])
+            continue
+        fig = go.Figure(entry[1])
+        fig.update_layout(width=1000, height=int(1000 * float((fig.layout.meta or {}).get("height_over_width", 0.6))))
+        parts.append(F._unescape_base64(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{k}",
+                                                    config=F.PLOTLY_CONFIG,
+                                                    post_script=entry[2] if len(entry) > 2 else None)))
+    expected = ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>export</title></head>"
+                "<body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
+    assert page == expected
+    assert figs[0][1].layout.width is None  # the caller's figure is not changed
+
+
 def test_panels_html_keeps_the_arrays_exact_and_does_not_escape_base64():
     """Issue 24 (pages under 5 MB on real files): plotly's HTML writer escapes every ``/`` as ``\\u002f`` (6 bytes
     for 1), also inside the base64 of the arrays.  A map with many empty (NaN) cells -- a DEM covering two thirds
