@@ -72,3 +72,43 @@ def test_csv_bytes_and_exact_round_trip():
         assert float(row["x_m"]) == xyz[first.evaluated_index[i], 0]
     assert ",0.10000000000000001," in text.decode()
     assert "nan" not in text.decode() and "inf" not in text.decode()
+
+
+class _Points(SimpleNamespace):
+    def __len__(self) -> int:
+        return len(self.row)
+
+
+def test_csv_awkward_numbers_single_and_empty_maps():
+    """The column-interleaving writer on -0.0, 1e-17, subnormals, huge and integral values, a method with one
+    point, one with none, unsorted and repeated check point indices, and no body-fixed coordinates (empty x, y, z):
+    the bytes of the column-wise reference, every finite number read back exactly."""
+    rng = np.random.default_rng(5)
+    n = 40
+    scps = _Points(row=rng.uniform(-1, 4e4, n), col=rng.uniform(0, 4e4, n))
+    scps.row[:6] = [-0.0, 1e-17, 5e-324, 1.7976931348623157e308, 12345.0, -2.5e-310]
+    xyz = rng.normal(0, 6.4e6, (n, 3))
+    xyz[0] = [-0.0, 1e300, -1e-300]
+    awkward = np.array([-0.0, 0.0, 1e-17, -1e-17, 5e-324, 1e308, -1.7976931348623157e308, 0.1, 1 / 3, 2.0 ** 60,
+                        np.nan, np.inf])
+    idx = np.array([5, 3, 3, 0, 39, 1, 2, 4, 6, 7, 8, 9])  # unsorted, one repeated
+    evs = {"a": SimpleNamespace(evaluated_index=idx, residual_row=awkward, residual_col=awkward[::-1].copy()),
+           "one": SimpleNamespace(evaluated_index=np.array([17]), residual_row=np.array([-0.0]),
+                                  residual_col=np.array([1e-17])),
+           "none": SimpleNamespace(evaluated_index=np.zeros(0, np.int64), residual_row=np.zeros(0),
+                                   residual_col=np.zeros(0))}
+    status = {"a": rng.integers(0, len(STATUS_NAMES), idx.size), "one": np.array([2]), "none": np.zeros(0, np.int64)}
+    for native in (False, True):
+        assert residuals_csv(evs, status, scps, xyz, native_pixels=native) == _column_wise(evs, status, scps, xyz,
+                                                                                           native)
+    nan_xyz = np.full((n, 3), np.nan)
+    text = residuals_csv(evs, status, scps, None)
+    assert text == _column_wise(evs, status, scps, nan_xyz, False)
+    rows = list(csv.DictReader(io.StringIO(text.decode())))
+    assert [r["method"] for r in rows] == ["a"] * idx.size + ["one"]
+    for r, i, v in zip(rows, idx, awkward, strict=False):
+        assert int(r["scp_index"]) == i and r["x_m"] == ""
+        assert (r["row_residual_px"] == "") if not np.isfinite(v) else (float(r["row_residual_px"]) == v)
+        assert float(r["row_px"]) == scps.row[i]
+    assert rows[0]["row_residual_px"] == "-0" and rows[-1]["col_residual_px"] == "1.0000000000000001e-17"
+    assert residuals_csv({}, {}, scps, xyz) == (",".join(CSV_COLUMNS) + "\n").encode()
