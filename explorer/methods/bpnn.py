@@ -58,6 +58,7 @@ from explorer.methods._lm import (
     torch,
     torch_threads,
 )
+from explorer.methods._lm_compiled import NUMBA_AVAILABLE, STOP_REASONS, lm_one_hidden
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
@@ -197,6 +198,11 @@ class MLPRegressor:
         self.degenerate_inputs = np.zeros(0, dtype=bool)
         self.fit_info: dict = {}
 
+    #: Train by :func:`explorer.methods._lm_compiled.lm_one_hidden` where it applies
+    #: (:meth:`_compiled_training_applies`); False: always by the torch trainer
+    #: (:func:`explorer.methods._lm.lm_minimise`).
+    compiled_training: ClassVar[bool] = True
+
     def _set_sizes(self, n_in: int, n_out: int) -> None:
         self._shapes = layer_shapes((n_in, *self.hidden, n_out))
         self.n_parameters = n_parameters(self._shapes)
@@ -288,6 +294,8 @@ class MLPRegressor:
         sum of squared errors plus ``weight_decay |theta|^2``, plateau rule, validation failures
         counted when the error does not improve (ties included)."""
 
+        if self._compiled_training_applies(u, t):
+            return self._levenberg_marquardt_compiled(theta, u, t, u_val, t_val)
         validation_error = None
         if u_val is not None and t_val is not None:
             uv, tv = u_val, t_val
@@ -309,6 +317,42 @@ class MLPRegressor:
         return res.theta, {"iterations": res.iterations, "stop": stop, "loss": res.final_objective,
                            "window_decrease": window_decrease,
                            "val_loss": res.val_mse if u_val is not None else None}
+
+    def _compiled_training_applies(self, u: torch.Tensor, t: torch.Tensor) -> bool:
+        """True where :func:`explorer.methods._lm_compiled.lm_one_hidden` trains this network: numba present, one
+        hidden layer, and at least as many errors as weights (the torch trainer's ``J J^T`` form is not in it)."""
+        return (self.compiled_training and NUMBA_AVAILABLE and len(self._shapes) == 2
+                and int(u.shape[0]) * int(t.shape[1]) >= self.n_parameters)
+
+    def _compiled_inputs(self, u: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        """What the hidden layer sees (N, I) and the linear features (N, F) of inputs ``u``, as contiguous float64
+        arrays (the network of :mod:`explorer.methods._lm_compiled`; no linear term here)."""
+        x = np.ascontiguousarray(u.numpy(), dtype=np.float64)
+        return x, np.empty((x.shape[0], 0))
+
+    def _levenberg_marquardt_compiled(
+        self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor,
+        u_val: torch.Tensor | None, t_val: torch.Tensor | None,
+    ) -> tuple[torch.Tensor, dict]:
+        """:meth:`_levenberg_marquardt` by the compiled trainer (the same algorithm and stopping rules, one call)."""
+        x, feats = self._compiled_inputs(u)
+        target = np.ascontiguousarray(t.numpy(), dtype=np.float64)
+        if u_val is not None and t_val is not None:
+            xv, fv = self._compiled_inputs(u_val)
+            tv = np.ascontiguousarray(t_val.numpy(), dtype=np.float64)
+        else:
+            xv, fv, tv = np.empty((0, x.shape[1])), np.empty((0, feats.shape[1])), np.empty((0, target.shape[1]))
+        best, _done, _best_epoch, stop, iterations, _train, val, final, history = lm_one_hidden(
+            np.ascontiguousarray(theta.numpy(), dtype=np.float64), x, feats, target, xv, fv, tv, self.hidden[0],
+            self.activation == "tanh", self.weight_decay, self.max_iter, 1e-3, 0.1, 10.0, 1e10, 1e-28, self.max_fail,
+            self.window, self.tol)
+        ref = history[max(0, len(history) - 1 - self.window)]
+        window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
+        reason = STOP_REASONS[int(stop)]
+        return torch.from_numpy(best), {
+            "iterations": int(iterations), "stop": "max_iter" if reason == "max_epochs" else reason,
+            "loss": float(final), "window_decrease": float(window_decrease),
+            "val_loss": float(val) if u_val is not None else None}
 
     def fit_arrays(
         self,
@@ -639,6 +683,11 @@ class LineOfSightNetwork(BPNetworkGeometryModel):
                 j_b[:, o, o * n_feat:(o + 1) * n_feat] = hit[2]
             hit[3] = j_b
         return hit[1], hit[2], hit[3]
+
+    def _compiled_inputs(self, u: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+        rc, feats, _ = self._input_parts(u)
+        return (np.ascontiguousarray(rc.numpy(), dtype=np.float64),
+                np.ascontiguousarray(feats.numpy(), dtype=np.float64))
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)

@@ -95,13 +95,15 @@ def test_a_training_that_cannot_succeed_is_refused_before_its_first_step(network
     plus 2 x 5 linear terms = 47; 2 equations per point, so 37 / 46 points are refused without any step and 38 / 47
     are trained."""
     calls = []
-    original = bpnn.lm_minimise
 
-    def counting(*args, **kwargs):
-        calls.append(1)
-        return original(*args, **kwargs)
+    def counting(trainer):
+        def run(*args, **kwargs):
+            calls.append(1)
+            return trainer(*args, **kwargs)
+        return run
 
-    monkeypatch.setattr(bpnn, "lm_minimise", counting)
+    for trainer in ("lm_minimise", "lm_one_hidden"):  # the torch trainer and the compiled one
+        monkeypatch.setattr(bpnn, trainer, counting(getattr(bpnn, trainer)))
     rng = np.random.default_rng(1)
     hidden = 6 if weights == 38 else 7
     for n, refused in ((weights - 1, True), (weights, False)):

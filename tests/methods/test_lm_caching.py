@@ -23,6 +23,12 @@ def data():
     return scops.row, scops.col, g[:, 2], g[:, 0], g[:, 1]
 
 
+@pytest.fixture(autouse=True)
+def _torch_trainer(monkeypatch):
+    """These caches belong to the torch trainer (the compiled one, tests/methods/test_lm_compiled.py, has none)."""
+    monkeypatch.setattr(bpnn.MLPRegressor, "compiled_training", False)
+
+
 def _train(data, **options):
     net = bpnn.LineOfSightNetwork(6, max_iter=150, seed=2, **options)
     return net.fit(*data)

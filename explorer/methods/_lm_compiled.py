@@ -1,0 +1,243 @@
+"""The Levenberg-Marquardt training of a network with ONE hidden layer, compiled whole (numba): the trainer of
+``bpnn`` and ``nn-rfm`` (:class:`explorer.methods.bpnn.MLPRegressor` and its subclasses).
+
+The same algorithm, stopping rules and results as :func:`explorer.methods._lm.lm_minimise` called the way
+:meth:`~explorer.methods.bpnn.MLPRegressor._levenberg_marquardt` calls it (sum of squared errors plus
+``lambda |theta|^2``, MATLAB's ``trainlm`` damping, validation failures counted on ties, the plateau rule), but
+one compiled call for the whole training instead of some thirty torch operations per epoch: at 42 weights and 200
+errors an epoch cost 0.27 ms of per-operation overhead in torch for some 0.04 ms of arithmetic.  The normal
+equations are built per output: an output's errors depend only on the hidden layer's weights (shared) and on that
+output's own weights (its row of the output layer, its bias and its linear terms), so ``J^T J`` is the sum over the
+outputs of ``J_o^T J_o`` on those columns alone (half the products of the full ``J^T J`` with two outputs).
+The damped system is solved by Cholesky (least squares if it is not positive definite), as in
+:func:`explorer.methods._lm._damped_step`.  The sums are in another order than torch's: the trained weights
+agree with the torch trainer's to round-off over a few epochs and then drift as any two LM trainings started
+from round-off-different points do (tests/methods/test_lm_compiled.py); same inputs, same bits, run to run.
+
+The network (:func:`network_outputs`): ``y_o = sum_j W2[o, j] h_j + b2[o] + sum_f L[o, f] F_f`` with ``h_j =
+act(sum_i W1[j, i] X_i + b1[j])`` (``act`` the logistic sigmoid or tanh), parameters laid out as ``W1`` (H, I)
+row-major, ``b1`` (H), ``W2`` (O, H) row-major, ``b2`` (O), ``L`` (O, F) row-major -- the flat layout of
+:func:`explorer.methods._lm.dense_layers` followed by the line-of-sight network's linear terms (F = 0: none).
+Conventions: ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from explorer._numba import NUMBA_AVAILABLE, njit
+
+__all__ = ["NUMBA_AVAILABLE", "STOP_REASONS", "lm_one_hidden", "network_outputs"]
+
+#: The stop reasons of :func:`lm_one_hidden` by code (those of :func:`explorer.methods._lm.lm_minimise`).
+STOP_REASONS = ("max_epochs", "non_finite", "goal", "mu_max", "validation", "plateau")
+
+
+@njit(cache=True)
+def _hidden(theta, x, n_hidden, tanh):  # pragma: no cover - compiled
+    """Hidden activations (N, H) of inputs ``x`` (N, I)."""
+    n, n_in = x.shape
+    h = np.empty((n, n_hidden))
+    b0 = n_hidden * n_in
+    for k in range(n):
+        for j in range(n_hidden):
+            z = theta[b0 + j]
+            for i in range(n_in):
+                z += theta[j * n_in + i] * x[k, i]
+            h[k, j] = np.tanh(z) if tanh else 1.0 / (1.0 + np.exp(-z))
+    return h
+
+
+@njit(cache=True)
+def network_outputs(theta, x, feats, n_hidden, n_out, tanh):  # pragma: no cover - compiled
+    """Outputs (N, O) of the network (module docstring) for inputs ``x`` (N, I) and linear features ``feats``
+    (N, F; F may be 0)."""
+    n, n_in = x.shape
+    n_feat = feats.shape[1]
+    h = _hidden(theta, x, n_hidden, tanh)
+    s = n_hidden * n_in + n_hidden  # where the output layer starts
+    w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
+    y = np.empty((n, n_out))
+    for k in range(n):
+        for o in range(n_out):
+            v = theta[b2 + o]
+            for j in range(n_hidden):
+                v += theta[w2 + o * n_hidden + j] * h[k, j]
+            for f in range(n_feat):
+                v += theta[lin + o * n_feat + f] * feats[k, f]
+            y[k, o] = v
+    return y
+
+
+@njit(cache=True)
+def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - compiled
+    """Sum of squared errors ``target - outputs`` plus ``lam |theta|^2``, and the errors (N, O)."""
+    e = target - network_outputs(theta, x, feats, n_hidden, target.shape[1], tanh)
+    s = 0.0
+    for k in range(e.shape[0]):
+        for o in range(e.shape[1]):
+            s += e[k, o] * e[k, o]
+    if lam != 0.0:
+        s += lam * np.dot(theta, theta)
+    return s, e
+
+
+@njit(cache=True)
+def _normal_equations(theta, x, feats, err, n_hidden, tanh, lam):  # pragma: no cover - compiled
+    """``J^T J`` (P, P) and ``J^T e - lam theta`` (P,) of the errors ``err`` (N, O), built output by output on the
+    columns the output depends on (the hidden layer's, then its own)."""
+    n, n_in = x.shape
+    n_out, n_feat = err.shape[1], feats.shape[1]
+    p = theta.size
+    s = n_hidden * n_in + n_hidden
+    w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
+    h = _hidden(theta, x, n_hidden, tanh)
+    own = n_hidden + 1 + n_feat  # an output's own columns
+    cols = np.empty(s + own, np.int64)
+    for c in range(s):
+        cols[c] = c
+    jt = np.empty((s + own, n))  # J_o transposed: one row per column of the parameters, contiguous over points
+    product = np.zeros((p, p))
+    rhs = np.zeros(p)
+    for o in range(n_out):
+        for j in range(n_hidden):
+            cols[s + j] = w2 + o * n_hidden + j
+        cols[s + n_hidden] = b2 + o
+        for f in range(n_feat):
+            cols[s + n_hidden + 1 + f] = lin + o * n_feat + f
+        for k in range(n):
+            for j in range(n_hidden):
+                hj = h[k, j]
+                d = theta[w2 + o * n_hidden + j] * ((1.0 - hj * hj) if tanh else hj * (1.0 - hj))  # d y_o / d z_j
+                for i in range(n_in):
+                    jt[j * n_in + i, k] = d * x[k, i]
+                jt[n_hidden * n_in + j, k] = d
+                jt[s + j, k] = hj
+            jt[s + n_hidden, k] = 1.0
+            for f in range(n_feat):
+                jt[s + n_hidden + 1 + f, k] = feats[k, f]
+        g = np.dot(jt, jt.T)
+        r = np.dot(jt, np.ascontiguousarray(err[:, o]))
+        for a in range(s + own):
+            ca = cols[a]
+            rhs[ca] += r[a]
+            for b in range(s + own):
+                product[ca, cols[b]] += g[a, b]
+    if lam != 0.0:
+        for c in range(p):
+            rhs[c] -= lam * theta[c]
+    return product, rhs
+
+
+@njit(cache=True)
+def _damped_step(product, rhs, damping):  # pragma: no cover - compiled
+    """Solution of ``(product + damping I) d = rhs``: Cholesky, least squares if not positive definite."""
+    p = rhs.size
+    a = product.copy()
+    for c in range(p):
+        a[c, c] += damping
+    low = np.zeros((p, p))
+    ok = True
+    for j in range(p):
+        s = a[j, j]
+        for k in range(j):
+            s -= low[j, k] * low[j, k]
+        if not s > 0.0:  # also NaN
+            ok = False
+            break
+        d = np.sqrt(s)
+        low[j, j] = d
+        for i in range(j + 1, p):
+            t = a[i, j]
+            for k in range(j):
+                t -= low[i, k] * low[j, k]
+            low[i, j] = t / d
+    if not ok:
+        return np.linalg.lstsq(a, rhs)[0]
+    y = np.empty(p)
+    for i in range(p):
+        t = rhs[i]
+        for k in range(i):
+            t -= low[i, k] * y[k]
+        y[i] = t / low[i, i]
+    sol = np.empty(p)
+    for i in range(p - 1, -1, -1):
+        t = y[i]
+        for k in range(i + 1, p):
+            t -= low[k, i] * sol[k]
+        sol[i] = t / low[i, i]
+    return sol
+
+
+@njit(cache=True)
+def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu,
+                  mu_dec, mu_inc, mu_max, goal, max_fail, window, tol):  # pragma: no cover - compiled
+    """Train the network (module docstring) by Levenberg-Marquardt: :func:`explorer.methods._lm.lm_minimise` with
+    ``mean=False``, ``weight_decay=lam``, ``min_grad=0``, ``fail_on_tie=True``, ``count_initial_validation=False``
+    and ``plateau=(window, tol)`` (``window < 1``: no plateau rule); no validation when ``x_val`` has no row.
+
+    Returns
+    -------
+    theta : ndarray (P,)
+        The parameters with the best validation error (the last accepted ones without validation).
+    done, best_epoch, stop, iterations : int
+        Accepted epochs, the epoch of ``theta``, the stop code (:data:`STOP_REASONS`), epochs started.
+    train_best, val_best, final_objective : float
+        Objective and validation error (sum of squares) of ``theta``, objective of the last accepted step.
+    history : ndarray (done + 1,)
+        The objective at the start and after each epoch.
+    """
+    validate = x_val.shape[0] > 0
+    theta = theta0.copy()
+    perf, err = _sse(theta, x, feats, target, n_hidden, tanh, lam)
+    best_theta = theta.copy()
+    best_epoch = 0
+    best_val = np.inf
+    fails = 0
+    hist = np.empty(max_epochs + 1)
+    hist[0] = perf
+    stop, done, started = 0, 0, 0
+    for epoch in range(1, max_epochs + 1):
+        if not np.isfinite(perf):
+            stop = 1
+            break
+        if perf <= goal:
+            stop = 2
+            break
+        started = epoch
+        product, rhs = _normal_equations(theta, x, feats, err, n_hidden, tanh, lam)
+        improved = False
+        while mu <= mu_max:
+            cand = theta + _damped_step(product, rhs, mu + lam)
+            cperf, cerr = _sse(cand, x, feats, target, n_hidden, tanh, lam)
+            if np.isfinite(cperf) and cperf < perf:
+                theta, err, perf = cand, cerr, cperf
+                mu = max(mu * mu_dec, 1e-20)
+                improved = True
+                break
+            mu *= mu_inc
+        if not improved:
+            stop = 3
+            break
+        done = epoch
+        hist[epoch] = perf
+        if not validate:
+            best_theta, best_epoch = theta.copy(), epoch
+        else:
+            v = _sse(theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0)[0]
+            if v < best_val:
+                best_theta, best_val, best_epoch = theta.copy(), v, epoch
+                fails = 0
+            else:  # a tie counts as a failure (fail_on_tie)
+                fails += 1
+                if fails >= max_fail:
+                    stop = 4
+                    break
+        if window >= 1 and done >= window:  # the objective fell by less than tol over the last window epochs
+            ref = hist[done - window]
+            if ref - perf <= tol * ref:
+                stop = 5
+                break
+    train_best = _sse(best_theta, x, feats, target, n_hidden, tanh, lam)[0]
+    val_best = _sse(best_theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0)[0] if validate else np.nan
+    return best_theta, done, best_epoch, stop, max(started, done), train_best, val_best, perf, hist[:done + 1].copy()
