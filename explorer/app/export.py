@@ -277,10 +277,12 @@ def _pool_jobs(model: ExplorerModel, s: Settings) -> list[tuple[str, int]]:
     return sorted(jobs, key=lambda j: (not reg[j[0]].long_fit, -j[1]))
 
 
-def _sweep_with_pool(model: ExplorerModel, pool: Any, s: Settings) -> tuple[dict[str, list[Evaluation]],
-                                                                             dict[str, dict[int, str]]]:
+def _sweep_with_pool(model: ExplorerModel, pool: Any, s: Settings,
+                     meanwhile: Callable[[], None] | None = None) -> tuple[dict[str, list[Evaluation]],
+                                                                           dict[str, dict[int, str]]]:
     """The sweep of every method of ``s``, its jobs shared with ``pool``'s worker; the same evaluations, in the
-    same order, as :meth:`ExplorerModel.sweep` method by method."""
+    same order, as :meth:`ExplorerModel.sweep` method by method.  ``meanwhile()`` is called once every job is
+    taken, before waiting for the worker's last results (work that does not depend on the sweep)."""
     from explorer.app.model import sweep_results
 
     def compute(name: str, density: int) -> tuple[str, Any]:
@@ -294,6 +296,8 @@ def _sweep_with_pool(model: ExplorerModel, pool: Any, s: Settings) -> tuple[dict
                 done[(name, d)] = compute(name, d)
     while (k := pool.claim()) is not None:
         done[pool.jobs[k]] = compute(*pool.jobs[k])
+    if meanwhile is not None:
+        meanwhile()
     for k, result in pool.collect().items():
         done[pool.jobs[k]] = result
     sweeps: dict[str, list[Evaluation]] = {}
@@ -359,7 +363,11 @@ def _export_files(model: ExplorerModel, pool: Any, scene: Any, s: Settings, *, s
     sweeps: dict[str, list[Evaluation]] = {}
     sweep_failed: dict[str, dict[int, str]] = {}
     if pool is not None:
-        sweeps, sweep_failed = _sweep_with_pool(model, pool, s)
+        def render_maps() -> None:  # the maps' part of panels.html (the page's first figure) while the worker ends
+            if map_figs:
+                map_figs[0] = (map_figs[0][0], F.render_figure(map_figs[0][1], 0))
+
+        sweeps, sweep_failed = _sweep_with_pool(model, pool, s, meanwhile=render_maps)
     for name in (s.methods if s.sweep and pool is None else ()):
         def get_fit(density: int, name: str = name) -> FitRecord:
             return (sweep_fit(name, density) if sweep_fit is not None else None) or model.fit(

@@ -655,12 +655,11 @@ CARTESIAN_TRACE_TYPES = frozenset({"bar", "box", "candlestick", "contour", "funn
 """Trace types of plotly.js's cartesian partial bundle (``assets/plotlyjs``)."""
 
 
-def _plotlyjs_for(figures: Sequence[go.Figure]) -> str:
-    """The plotly.js source to inline: the cartesian partial bundle (1.5 MB) when every trace is one of its
-    types and it is the plotly.js version plotly.py was built for, else plotly.py's full bundle (4.8 MB)."""
+def _plotlyjs_for(types: set[str] | frozenset[str]) -> str:
+    """The plotly.js source to inline: the cartesian partial bundle (1.5 MB) when every trace type (``types``) is
+    one of its types and it is the plotly.js version plotly.py was built for, else plotly.py's full bundle (4.8 MB)."""
     from plotly.offline import get_plotlyjs, get_plotlyjs_version
 
-    types = {t.type or "scatter" for fig in figures for t in fig.data}
     if types <= CARTESIAN_TRACE_TYPES:
         try:
             from explorer._resources import asset
@@ -673,6 +672,30 @@ def _plotlyjs_for(figures: Sequence[go.Figure]) -> str:
     return get_plotlyjs()
 
 
+@dataclass(frozen=True)
+class RenderedFigure:
+    """One figure's part of the :func:`figures_html` page, made ahead of the page (:func:`render_figure`)."""
+
+    position: int
+    """The figure's position in the page's ``figures`` (its div's id is ``panel-<position>``)."""
+    html: str
+    trace_types: frozenset[str]
+
+
+def render_figure(fig: Any, position: int, post_script: str | None = None) -> RenderedFigure:
+    """The page part of ``fig`` (a ``go.Figure`` or its dict) at ``position`` in :func:`figures_html`'s
+    ``figures``: one validated copy (the caller's figure is not changed), 1000 px wide at the height its
+    ``layout.meta.height_over_width`` asks, its div ``panel-<position>``, ``post_script`` run once it is drawn.
+    The export makes its maps' part while it waits for the sweep's last results."""
+    copy = go.Figure(fig)
+    types = frozenset(t.type or "scatter" for t in copy.data)
+    aspect = float((copy.layout.meta or {}).get("height_over_width", 0.6))
+    copy.update_layout(width=1000, height=int(1000 * aspect))
+    text = _unescape_base64(copy.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{position}",
+                                         config=PLOTLY_CONFIG, post_script=post_script))
+    return RenderedFigure(int(position), text, types)
+
+
 def figures_html(figures: Sequence[tuple], title: str, notes: Sequence[str] = (),
                  scripts: Sequence[str] = ()) -> str:
     """The figures in one self-contained HTML page: plotly.js inlined once (its cartesian partial bundle
@@ -683,7 +706,8 @@ def figures_html(figures: Sequence[tuple], title: str, notes: Sequence[str] = ()
     ----------
     figures : sequence of (heading, go.Figure), (heading, go.Figure, post_script) or (heading, str)
         ``post_script``: JavaScript run once the figure is drawn (``{plot_id}`` is its div's id); a ``str``
-        in place of the figure is an HTML block written as it is (a table).
+        in place of the figure is an HTML block written as it is (a table); a :class:`RenderedFigure` in place
+        of a figure is its part made ahead (:func:`render_figure`, at this position).
     title : str
         Page title and top heading.
     notes : sequence of str
@@ -697,25 +721,23 @@ def figures_html(figures: Sequence[tuple], title: str, notes: Sequence[str] = ()
     for src in scripts:
         if "/" in src or ":" in src or not src.endswith(".js"):
             raise ValueError(f"scripts must be .js files beside the page, got {src!r}")
-    # one validated copy per figure (the page's key order is the copy's; the caller's figure is not changed): it
-    # was made twice, once only to read the trace types (0.2 s for the DIMAP export's maps)
-    copies = {k: go.Figure(entry[1]) for k, entry in enumerate(figures) if not isinstance(entry[1], str)}
+    rendered: dict[int, RenderedFigure] = {}
+    for k, entry in enumerate(figures):
+        body = entry[1]
+        if isinstance(body, RenderedFigure):
+            if body.position != k:
+                raise ValueError(f"figure {entry[0]!r} was rendered for position {body.position}, not {k}")
+            rendered[k] = body
+        elif not isinstance(body, str):
+            rendered[k] = render_figure(body, k, entry[2] if len(entry) > 2 else None)
     parts = [f"<h1>{html.escape(title)}</h1>"] + [f"<p>{html.escape(t)}</p>" for t in notes]
     parts += [f'<script src="{html.escape(src)}"></script>' for src in scripts]
-    if copies:
-        parts.append('<script type="text/javascript">' + _plotlyjs_for(list(copies.values())) + "</script>")
+    if rendered:
+        types = frozenset().union(*(r.trace_types for r in rendered.values()))
+        parts.append('<script type="text/javascript">' + _plotlyjs_for(types) + "</script>")
     for k, entry in enumerate(figures):
-        heading, body = entry[0], entry[1]
-        parts.append(f"<h2>{html.escape(heading)}</h2>")
-        if isinstance(body, str):  # an HTML block (a table), as given
-            parts.append(body)
-            continue
-        fig = copies[k]
-        post = entry[2] if len(entry) > 2 else None
-        aspect = float((fig.layout.meta or {}).get("height_over_width", 0.6))
-        fig.update_layout(width=1000, height=int(1000 * aspect))
-        parts.append(_unescape_base64(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{k}",
-                                                  config=PLOTLY_CONFIG, post_script=post)))
+        parts.append(f"<h2>{html.escape(entry[0])}</h2>")
+        parts.append(rendered[k].html if k in rendered else entry[1])  # a figure's part, or an HTML block as given
     return ("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + html.escape(title)
             + "</title></head><body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
 
@@ -733,5 +755,6 @@ def _unescape_base64(html_part: str) -> str:
 
 __all__ = [
     "CARTESIAN_TRACE_TYPES", "PLOTLY_CONFIG", "SCOP_MARKS", "accuracy_vs_density", "decimation_index", "empty_figure",
-    "figures_html", "method_colors", "residual_maps", "timing_bars", "timing_fill_script",
+    "RenderedFigure", "figures_html", "method_colors", "render_figure", "residual_maps", "timing_bars",
+    "timing_fill_script",
 ]

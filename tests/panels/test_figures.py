@@ -428,7 +428,8 @@ def test_panels_html_equals_the_validated_copies_path(results):
 
     parts = ["<h1>export</h1>", "<p>note &amp; more</p>", '<script src="timing.js"></script>']
     copies = [go.Figure(e[1]) for e in figs if not isinstance(e[1], str)]
-    parts.append('<script type="text/javascript">' + F._plotlyjs_for(copies) + "</script>")
+    types = {t.type or "scatter" for c in copies for t in c.data}
+    parts.append('<script type="text/javascript">' + F._plotlyjs_for(types) + "</script>")
     for k, entry in enumerate(figs):
         parts.append(f"<h2>{html.escape(entry[0])}</h2>")
         if isinstance(entry[1], str):
@@ -443,6 +444,12 @@ def test_panels_html_equals_the_validated_copies_path(results):
                 "<body style=\"font-family: sans-serif\">\n" + "\n".join(parts) + "\n</body></html>\n")
     assert page == expected
     assert figs[0][1].layout.width is None  # the caller's figure is not changed
+    # a figure's part made ahead (the export: the maps while the sweep's last results come) gives the same page
+    ahead = [(figs[0][0], F.render_figure(figs[0][1], 0)), *figs[1:3],
+             (figs[3][0], F.render_figure(figs[3][1], 3, figs[3][2])), figs[4]]
+    assert F.figures_html(ahead, "export", ["note & more"], scripts=["timing.js"]) == expected
+    with pytest.raises(ValueError, match="position 0, not 1"):
+        F.figures_html([("table", "<p>x</p>"), ahead[0]], "export")
 
 
 def test_panels_html_keeps_the_arrays_exact_and_does_not_escape_base64():
