@@ -233,6 +233,38 @@ def test_maps_drawn_reports_are_read_and_an_update_without_a_browser_does_not_wa
     assert not th.is_alive()
 
 
+def test_3d_view_reports_end_an_update_and_hold_idle_until_drawn(server, monkeypatch):
+    """The page's report of its 3D view drawn (``drawn <n>`` in the hidden *View drawn* control,
+    controls.VIEW_DRAWN_SCRIPT): each update's 3D batch is numbered (``view <n>`` sent to the page); with a browser
+    open, the app is idle only once the newest batch is reported drawn, or VIEW_DRAWN_WAIT_S after it was sent;
+    without a browser it never waits."""
+    from explorer.app import views
+
+    app = make_app(server)
+    sent = app._view_sent
+    assert sent >= 1 and app.handles["view_drawn"].value == f"view {sent}" and app.view_drawn == 0
+    assert app.wait_idle(5)  # no browser: idle at once
+    app.handles["view_drawn"].value = "view 99"  # the server's own message is not a report
+    app.handles["view_drawn"].value = "not a report"
+    assert app.view_drawn == 0
+    monkeypatch.setattr(app, "_open_browsers", lambda: [object()])  # a browser open, one that never reports
+    monkeypatch.setattr(views, "VIEW_DRAWN_WAIT_S", 1.5)
+    app.handles["density"].value = "30"  # an update: its 3D batch is the next number
+    assert app._view_sent == sent + 1 and app.handles["view_drawn"].value == f"view {sent + 1}"
+    assert app._view_drawing()
+    assert not app.wait_idle(0.3)  # still drawing: not idle
+    t0 = time.monotonic()
+    threading.Timer(0.4, lambda: setattr(app.handles["view_drawn"], "value", f"drawn {sent + 1}")).start()
+    assert app.wait_idle(10)  # the report ends the wait (not the 1.5 s deadline)
+    assert 0.3 < time.monotonic() - t0 < 1.4 and app.view_drawn == sent + 1 and not app._view_drawing()
+    app.handles["view_drawn"].value = f"drawn {sent}"  # an older report does not lower it
+    assert app.view_drawn == sent + 1
+    app.handles["density"].value = "50"  # never reported: idle once the deadline passed
+    t0 = time.monotonic()
+    assert app._view_drawing() and app.wait_idle(10)
+    assert 1.0 < time.monotonic() - t0 < 5.0 and not app._view_drawing()
+
+
 def test_scene_nodes_and_counts(server):
     app = make_app(server)
     s = app.settings()

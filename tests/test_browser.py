@@ -730,6 +730,48 @@ def test_the_page_reports_the_maps_it_drew_and_the_3d_view_follows(explorer, bro
         page.context.close()
 
 
+def test_the_page_reports_its_3d_view_drawn_and_an_update_ends_then(explorer, browser):
+    """Issue 24: the page types ``drawn <n>`` into the hidden *View drawn* control once its 3D view has drawn the
+    update's 3D batch ``n`` and gone idle (``explorer.app.controls.VIEW_DRAWN_SCRIPT``); the update ends then (its
+    time is that of the whole update on screen) and the app counts as idle only then, also for the state a page
+    draws on connecting.  The report comes from the page (not the server's deadline), after the page's WebGL
+    canvas drew."""
+    from explorer.app.views import VIEW_DRAWN_WAIT_S
+
+    reporters = len(explorer._views_drawn)
+    page = _open(browser, explorer.url)
+    uuid = explorer.handles["view_drawn"]._impl.uuid
+    row_hidden = """(uuid) => {
+      let node = document.querySelector('label[for="' + uuid + '"]');
+      while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+      return node ? node.style.display === 'none' : null;
+    }"""
+    before = explorer.handles["density"].value
+    density = next(d for d in ("30", "50", "300") if d != before)
+    try:
+        page.wait_for_function("() => window.__pushbroomView && window.__pushbroomView.target > 0")
+        assert explorer.wait_idle(120)
+        end = time.monotonic() + 30
+        while len(explorer._views_drawn) < reporters + 1 and time.monotonic() < end:
+            time.sleep(0.05)
+        # the state drawn on connecting, reported by this page (another page may have reported it before)
+        assert len(explorer._views_drawn) == reporters + 1
+        assert explorer.view_drawn == explorer._view_sent
+        draws = page.evaluate("window.__pushbroomView.draws")
+        assert draws > 0
+        explorer.handles["density"].value = density
+        assert explorer.wait_idle(120)
+        assert explorer.view_drawn == explorer._view_sent
+        assert explorer.last_times["view_drawn_wait"] < VIEW_DRAWN_WAIT_S - 0.5  # reported, not timed out
+        assert explorer.last_update_s >= explorer.last_times["view_drawn_wait"]  # the update's time includes it
+        assert page.evaluate("window.__pushbroomView.draws") > draws  # the batch was drawn before the report
+        assert page.evaluate(row_hidden, uuid) is True  # the control is the page's, not the user's
+    finally:
+        explorer.handles["density"].value = before
+        assert explorer.wait_idle(120)
+        page.context.close()
+
+
 PLOTLY_DRAWS = """
 window.__plotlyDraws = [];
 (function () {

@@ -117,6 +117,92 @@ DRAWN_SCRIPT = r"""
 (the handle ``maps_drawn``)."""
 
 
+VIEW_DRAWN_SCRIPT = r"""
+(function () {
+  if (window.__pushbroomView) { window.__pushbroomView.uuid = '%(uuid)s'; return; }
+  const state = {uuid: '%(uuid)s', draws: 0, target: 0, since: 0, drawsAtStart: 0, watching: false, reports: 0,
+                 page: Math.random().toString(36).slice(2, 10)};
+  window.__pushbroomView = state;
+  function counted(orig) {
+    return function () {
+      const c = this.canvas;
+      if (!(c && c.closest && c.closest('.js-plotly-plot'))) state.draws++;
+      return orig.apply(this, arguments);
+    };
+  }
+  for (const C of [window.WebGLRenderingContext, window.WebGL2RenderingContext]) {
+    if (!C) continue;
+    for (const f of ['drawArrays', 'drawElements', 'drawArraysInstanced', 'drawElementsInstanced']) {
+      if (typeof C.prototype[f] === 'function') C.prototype[f] = counted(C.prototype[f]);
+    }
+  }
+  function input() {
+    const label = document.querySelector('label[for="' + state.uuid + '"]');
+    let node = label;
+    while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+    if (node && node.style.display !== 'none') node.style.display = 'none';
+    return node ? node.querySelector('input') : null;
+  }
+  /* a newer batch than the one watched: watch it instead (its frames count from now).  A page that opens finds
+     "view <n>", or "drawn <n>" when another page has reported it: it draws that state too */
+  function take(inp) {
+    const m = inp ? /^(view|drawn) (\d+)( |$)/.exec(inp.value) : null;
+    if (!m || Number(m[2]) <= state.target) return false;
+    state.target = Number(m[2]);
+    state.since = performance.now();
+    state.drawsAtStart = state.draws;
+    return true;
+  }
+  function watch() {
+    let drawsAtTick = state.draws, quietTicks = 0;
+    function tick() {
+      take(input());
+      const now = performance.now();
+      quietTicks = state.draws === drawsAtTick ? quietTicks + 1 : 0;
+      drawsAtTick = state.draws;
+      const drew = state.draws > state.drawsAtStart;
+      if ((quietTicks >= 2 && (drew || now - state.since > %(no_draw_ms)d)) || now - state.since > %(max_ms)d) {
+        setTimeout(function () {
+          const inp = input();
+          if (!inp) { state.watching = false; return; }
+          if (take(inp)) { requestAnimationFrame(tick); return; }  /* arrived meanwhile: not drawn yet */
+          const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
+          state.reports++;  /* a text of its own each time: viser passes on only a changed value */
+          setter.call(inp, 'drawn ' + state.target + ' ' + state.page + '.' + state.reports);
+          inp.dispatchEvent(new Event('input', {bubbles: true}));
+          state.watching = false;
+        }, 0);
+        return;
+      }
+      requestAnimationFrame(tick);
+    }
+    requestAnimationFrame(tick);
+  }
+  setInterval(function () {
+    if (!state.watching && take(input())) {
+      state.watching = true;
+      watch();
+    }
+  }, 40);
+})();
+"""
+"""Tells the server when the page's 3D view has drawn what it was sent.  The server ends an update's 3D batch by
+typing ``view <revision>`` into the (hidden) text control ``uuid`` (the handle ``view_drawn``); once the page has
+applied it, the script waits until the 3D view's WebGL canvas has been idle for two animation frames (no draw
+call; viser renders on demand, several frames after each change) after having drawn at least once (or, when the
+batch changed nothing drawn, ``no_draw_ms`` passed), and types ``drawn <revision> <page>.<k>`` back (at most
+``max_ms`` after it saw the revision; the page's token and report count make each report a new value, which viser
+passes on).  A page that opens draws the state it finds (``view <n>``, or ``drawn <n> ...`` from another page) and
+reports it too.  Draw calls are counted by wrapping the WebGL contexts' draw functions; Plotly's own WebGL
+canvases (inside ``.js-plotly-plot``) are not counted."""
+
+
+VIEW_NO_DRAW_MS = 300
+"""A 3D batch after which the page's 3D view drew nothing for this long counts as drawn (it changed nothing shown)."""
+VIEW_MAX_MS = 3000
+"""The page reports a 3D batch drawn at the latest this long after it saw it."""
+
+
 PLOTLY_SIZE_SCRIPT = r"""
 (function () {
   if (window.__pushbroomPlotlySize) return;
@@ -181,6 +267,11 @@ def _script_html(script: str) -> str:
 def click_bridge_html(uuid: str) -> str:
     """HTML whose ``onerror`` runs :data:`CLICK_SCRIPT` for the text control ``uuid``."""
     return _script_html(CLICK_SCRIPT % {"uuid": uuid})
+
+
+def view_drawn_bridge_html(uuid: str) -> str:
+    """HTML whose ``onerror`` runs :data:`VIEW_DRAWN_SCRIPT` for the text control ``uuid``."""
+    return _script_html(VIEW_DRAWN_SCRIPT % {"uuid": uuid, "no_draw_ms": VIEW_NO_DRAW_MS, "max_ms": VIEW_MAX_MS})
 
 
 def drawn_bridge_html(uuid: str) -> str:
@@ -297,6 +388,9 @@ class Controls:
         # update waits for it (explorer.app.views.Views.update)
         h["maps_drawn"] = gui.add_text("Maps drawn", "", hint="set by the page: the revision of the maps it drew")
         h["drawn_bridge"] = gui.add_html(drawn_bridge_html(h["maps_drawn"]._impl.uuid))
+        # and when its 3D view has drawn an update's 3D batch: the update ends then (Views._wait_view_drawn)
+        h["view_drawn"] = gui.add_text("View drawn", "", hint="set by the page: the 3D batch it drew")
+        h["view_bridge"] = gui.add_html(view_drawn_bridge_html(h["view_drawn"]._impl.uuid))
 
         self.panel = gui.add_panel()
         config = F.PLOTLY_CONFIG
@@ -415,5 +509,6 @@ class Controls:
         return int(m.group(1)) if m else None
 
 
-__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "Controls", "ControlsHost",
-           "click_bridge_html", "color_options", "drawn_bridge_html"]
+__all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "VIEW_DRAWN_SCRIPT", "VIEW_MAX_MS",
+           "VIEW_NO_DRAW_MS", "Controls", "ControlsHost", "click_bridge_html", "color_options", "drawn_bridge_html",
+           "view_drawn_bridge_html"]

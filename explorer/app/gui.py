@@ -34,7 +34,7 @@ from explorer.app.model import (
     control_default,
     safe_available,
 )
-from explorer.app.views import Superseded, Views
+from explorer.app.views import VIEW_DRAWN_WAIT_S, Superseded, Views
 from explorer.methods import registry
 from explorer.presets import default_preset_id, preset_ids
 from explorer.scene import Scene
@@ -221,6 +221,15 @@ class ExplorerApp(Views):
         self.maps_drawn = 0
         """The newest maps revision (``layout.meta["revision"]``) a browser reported as drawn."""
         self.handles["maps_drawn"].on_update(self.maps_drawn_reported)
+        self.view_drawn = 0
+        """The newest 3D batch (its number, :meth:`_mark_view_sent`) a browser reported as drawn."""
+        self._view_sent = 0
+        self._views_drawn: dict[Any, int] = {}
+        """The newest 3D batch each browser (by viser client id) reported drawn."""
+        self._view_deadline = 0.0
+        """Until then (``time.monotonic()``) the app counts as busy while no browser reported the newest 3D batch
+        drawn (see :meth:`wait_idle`)."""
+        self.handles["view_drawn"].on_update(self.view_drawn_reported)
         if compile_progress is not None:
             compile_progress.observers.append(self._show_compiling)
         self.server.scene.set_up_direction("+z")
@@ -250,6 +259,8 @@ class ExplorerApp(Views):
         other: it stayed at the server's initial camera, never framed (seen in CI, a wide window). Only quick,
         non-blocking work here: it runs on viser's event loop."""
         self._client_since[client.client_id] = time.monotonic()
+        # the page draws the state it was sent on connecting (the buffer replayed): idle once it has drawn it
+        self._view_deadline = max(self._view_deadline, time.monotonic() + VIEW_DRAWN_WAIT_S)
         client.camera.on_update(lambda cam: self._client_camera_reported(cam.client))
 
     def _discover_methods(self, wanted: list[str] | None) -> None:
@@ -375,19 +386,39 @@ class ExplorerApp(Views):
         return True
 
     def wait_idle(self, timeout: float = 120.0) -> bool:
-        """Block until the methods are loaded and every requested update and every queued fit has
-        finished; False on timeout."""
+        """Block until the methods are loaded, every requested update and every queued fit has finished, and an
+        open browser has drawn the newest 3D batch (:meth:`_view_drawing`); False on timeout."""
         end = time.monotonic() + timeout
         if not self.methods_ready.wait(timeout):
             return False
         with self._lock:
             while (self._done_gen < self._gen or self._busy
-                   or (self.fits is not None and self.fits.busy)):
-                left = end - time.monotonic()
+                   or (self.fits is not None and self.fits.busy) or self._view_drawing()):
+                now = time.monotonic()
+                left = end - now
                 if left <= 0:
                     return False
+                if self._view_deadline > now:
+                    left = min(left, self._view_deadline - now)
                 self._lock.wait(left)
         return True
+
+    def _view_drawing(self) -> bool:
+        """True while a browser still draws the 3D view it was sent: a browser is open and none has reported the
+        newest 3D batch drawn, or one that connected less than :data:`~explorer.app.views.VIEW_DRAWN_WAIT_S` ago
+        has not yet reported the state it drew on connecting; never longer than that after the batch was sent or
+        the browser connected."""
+        now = time.monotonic()
+        if now >= self._view_deadline:
+            return False
+        clients = self._open_browsers()
+        if not clients:
+            return False
+        if self.view_drawn < self._view_sent:
+            return True
+        ids = [getattr(c, "client_id", None) for c in clients]
+        return any(self._views_drawn.get(i, 0) < self._view_sent for i in ids
+                   if now - self._client_since.get(i, now) < VIEW_DRAWN_WAIT_S)
 
     def close(self) -> None:
         """Stop the worker and fit threads (the server is the caller's)."""

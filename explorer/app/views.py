@@ -32,6 +32,9 @@ CANVAS_SETTLE_S = 10.0
 reframed for the new shape even if its reports still carry an earlier pose."""
 MAPS_DRAWN_WAIT_S = 1.0
 """At most this long an update waits for a browser to report its new maps drawn before it sends the 3D part."""
+VIEW_DRAWN_WAIT_S = 3.5
+"""The longest an update waits for a browser to report its 3D batch drawn (the page reports it at the latest
+:data:`explorer.app.controls.VIEW_MAX_MS` after it applied it)."""
 SEND_WAIT_S = 0.1
 """How long an update waits for the browsers' connections to take the panels before it queues the 3D batch."""
 SENT_POSES_KEPT = 8
@@ -85,6 +88,10 @@ class Views:
     _B: Any
     if TYPE_CHECKING:  # pragma: no cover  (provided by ExplorerApp)
         runs: dict[str, MethodRun]
+        view_drawn: int
+        _view_sent: int
+        _view_deadline: float
+        _views_drawn: dict[Any, int]
         pending: dict[str, str]
         sweeps: dict[str, list]
         selection: Selection | None
@@ -161,6 +168,53 @@ class Views:
             self.maps_drawn = max(getattr(self, "maps_drawn", 0), int(m.group(1)))
             self._lock.notify_all()
 
+    def view_drawn_reported(self, _event: Any = None) -> None:
+        """The page typed ``drawn <n> <page>.<k>`` into the hidden *View drawn* control
+        (:data:`explorer.app.controls.VIEW_DRAWN_SCRIPT`): a browser's 3D view has drawn the 3D batch ``n``."""
+        import re
+
+        m = re.fullmatch(r"drawn (\d+)(?: \S+)?", str(self.handles["view_drawn"].value))
+        if m is None:
+            return
+        n, client = int(m.group(1)), getattr(_event, "client_id", None)
+        with self._lock:
+            self.view_drawn = max(getattr(self, "view_drawn", 0), n)
+            self._views_drawn[client] = max(self._views_drawn.get(client, 0), n)
+            self._lock.notify_all()
+
+    def _mark_view_sent(self) -> int:
+        """Number the 3D batch being sent (call inside its ``atomic`` block, last): the page reports it drawn."""
+        self._view_sent = getattr(self, "_view_sent", 0) + 1
+        self._view_deadline = time.monotonic() + VIEW_DRAWN_WAIT_S
+        with contextlib.suppress(Exception):  # a controls double without the hidden control
+            self.handles["view_drawn"].value = f"view {self._view_sent}"
+        return self._view_sent
+
+    def _wait_view_drawn(self, gen: int | None, timeout_s: float = VIEW_DRAWN_WAIT_S) -> None:
+        """Wait until an open browser reported the 3D batch just sent as drawn (at most ``timeout_s``; not at all
+        without a browser, and no longer once a newer request arrived).
+
+        The update ends then, so that its time is that of the whole update on screen and a change made once the
+        page is settled finds it idle: without a GPU a browser draws the 3D view in software and reads every 3D
+        frame back to the CPU on the page's thread (70-170 ms a frame at 1400 x 900; viser draws several frames
+        after each change), so maps sent meanwhile wait for those frames.  A newer request ends the wait at once
+        (its maps go first: its update sends them before its own 3D batch)."""
+        rev = getattr(self, "_view_sent", 0)
+        try:
+            if not self.server.get_clients():
+                return
+        except Exception:
+            return
+        end = time.monotonic() + timeout_s
+        with self._lock:
+            while getattr(self, "view_drawn", 0) < rev:
+                if (gen is not None and self._gen != gen) or getattr(self, "_closing", False):
+                    return
+                left = end - time.monotonic()
+                if left <= 0:
+                    return
+                self._lock.wait(left)
+
     def _wait_maps_drawn(self, gen: int | None, timeout_s: float = MAPS_DRAWN_WAIT_S) -> None:
         """Wait until an open browser reported the maps this update sent as drawn (at most ``timeout_s``; not at all
         without a browser, nor when the update sent no maps, nor once a newer request arrived).
@@ -212,7 +266,8 @@ class Views:
             Stage timings in seconds: scene, methods, cloud, panels, selection, total (the
             scene and panels are up to date), sweep (accuracy-vs-density, after total);
             maps_drawn_wait: how long the update waited for a browser to report its maps painted
-            (part of total; :meth:`_wait_maps_drawn`).
+            (part of total; :meth:`_wait_maps_drawn`); view_drawn_wait: the same for its 3D batch
+            (:meth:`_wait_view_drawn`).
         """
         times: dict[str, float] = {}
         t_start = time.perf_counter()
@@ -239,6 +294,11 @@ class Views:
                 times[stage] = time.perf_counter() - t0
                 self._check(gen)
             self._layout_labels()
+            self._mark_view_sent()
+        t0 = time.perf_counter()
+        self._send_queued()
+        self._wait_view_drawn(gen)
+        times["view_drawn_wait"] = time.perf_counter() - t0  # the browser's time, not the app's
         self.last_update_s = time.perf_counter() - t_start
         times["total"] = self.last_update_s
         if self.request_started is not None:
