@@ -52,9 +52,14 @@ def _hidden(theta, x, n_hidden, tanh):  # pragma: no cover - compiled
 def network_outputs(theta, x, feats, n_hidden, n_out, tanh):  # pragma: no cover - compiled
     """Outputs (N, O) of the network (module docstring) for inputs ``x`` (N, I) and linear features ``feats``
     (N, F; F may be 0)."""
-    n, n_in = x.shape
+    return _outputs(theta, _hidden(theta, x, n_hidden, tanh), x.shape[1], feats, n_out)
+
+
+@njit(cache=True)
+def _outputs(theta, h, n_in, feats, n_out):  # pragma: no cover - compiled
+    """Outputs (N, O) from the hidden activations ``h`` (N, H) of inputs of ``n_in`` columns."""
+    n, n_hidden = h.shape
     n_feat = feats.shape[1]
-    h = _hidden(theta, x, n_hidden, tanh)
     s = n_hidden * n_in + n_hidden  # where the output layer starts
     w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
     y = np.empty((n, n_out))
@@ -71,27 +76,30 @@ def network_outputs(theta, x, feats, n_hidden, n_out, tanh):  # pragma: no cover
 
 @njit(cache=True)
 def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - compiled
-    """Sum of squared errors ``target - outputs`` plus ``lam |theta|^2``, and the errors (N, O)."""
-    e = target - network_outputs(theta, x, feats, n_hidden, target.shape[1], tanh)
+    """Sum of squared errors ``target - outputs`` plus ``lam |theta|^2``, the errors (N, O) and the hidden
+    activations (N, H)."""
+    h = _hidden(theta, x, n_hidden, tanh)
+    e = target - _outputs(theta, h, x.shape[1], feats, target.shape[1])
     s = 0.0
     for k in range(e.shape[0]):
         for o in range(e.shape[1]):
             s += e[k, o] * e[k, o]
     if lam != 0.0:
         s += lam * np.dot(theta, theta)
-    return s, e
+    return s, e, h
 
 
 @njit(cache=True)
-def _normal_equations(theta, x, feats, err, n_hidden, tanh, lam):  # pragma: no cover - compiled
-    """``J^T J`` (P, P) and ``J^T e - lam theta`` (P,) of the errors ``err`` (N, O), built output by output on the
-    columns the output depends on (the hidden layer's, then its own)."""
+def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover - compiled
+    """``J^T J`` (P, P) and ``J^T e - lam theta`` (P,) of the errors ``err`` (N, O) and hidden activations ``h``
+    (N, H) at ``theta``, built output by output on the columns the output depends on (the hidden layer's, then its
+    own)."""
     n, n_in = x.shape
+    n_hidden = h.shape[1]
     n_out, n_feat = err.shape[1], feats.shape[1]
     p = theta.size
     s = n_hidden * n_in + n_hidden
     w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
-    h = _hidden(theta, x, n_hidden, tanh)
     own = n_hidden + 1 + n_feat  # an output's own columns
     cols = np.empty(s + own, np.int64)
     for c in range(s):
@@ -189,7 +197,7 @@ def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidd
     """
     validate = x_val.shape[0] > 0
     theta = theta0.copy()
-    perf, err = _sse(theta, x, feats, target, n_hidden, tanh, lam)
+    perf, err, hid = _sse(theta, x, feats, target, n_hidden, tanh, lam)
     best_theta = theta.copy()
     best_epoch = 0
     best_val = np.inf
@@ -205,13 +213,13 @@ def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidd
             stop = 2
             break
         started = epoch
-        product, rhs = _normal_equations(theta, x, feats, err, n_hidden, tanh, lam)
+        product, rhs = _normal_equations(theta, x, feats, err, hid, tanh, lam)
         improved = False
         while mu <= mu_max:
             cand = theta + _damped_step(product, rhs, mu + lam)
-            cperf, cerr = _sse(cand, x, feats, target, n_hidden, tanh, lam)
+            cperf, cerr, chid = _sse(cand, x, feats, target, n_hidden, tanh, lam)
             if np.isfinite(cperf) and cperf < perf:
-                theta, err, perf = cand, cerr, cperf
+                theta, err, perf, hid = cand, cerr, cperf, chid
                 mu = max(mu * mu_dec, 1e-20)
                 improved = True
                 break

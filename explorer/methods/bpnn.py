@@ -47,6 +47,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from explorer import _log
+from explorer._threads import blas_threads
 from explorer.errors import InputError, NotFittedError, check_finite
 from explorer.methods._lm import (
     dense_forward,
@@ -342,10 +343,11 @@ class MLPRegressor:
             tv = np.ascontiguousarray(t_val.numpy(), dtype=np.float64)
         else:
             xv, fv, tv = np.empty((0, x.shape[1])), np.empty((0, feats.shape[1])), np.empty((0, target.shape[1]))
-        best, _done, _best_epoch, stop, iterations, _train, val, final, history = lm_one_hidden(
-            np.ascontiguousarray(theta.numpy(), dtype=np.float64), x, feats, target, xv, fv, tv, self.hidden[0],
-            self.activation == "tanh", self.weight_decay, self.max_iter, 1e-3, 0.1, 10.0, 1e10, 1e-28, self.max_fail,
-            self.window, self.tol)
+        with blas_threads(1):  # its small products on OpenBLAS's threads cost 25x on a busy machine
+            best, _done, _best_epoch, stop, iterations, _train, val, final, history = lm_one_hidden(
+                np.ascontiguousarray(theta.numpy(), dtype=np.float64), x, feats, target, xv, fv, tv, self.hidden[0],
+                self.activation == "tanh", self.weight_decay, self.max_iter, 1e-3, 0.1, 10.0, 1e10, 1e-28,
+                self.max_fail, self.window, self.tol)
         ref = history[max(0, len(history) - 1 - self.window)]
         window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
         reason = STOP_REASONS[int(stop)]

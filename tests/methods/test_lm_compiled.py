@@ -93,3 +93,33 @@ def test_same_bits_run_to_run_and_several_layers_train_by_torch(data):
     deep._levenberg_marquardt_compiled = None  # not the compiled trainer: it serves one hidden layer only
     deep.fit(*data)
     assert deep.fit_info["iterations"] > 0 and np.isfinite(deep.fit_info["train_rms"]).all()
+
+
+def test_the_compiled_training_runs_on_one_blas_thread(data, monkeypatch):
+    """Its J_o^T J_o products go to OpenBLAS (numba's np.dot): on OpenBLAS's threads they cost 25x on a busy machine
+    (measured 5.2 ms against 0.2 ms per epoch at 1,000 points, load 6), and a network trained outside a method's fit
+    (compare_bpnn_rfm, fit_nn_rfm) has no other guard."""
+    from explorer import _threads
+
+    if _threads.blas_thread_count() is None:
+        pytest.skip("no OpenBLAS found in this process")
+    seen = []
+    original = bpnn.lm_one_hidden
+
+    def spy(*args):
+        seen.append(_threads.blas_thread_count())
+        return original(*args)
+
+    monkeypatch.setattr(bpnn, "lm_one_hidden", spy)
+    api = _threads._openblas_api()
+    assert api is not None
+    before = api[1]()
+    api[0](2)  # the caller's setting: two threads (numpy's default on a 2-core machine)
+    try:
+        if _threads.blas_thread_count() != 2:
+            pytest.skip("OpenBLAS runs on one thread here")
+        bpnn.LineOfSightNetwork(6, max_iter=5, seed=0).fit(*data)
+        assert _threads.blas_thread_count() == 2  # restored
+    finally:
+        api[0](before)
+    assert seen == [1]
