@@ -127,7 +127,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pushbroom {name}: error: {problem}", file=sys.stderr)
         return 2
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    warnings.showwarning = _show_warning  # one line per warning, no file paths
+    # one line per warning, no file paths -- while the command runs: restored after it, as the SIGTERM handler is
+    # (left in place, a caller of main() -- a test, a notebook -- had every later warning of its process, from any
+    # thread, printed on its stderr instead of going where it sent warnings)
+    previous_showwarning = warnings.showwarning
+    warnings.showwarning = _show_warning
     from explorer.errors import ExplorerError
     from explorer.io_atomic import note_input, protect_inputs
 
@@ -166,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     finally:
         signal.signal(signal.SIGTERM, previous)
+        warnings.showwarning = previous_showwarning
 
 
 def run() -> None:

@@ -31,10 +31,14 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
 
-__all__ = ["CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "expected_compiles", "is_cached", "kernels",
-           "manifest", "needed_units", "package_kernels", "reporting_compiles", "uncached", "unrecorded_uncached"]
+__all__ = ["PROGRESS_PREFIX", "CompileProgress", "Kernel", "TerminalLine", "compile_kernels", "expected_compiles",
+           "is_cached", "kernels", "manifest", "needed_units", "package_kernels", "reporting_compiles", "uncached",
+           "unrecorded_uncached"]
 
 WARMUP_HINT = "run `pushbroom warmup` once to skip this"
+PROGRESS_PREFIX = "compiling kernels for first use: "
+"""How each line of :class:`TerminalLine` starts (a command's stderr has them before its own output when numba
+compiles kernels its cache lacks)."""
 
 
 @dataclass(frozen=True)
@@ -459,13 +463,13 @@ class TerminalLine:
 
     def __call__(self, progress: CompileProgress, finished: bool) -> None:
         if finished:
-            text = (f"compiling kernels for first use: done, {progress.done} kernel{'s' * (progress.done != 1)} in "
+            text = (f"{PROGRESS_PREFIX}done, {progress.done} kernel{'s' * (progress.done != 1)} in "
                     f"{progress.seconds:.0f} s; {WARMUP_HINT}")
             self._write(text, end=True)
             return
         if progress.current is None:  # a kernel ended: the next start rewrites the line
             return
-        self._write(f"compiling kernels for first use: {progress.position}/{progress.total} ({progress.current}) ...",
+        self._write(f"{PROGRESS_PREFIX}{progress.position}/{progress.total} ({progress.current}) ...",
                     end=False)
 
     def _write(self, text: str, end: bool) -> None:
