@@ -21,11 +21,6 @@ from explorer._numba import NUMBA_AVAILABLE, njit, prange
 
 BLOCK = 2048  # points per block buffer
 
-#: Points from which :func:`inside_flags` runs its parallel loop; fewer take numpy's comparisons (the same flags):
-#: starting the loop's threads cost more than the work -- measured at 5,000 points (the sweep's evaluations) 1-2 ms
-#: of CPU on a busy machine against 0.01 ms for numpy.
-INSIDE_PARALLEL_FROM = 1 << 17
-
 
 @njit(parallel=True, fastmath=False, cache=True)
 def _inside_nb(row, col, row_hi, col_hi, mask, out):  # pragma: no cover - compiled
@@ -61,7 +56,7 @@ def inside_flags(
     """
     row = np.ascontiguousarray(row, dtype=np.float64)
     col = np.ascontiguousarray(col, dtype=np.float64)
-    if not NUMBA_AVAILABLE or row.shape[0] < INSIDE_PARALLEL_FROM:
+    if not NUMBA_AVAILABLE:
         out = (row >= -0.5) & (row <= n_rows - 0.5) & (col >= -0.5) & (col <= n_columns - 0.5)
         return out if mask is None else out & mask
     out = np.empty(row.shape[0], dtype=np.bool_)
