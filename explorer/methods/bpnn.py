@@ -18,8 +18,10 @@ This module provides
   regression and needs no target rescaling into (0, 1)), trained by Levenberg-Marquardt (the
   MATLAB ``trainlm`` algorithm: ``mu`` starts at 1e-3, x0.1 on success, x10 on failure) with
   seeded restarts and optional validation early stopping.  LM from a random start is slow to
-  polish a near-affine map: reaching the paper's 0.02 px takes ~2000 steps (~8 s on one core);
-  600 steps give 0.05-0.1 px with the best of two restarts;
+  polish a near-affine map: reaching the paper's 0.02 px takes ~2000 steps (0.1-0.5 s of CPU for 50-1000 SCOPs
+  with the compiled trainer, :mod:`explorer.methods._lm_compiled`, for one hidden layer); 600 steps give
+  0.05-0.1 px with the best of two restarts.  A network with fewer than :data:`MIN_EQUATIONS_PER_PARAMETER`
+  training equations per weight is not trained at all (:func:`too_few_points`);
 * :class:`LineOfSightNetwork`: the same network with Z entering as a line of sight does (X, Y affine
   in Z at a fixed image point; the sigmoid layer sees (row, col) only);
 * :class:`BPNNMethod` (registered ``bpnn``): fits the network on SCOPs (pass a multi-layer SCOP
