@@ -14,7 +14,7 @@ The damped system is solved by Cholesky (least squares if it is not positive def
 agree with the torch trainer's to round-off over a few epochs and then drift as any two LM trainings started
 from round-off-different points do (tests/methods/test_lm_compiled.py); same inputs, same bits, run to run.
 
-The network (:func:`network_outputs`): ``y_o = sum_j W2[o, j] h_j + b2[o] + sum_f L[o, f] F_f`` with ``h_j =
+The network (:func:`_outputs` of :func:`_hidden`): ``y_o = sum_j W2[o, j] h_j + b2[o] + sum_f L[o, f] F_f`` with ``h_j =
 act(sum_i W1[j, i] X_i + b1[j])`` (``act`` the logistic sigmoid or tanh), parameters laid out as ``W1`` (H, I)
 row-major, ``b1`` (H), ``W2`` (O, H) row-major, ``b2`` (O), ``L`` (O, F) row-major -- the flat layout of
 :func:`explorer.methods._lm.dense_layers` followed by the line-of-sight network's linear terms (F = 0: none).
@@ -27,7 +27,7 @@ import numpy as np
 
 from explorer._numba import NUMBA_AVAILABLE, njit
 
-__all__ = ["NUMBA_AVAILABLE", "STOP_REASONS", "lm_one_hidden", "network_outputs"]
+__all__ = ["NUMBA_AVAILABLE", "STOP_REASONS", "lm_one_hidden"]
 
 #: The stop reasons of :func:`lm_one_hidden` by code (those of :func:`explorer.methods._lm.lm_minimise`).
 STOP_REASONS = ("max_epochs", "non_finite", "goal", "mu_max", "validation", "plateau")
@@ -49,15 +49,9 @@ def _hidden(theta, x, n_hidden, tanh):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def network_outputs(theta, x, feats, n_hidden, n_out, tanh):  # pragma: no cover - compiled
-    """Outputs (N, O) of the network (module docstring) for inputs ``x`` (N, I) and linear features ``feats``
-    (N, F; F may be 0)."""
-    return _outputs(theta, _hidden(theta, x, n_hidden, tanh), x.shape[1], feats, n_out)
-
-
-@njit(cache=True)
 def _outputs(theta, h, n_in, feats, n_out):  # pragma: no cover - compiled
-    """Outputs (N, O) from the hidden activations ``h`` (N, H) of inputs of ``n_in`` columns."""
+    """Outputs (N, O) of the network (module docstring) from the hidden activations ``h`` (N, H) of inputs of
+    ``n_in`` columns and the linear features ``feats`` (N, F; F may be 0)."""
     n, n_hidden = h.shape
     n_feat = feats.shape[1]
     s = n_hidden * n_in + n_hidden  # where the output layer starts
