@@ -120,13 +120,14 @@ DRAWN_SCRIPT = r"""
 VIEW_DRAWN_SCRIPT = r"""
 (function () {
   if (window.__pushbroomView) { window.__pushbroomView.uuid = '%(uuid)s'; return; }
-  const state = {uuid: '%(uuid)s', draws: 0, target: 0, since: 0, drawsAtStart: 0, watching: false, reports: 0,
+  const state = {uuid: '%(uuid)s', draws: 0, lastDraw: 0, target: 0, since: 0, drawsAtStart: 0, watching: false,
+                 reports: 0,
                  page: Math.random().toString(36).slice(2, 10)};
   window.__pushbroomView = state;
   function counted(orig) {
     return function () {
       const c = this.canvas;
-      if (!(c && c.closest && c.closest('.js-plotly-plot'))) state.draws++;
+      if (!(c && c.closest && c.closest('.js-plotly-plot'))) { state.draws++; state.lastDraw = performance.now(); }
       return orig.apply(this, arguments);
     };
   }
@@ -153,24 +154,25 @@ VIEW_DRAWN_SCRIPT = r"""
     state.drawsAtStart = state.draws;
     return true;
   }
+  function report(inp) {
+    const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
+    state.reports++;  /* a text of its own each time: viser passes on only a changed value */
+    setter.call(inp, 'drawn ' + state.target + ' ' + state.page + '.' + state.reports);
+    inp.dispatchEvent(new Event('input', {bubbles: true}));
+    state.watching = false;
+  }
   function watch() {
-    let drawsAtTick = state.draws, quietTicks = 0;
     function tick() {
       take(input());
       const now = performance.now();
-      quietTicks = state.draws === drawsAtTick ? quietTicks + 1 : 0;
-      drawsAtTick = state.draws;
       const drew = state.draws > state.drawsAtStart;
-      if ((quietTicks >= 2 && (drew || now - state.since > %(no_draw_ms)d)) || now - state.since > %(max_ms)d) {
+      const quiet = now - Math.max(state.lastDraw, state.since) >= %(quiet_ms)d;
+      if ((quiet && (drew || now - state.since > %(no_draw_ms)d)) || now - state.since > %(max_ms)d) {
         setTimeout(function () {
           const inp = input();
           if (!inp) { state.watching = false; return; }
           if (take(inp)) { requestAnimationFrame(tick); return; }  /* arrived meanwhile: not drawn yet */
-          const setter = Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set;
-          state.reports++;  /* a text of its own each time: viser passes on only a changed value */
-          setter.call(inp, 'drawn ' + state.target + ' ' + state.page + '.' + state.reports);
-          inp.dispatchEvent(new Event('input', {bubbles: true}));
-          state.watching = false;
+          report(inp);
         }, 0);
         return;
       }
@@ -179,27 +181,38 @@ VIEW_DRAWN_SCRIPT = r"""
     requestAnimationFrame(tick);
   }
   setInterval(function () {
-    if (!state.watching && take(input())) {
+    const inp = input();
+    if (document.hidden) {  /* a hidden page draws nothing (no animation frames): nothing to wait for */
+      if ((take(inp) || state.watching) && inp) report(inp);
+      return;
+    }
+    if (!state.watching && take(inp)) {
       state.watching = true;
       watch();
     }
   }, 40);
 })();
 """
-"""Tells the server when the page's 3D view has drawn what it was sent.  The server ends an update's 3D batch by
-typing ``view <revision>`` into the (hidden) text control ``uuid`` (the handle ``view_drawn``); once the page has
-applied it, the script waits until the 3D view's WebGL canvas has been idle for two animation frames (no draw
-call; viser renders on demand, several frames after each change) after having drawn at least once (or, when the
-batch changed nothing drawn, ``no_draw_ms`` passed), and types ``drawn <revision> <page>.<k>`` back (at most
-``max_ms`` after it saw the revision; the page's token and report count make each report a new value, which viser
-passes on).  A page that opens draws the state it finds (``view <n>``, or ``drawn <n> ...`` from another page) and
-reports it too.  Draw calls are counted by wrapping the WebGL contexts' draw functions; Plotly's own WebGL
+"""Tells the server when the page's 3D view has drawn what it was sent.
+
+The server ends an update's 3D batch by typing ``view <revision>`` into the (hidden) text control ``uuid`` (the
+handle ``view_drawn``).  Once the page has applied it, the script waits until the 3D view's WebGL canvas has drawn
+at least once (or ``no_draw_ms`` passed: the batch changed nothing drawn) and then made no draw call for
+``quiet_ms`` -- viser renders on demand but keeps drawing for 250 ms after each request, and a software frame read
+back to the CPU lasts up to ~250 ms, so a shorter gap lies between two frames of one burst -- and types
+``drawn <revision> <page>.<k>`` back, at the latest ``max_ms`` after it saw the revision (the page's token and report
+count make each report a new value, which viser passes on).  A page that opens draws the state it finds
+(``view <n>``, or ``drawn <n> ...`` from another page) and reports it too; a hidden page (no animation frames)
+reports at once.  Draw calls are counted by wrapping the WebGL contexts' draw functions; Plotly's own WebGL
 canvases (inside ``.js-plotly-plot``) are not counted."""
 
 
+VIEW_QUIET_MS = 350
+"""The page's 3D view counts as drawn once its canvas has made no draw call for this long (longer than the gap
+between two frames of one of viser's render bursts, a software frame's read-back included)."""
 VIEW_NO_DRAW_MS = 300
 """A 3D batch after which the page's 3D view drew nothing for this long counts as drawn (it changed nothing shown)."""
-VIEW_MAX_MS = 3000
+VIEW_MAX_MS = 5000
 """The page reports a 3D batch drawn at the latest this long after it saw it."""
 
 
@@ -271,7 +284,8 @@ def click_bridge_html(uuid: str) -> str:
 
 def view_drawn_bridge_html(uuid: str) -> str:
     """HTML whose ``onerror`` runs :data:`VIEW_DRAWN_SCRIPT` for the text control ``uuid``."""
-    return _script_html(VIEW_DRAWN_SCRIPT % {"uuid": uuid, "no_draw_ms": VIEW_NO_DRAW_MS, "max_ms": VIEW_MAX_MS})
+    return _script_html(VIEW_DRAWN_SCRIPT % {"uuid": uuid, "quiet_ms": VIEW_QUIET_MS, "no_draw_ms": VIEW_NO_DRAW_MS,
+                                             "max_ms": VIEW_MAX_MS})
 
 
 def drawn_bridge_html(uuid: str) -> str:
@@ -510,5 +524,5 @@ class Controls:
 
 
 __all__ = ["CLICK_SCRIPT", "DRAWN_SCRIPT", "NO_DIFFERENCE", "PLOTLY_SIZE_SCRIPT", "VIEW_DRAWN_SCRIPT", "VIEW_MAX_MS",
-           "VIEW_NO_DRAW_MS", "Controls", "ControlsHost", "click_bridge_html", "color_options", "drawn_bridge_html",
-           "view_drawn_bridge_html"]
+           "VIEW_NO_DRAW_MS", "VIEW_QUIET_MS", "Controls", "ControlsHost", "click_bridge_html", "color_options",
+           "drawn_bridge_html", "view_drawn_bridge_html"]

@@ -32,7 +32,7 @@ CANVAS_SETTLE_S = 10.0
 reframed for the new shape even if its reports still carry an earlier pose."""
 MAPS_DRAWN_WAIT_S = 1.0
 """At most this long an update waits for a browser to report its new maps drawn before it sends the 3D part."""
-VIEW_DRAWN_WAIT_S = 3.5
+VIEW_DRAWN_WAIT_S = 6.0
 """The longest an update waits for a browser to report its 3D batch drawn (the page reports it at the latest
 :data:`explorer.app.controls.VIEW_MAX_MS` after it applied it)."""
 SEND_WAIT_S = 0.1
