@@ -123,3 +123,20 @@ def test_the_compiled_training_runs_on_one_blas_thread(data, monkeypatch):
     finally:
         api[0](before)
     assert seen == [1]
+
+
+def test_the_damped_step_solves_by_cholesky_and_falls_back_to_least_squares():
+    """Its Cholesky solve against numpy's dense solve (positive definite), and a matrix Cholesky cannot factor (a
+    weight no error depends on: a zero row and column of J^T J, no damping) solved by least squares (numpy's
+    minimum-norm solution), as torch's trainer does, instead of a division by a zero pivot."""
+    rng = np.random.default_rng(0)
+    jac = rng.normal(size=(60, 12))
+    product, rhs = jac.T @ jac, rng.normal(size=12)
+    np.testing.assert_allclose(_lm_compiled._damped_step(product, rhs, 1e-3),
+                               np.linalg.solve(product + 1e-3 * np.eye(12), rhs), rtol=1e-10)
+    jac[:, 5] = 0.0
+    product = jac.T @ jac
+    rhs = jac.T @ rng.normal(size=60)
+    step = _lm_compiled._damped_step(product, rhs, 0.0)
+    assert np.isfinite(step).all() and abs(step[5]) < 1e-12  # a zero pivot would give inf / NaN
+    np.testing.assert_allclose(step, np.linalg.lstsq(product, rhs, rcond=None)[0], rtol=1e-8, atol=1e-12)
