@@ -696,17 +696,20 @@ def test_other_real_sources_are_framed_and_their_labels_are_apart(browser, tmp_p
         th.join(60)
 
 
+ROW_HIDDEN = """(uuid) => {
+  let node = document.querySelector('label[for="' + uuid + '"]');
+  while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
+  return node ? node.style.display === 'none' : null;
+}"""
+"""True when the row of the text control ``uuid`` is hidden (a control the page, not the user, fills in)."""
+
+
 def test_the_page_reports_the_maps_it_drew_and_the_3d_view_follows(explorer, browser):
     """Issue 24: the page types ``drawn <revision>`` into the hidden *Maps drawn* control once it has painted the maps
     of that revision (``explorer.app.controls.DRAWN_SCRIPT``); an update sends its 3D part after that report (a
     software-WebGL frame no longer comes between the maps' arrival and their drawing)."""
     page = _open(browser, explorer.url)
     uuid = explorer.handles["maps_drawn"]._impl.uuid
-    row_hidden = """(uuid) => {
-      let node = document.querySelector('label[for="' + uuid + '"]');
-      while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
-      return node ? node.style.display === 'none' : null;
-    }"""
     before = explorer.handles["density"].value
     density = next(d for d in ("30", "50", "300") if d != before)
     try:
@@ -723,7 +726,7 @@ def test_the_page_reports_the_maps_it_drew_and_the_3d_view_follows(explorer, bro
         assert explorer.maps_drawn == rev
         assert f"SCOPs ({len(explorer.model.scops(explorer.settings()))})" in page.locator(
             ".js-plotly-plot").first.inner_text()
-        assert page.evaluate(row_hidden, uuid) is True  # the control is the page's, not the user's
+        assert page.evaluate(ROW_HIDDEN, uuid) is True  # the control is the page's, not the user's
     finally:
         explorer.handles["density"].value = before
         assert explorer.wait_idle(120)
@@ -741,11 +744,6 @@ def test_the_page_reports_its_3d_view_drawn_and_an_update_ends_then(explorer, br
     reporters = len(explorer._views_drawn)
     page = _open(browser, explorer.url)
     uuid = explorer.handles["view_drawn"]._impl.uuid
-    row_hidden = """(uuid) => {
-      let node = document.querySelector('label[for="' + uuid + '"]');
-      while (node && !(node.querySelector && node.querySelector('input'))) node = node.parentElement;
-      return node ? node.style.display === 'none' : null;
-    }"""
     before = explorer.handles["density"].value
     density = next(d for d in ("30", "50", "300") if d != before)
     try:
@@ -765,7 +763,7 @@ def test_the_page_reports_its_3d_view_drawn_and_an_update_ends_then(explorer, br
         assert explorer.last_times["view_drawn_wait"] < VIEW_DRAWN_WAIT_S - 0.5  # reported, not timed out
         assert explorer.last_update_s >= explorer.last_times["view_drawn_wait"]  # the update's time includes it
         assert page.evaluate("window.__pushbroomView.draws") > draws  # the batch was drawn before the report
-        assert page.evaluate(row_hidden, uuid) is True  # the control is the page's, not the user's
+        assert page.evaluate(ROW_HIDDEN, uuid) is True  # the control is the page's, not the user's
     finally:
         explorer.handles["density"].value = before
         assert explorer.wait_idle(120)

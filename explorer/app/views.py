@@ -199,21 +199,7 @@ class Views:
         frame back to the CPU on the page's thread (70-170 ms a frame at 1400 x 900; viser draws several frames
         after each change), so maps sent meanwhile wait for those frames.  A newer request ends the wait at once
         (its maps go first: its update sends them before its own 3D batch)."""
-        rev = getattr(self, "_view_sent", 0)
-        try:
-            if not self.server.get_clients():
-                return
-        except Exception:
-            return
-        end = time.monotonic() + timeout_s
-        with self._lock:
-            while getattr(self, "view_drawn", 0) < rev:
-                if (gen is not None and self._gen != gen) or getattr(self, "_closing", False):
-                    return
-                left = end - time.monotonic()
-                if left <= 0:
-                    return
-                self._lock.wait(left)
+        self._wait_reported("view_drawn", getattr(self, "_view_sent", 0), gen, timeout_s)
 
     def _wait_maps_drawn(self, gen: int | None, timeout_s: float = MAPS_DRAWN_WAIT_S) -> None:
         """Wait until an open browser reported the maps this update sent as drawn (at most ``timeout_s``; not at all
@@ -223,8 +209,13 @@ class Views:
         of a SCOP change sent beside the 3D nodes waited one or two such frames before Plotly drew them.  The 3D
         part of the update follows the maps instead."""
         rev = getattr(self, "_maps_wait_rev", None)
-        if rev is None:
-            return
+        if rev is not None:
+            self._wait_reported("maps_drawn", rev, gen, timeout_s)
+
+    def _wait_reported(self, attr: str, rev: int, gen: int | None, timeout_s: float) -> None:
+        """Wait until the page's report counter ``attr`` (``maps_drawn``, ``view_drawn``) reaches ``rev``: at most
+        ``timeout_s``, not at all without a browser, and no longer once a newer request arrived or the app
+        closes."""
         try:
             if not self.server.get_clients():
                 return
@@ -232,7 +223,7 @@ class Views:
             return
         end = time.monotonic() + timeout_s
         with self._lock:
-            while getattr(self, "maps_drawn", 0) < rev:
+            while getattr(self, attr, 0) < rev:
                 if (gen is not None and self._gen != gen) or getattr(self, "_closing", False):
                     return
                 left = end - time.monotonic()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import cache
 
 import numpy as np
@@ -85,3 +87,25 @@ def ce_counts(name: str, preset: str) -> tuple[int, np.ndarray]:
     method = create(name, scene_for(preset))
     res = method.ground_to_image(scps_for(preset).ground)
     return method.setup_ce, res.ce_evaluations
+
+
+@contextmanager
+def caller_at_two_blas_threads() -> Iterator[None]:
+    """OpenBLAS set to two threads (the caller's setting: numpy's default on a 2-core machine) for the block, the
+    previous setting restored after; skips the test without an OpenBLAS in this process or where it runs on one
+    thread only."""
+    import pytest
+
+    from explorer import _threads
+
+    api = _threads._openblas_api()
+    if api is None or _threads.blas_thread_count() is None:
+        pytest.skip("numpy's BLAS is not an OpenBLAS found in this process")
+    before = api[1]()
+    api[0](2)
+    try:
+        if _threads.blas_thread_count() != 2:
+            pytest.skip("OpenBLAS runs on one thread here")
+        yield
+    finally:
+        api[0](before)

@@ -9,7 +9,7 @@ import pytest
 from explorer import _threads
 from explorer.methods import base, create
 from explorer.points import simulate_points
-from tests.methods.cases import scene_for, scps_for
+from tests.methods.cases import caller_at_two_blas_threads, scene_for, scps_for
 
 
 def _needs_openblas() -> None:
@@ -29,17 +29,9 @@ def test_a_fit_runs_on_one_blas_thread_and_restores_the_setting():
         original(control)
 
     method._fit = spy  # type: ignore[method-assign]
-    api = _threads._openblas_api()
-    assert api is not None
-    before = api[1]()
-    api[0](2)  # the caller's setting: two threads (numpy's default on a 2-core machine)
-    try:
-        if _threads.blas_thread_count() != 2:
-            pytest.skip("OpenBLAS runs on one thread here")
+    with caller_at_two_blas_threads():
         method.fit(simulate_points(scene, 100, kind="scop"))
         after = _threads.blas_thread_count()
-    finally:
-        api[0](before)
     assert seen == [1]
     assert after == 2
 

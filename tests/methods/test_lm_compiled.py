@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from explorer.methods import _lm_compiled, bpnn
-from tests.methods.cases import scene_for
+from tests.methods.cases import caller_at_two_blas_threads, scene_for
 
 pytestmark = pytest.mark.skipif(not _lm_compiled.NUMBA_AVAILABLE, reason="numba is not installed")
 
@@ -111,17 +111,9 @@ def test_the_compiled_training_runs_on_one_blas_thread(data, monkeypatch):
         return original(*args)
 
     monkeypatch.setattr(bpnn, "lm_one_hidden", spy)
-    api = _threads._openblas_api()
-    assert api is not None
-    before = api[1]()
-    api[0](2)  # the caller's setting: two threads (numpy's default on a 2-core machine)
-    try:
-        if _threads.blas_thread_count() != 2:
-            pytest.skip("OpenBLAS runs on one thread here")
+    with caller_at_two_blas_threads():
         bpnn.LineOfSightNetwork(6, max_iter=5, seed=0).fit(*data)
         assert _threads.blas_thread_count() == 2  # restored
-    finally:
-        api[0](before)
     assert seen == [1]
 
 
