@@ -25,3 +25,60 @@ def test_simulate_writes_npz(tmp_path, capsys):
 def test_unknown_preset_is_a_clear_error(capsys):
     assert main(["simulate", "--preset", "NOPE", "--n", "10"]) == 2
     assert "unknown preset" in capsys.readouterr().err
+
+
+def _script_result(tmp_path, body: str):
+    import subprocess
+    import sys
+
+    script = tmp_path / "script.py"
+    script.write_text(body)
+    return subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                          cwd=tmp_path)
+
+
+def test_exit_after_command_keeps_the_status_the_output_and_the_exit_handlers(tmp_path):
+    """The fast exit of a finished command (explorer.cli.exit_after_command, no Python teardown) still runs the
+    exit handlers, delivers buffered output to a pipe and ends with the command's status."""
+    done = tmp_path / "handler_ran"
+    proc = _script_result(tmp_path, f"""
+import atexit, sys
+from explorer.cli import exit_after_command
+atexit.register(lambda: open({str(done)!r}, "w").write("yes"))
+print("buffered line")
+sys.stderr.write("error line")
+exit_after_command(3)
+print("never reached")
+""")
+    assert proc.returncode == 3
+    assert proc.stdout == "buffered line\n"
+    assert proc.stderr == "error line"
+    assert done.read_text() == "yes"
+
+
+def test_exit_after_command_waits_for_a_running_thread(tmp_path):
+    """A thread that is not a daemon still runs: the normal exit (which waits for it) is taken."""
+    done = tmp_path / "thread_done"
+    proc = _script_result(tmp_path, f"""
+import threading, time
+from explorer.cli import exit_after_command
+def work():
+    time.sleep(0.5)
+    open({str(done)!r}, "w").write("finished")
+threading.Thread(target=work).start()
+exit_after_command(0)
+""")
+    assert proc.returncode == 0, proc.stderr
+    assert done.read_text() == "finished"
+
+
+def test_the_command_line_entry_point_exits_with_the_commands_status(tmp_path):
+    import subprocess
+    import sys
+
+    ok = subprocess.run([sys.executable, "-m", "explorer", "presets", "--json"], capture_output=True, text=True,
+                        timeout=120)
+    assert ok.returncode == 0 and {r["id"] for r in json.loads(ok.stdout)} >= {"WSU", "agile"}
+    bad = subprocess.run([sys.executable, "-m", "explorer", "simulate", "--preset", "NOPE", "--n", "10"],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "unknown preset" in bad.stderr

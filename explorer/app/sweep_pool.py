@@ -71,6 +71,18 @@ def _worker(counter: Any, conn: Any, parent_pid: int, methods: tuple[str, ...] =
         pass
     finally:
         conn.close()
+    _leave()
+
+
+def _leave() -> None:
+    """End the worker process now that its results are sent: standard output and error flushed, then
+    ``os._exit``.  The parent waits for the worker's end (:meth:`SweepPool.close`), and Python's teardown of the
+    worker (every array, compiled kernel and module freed; torch's finalizers) took 0.4-0.8 s of that wait for
+    nothing: the worker writes no file and holds no resource another process needs."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(0)
 
 
 def _import_for(methods: Sequence[str]) -> None:
