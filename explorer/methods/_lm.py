@@ -14,8 +14,21 @@ weights with the best validation error are kept), on a vanishing gradient, on
 (``mu`` 1e-3, factors 0.1/10, ``mu_max`` 1e10, 6 validation failures, 1000 epochs)
 are kept except the gradient bound: 1e-12 instead of 1e-7, because a sub-pixel
 scanline over thousands of rows needs a relative target error near 1e-6.
-The Jacobian of the outputs with respect to all parameters comes from
-``torch.func.jacrev`` of one sample's output, vmapped over the samples.
+The Jacobian of the outputs with respect to all parameters is back-propagated by
+:meth:`SigmoidMLP.per_sample_jacobian` (``torch.func.jacrev`` of one sample's output, vmapped
+over the samples, for other networks).
+
+Two implementations of that one training.  :func:`fit_network` (``mlp``, ``ann``) trains a network
+of ONE hidden layer on the CPU without torch when numba is present
+(:func:`explorer.methods._lm_compiled.train_one_hidden`, the whole training one compiled call;
+:func:`levenberg_marquardt_compiled`): the first weights come from
+:class:`explorer.methods._torch_uniform.TorchUniform` with the arithmetic of
+:meth:`SigmoidMLP.init_params` (the same bits as torch's generator), the trained weights equal the
+torch trainer's to round-off over short trainings (tests/methods/test_lm_without_torch.py), and the
+:class:`TrainedNetwork` holds a numpy ``theta`` and predicts in numpy -- importing torch costs some
+1.3 s of CPU per process for networks of a few dozen weights.  The torch trainer
+(:func:`levenberg_marquardt`, :func:`lm_minimise`) serves the rest: several hidden layers
+(``mlp``'s ``grid_search``), a device other than the CPU, no numba.
 Conventions: ``docs/conventions.md``.
 """
 
@@ -24,11 +37,14 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from explorer._lazy import LazyModule
+from explorer._numba import NUMBA_AVAILABLE
+from explorer._threads import blas_threads
+from explorer.methods._torch_uniform import TorchUniform
 from explorer.points import PointSet
 
 if TYPE_CHECKING:  # the real module for annotations
@@ -219,6 +235,29 @@ def dense_forward(
     return h
 
 
+def _row_norms_like_torch(w: np.ndarray) -> np.ndarray:
+    """``torch.linalg.vector_norm(w, dim=1, keepdim=True)`` of a float64 CPU matrix (H, I), bit for bit where it
+    matters here (I of 2 or 3: the inputs of ``mlp`` and ``ann``).
+
+    torch's vectorised CPU kernel (AVX2 / AVX-512) accumulates a short row's squares by fused multiply-adds,
+    ``fma(w2, w2, fma(w1, w1, w0 * w0))``, which numpy cannot do: here each fused step is computed exactly in
+    rational arithmetic and rounded once (a handful of rows).  Measured against torch 2.13 on this machine: equal
+    for every row of 2 and 3 columns; rows of 4 or more columns are summed by another pattern, for which numpy's
+    sum is the closest match (equal for 4 columns, within an ulp otherwise).  Returns (H, 1).
+    """
+    if w.shape[1] > 3:
+        return np.sqrt(np.sum(w * w, axis=1, keepdims=True))
+    from fractions import Fraction
+
+    out = np.empty((w.shape[0], 1))
+    for r, row in enumerate(w.tolist()):
+        acc = row[0] * row[0]
+        for v in row[1:]:
+            acc = float(Fraction(v) * Fraction(v) + Fraction(acc))  # one rounding: a fused multiply-add
+        out[r, 0] = np.sqrt(acc)
+    return out
+
+
 class SigmoidMLP:
     """Fully connected network: logistic-sigmoid hidden layers, one linear output.
 
@@ -260,6 +299,38 @@ class SigmoidMLP:
                 b = torch.zeros(o, dtype=torch.float64)
             parts += [w.reshape(-1), b]
         return torch.cat(parts)
+
+    def init_params_numpy(self, uniform: TorchUniform) -> np.ndarray:
+        """:meth:`init_params` without torch: the same draws (``uniform``, :class:`TorchUniform` of the seed of
+        torch's generator) and the same arithmetic, hence the same bits (tests/methods/test_lm_without_torch.py);
+        flat float64 vector (P,)."""
+        parts = []
+        for k, (o, i) in enumerate(self.shapes):
+            if k < len(self.shapes) - 1:
+                beta = 0.7 * o ** (1.0 / i)
+                w = uniform.rand((o, i)) * 2 - 1
+                w = beta * w / _row_norms_like_torch(w)
+                b = beta * (uniform.rand(o) * 2 - 1)
+            else:
+                w = (uniform.rand((o, i)) * 2 - 1) / np.sqrt(i)
+                b = np.zeros(o)
+            parts += [w.reshape(-1), b]
+        return np.concatenate(parts)
+
+    def forward_numpy(self, theta: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`forward` in numpy: output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)
+        (float64 host arrays)."""
+        h = x
+        last = len(self.shapes) - 1
+        pos = 0
+        for k, (o, i) in enumerate(self.shapes):
+            w, b = theta[pos:pos + o * i].reshape(o, i), theta[pos + o * i:pos + o * i + o]
+            pos += o * i + o
+            h = h @ w.T + b
+            if k < last:
+                with np.errstate(over="ignore"):  # exp(-z) = inf far below the transition: sigmoid 0, as torch
+                    h = 1.0 / (1.0 + np.exp(-h))
+        return h[:, 0]
 
     def forward(self, theta: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """Network output (N,) for inputs ``x`` (N, n_inputs) and parameters ``theta`` (P,)."""
@@ -319,7 +390,7 @@ class LMResult:
     ----------
     theta : Tensor (P,)
         Parameters with the lowest validation error met during training (the last ones without a
-        validation set).
+        validation set); a float64 numpy array from :func:`levenberg_marquardt_compiled`.
     epochs : int
         Levenberg-Marquardt steps taken (accepted epochs).
     best_epoch : int
@@ -338,7 +409,7 @@ class LMResult:
         Training objective of the last accepted step (not necessarily ``theta``'s).
     """
 
-    theta: torch.Tensor
+    theta: Any
     epochs: int
     best_epoch: int
     stop_reason: str
@@ -588,6 +659,74 @@ def levenberg_marquardt(
     )
 
 
+def compiled_training_applies(net: SigmoidMLP, device: Any = "cpu") -> bool:
+    """True where :func:`levenberg_marquardt_compiled` trains ``net`` instead of the torch trainer: numba present,
+    one hidden layer, on the CPU."""
+    return NUMBA_AVAILABLE and len(net.hidden) == 1 and str(device).split(":")[0] == "cpu"
+
+
+def levenberg_marquardt_compiled(
+    net: SigmoidMLP,
+    theta0: np.ndarray,
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_val: np.ndarray,
+    y_val: np.ndarray,
+    *,
+    min_grad: float = 1e-12,
+    max_epochs: int = 1000,
+    mu: float = 1e-3,
+    mu_dec: float = 0.1,
+    mu_inc: float = 10.0,
+    mu_max: float = 1e10,
+    goal: float = 0.0,
+    max_fail: int = 6,
+) -> LMResult:
+    """:func:`levenberg_marquardt` of a one-hidden-layer :class:`SigmoidMLP` without torch: one compiled call
+    (:func:`explorer.methods._lm_compiled.train_one_hidden`) with the same objective (mean squared error), options
+    and stopping rules (``min_grad``, validation failures only when worse, the initial validation error counted, no
+    plateau, no weight decay; the dual ``J J^T`` form with more weights than errors), on one OpenBLAS thread.
+
+    Parameters
+    ----------
+    net : SigmoidMLP
+        One hidden layer (:func:`compiled_training_applies`).
+    theta0 : ndarray (P,)
+        Initial parameters.
+    x_train, y_train, x_val, y_val
+        As :func:`levenberg_marquardt`.
+
+    Returns
+    -------
+    LMResult
+        As :func:`levenberg_marquardt`'s, its ``theta`` a float64 numpy array.
+    """
+    from explorer.methods._lm_compiled import STOP_REASONS, train_one_hidden
+
+    if len(net.hidden) != 1:
+        raise ValueError(f"the compiled trainer serves one hidden layer, not {len(net.hidden)}")
+
+    def arr(a: np.ndarray, ndim: int) -> np.ndarray:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        return a.reshape(a.shape[0], -1) if ndim == 2 else a
+
+    xt, xv = arr(x_train, 2), arr(x_val, 2).reshape(-1, net.n_inputs)
+    yt, yv = arr(y_train, 1).reshape(-1, 1), arr(y_val, 1).reshape(-1, 1)
+    no_feats = np.empty((xt.shape[0], 0))
+    no_feats_val = np.empty((xv.shape[0], 0))
+    with blas_threads(1):  # its small products on OpenBLAS's threads cost 25x on a busy machine (bpnn's measure)
+        (theta, done, best_epoch, stop, iterations, train_best, val_best, final, hist, hist_val,
+         hist_mu) = train_one_hidden(
+            np.ascontiguousarray(theta0, dtype=np.float64), xt, no_feats, yt, xv, no_feats_val, yv, net.hidden[0],
+            False, 0.0, int(max_epochs), float(mu), float(mu_dec), float(mu_inc), float(mu_max), float(goal),
+            int(max_fail), 0, 0.0, True, float(min_grad), False, True)
+    reason = STOP_REASONS[int(stop)]
+    ok = reason not in ("max_epochs", "non_finite") and bool(np.isfinite(train_best))
+    history = {"objective": hist.tolist(), "validation": hist_val.tolist(), "mu": hist_mu.tolist()}
+    return LMResult(theta, int(done), int(best_epoch), reason, ok, float(train_best),
+                    float(val_best) if xv.shape[0] else float("nan"), history, int(iterations), float(final))
+
+
 # ------------------------------------------------------------- network training
 
 
@@ -598,25 +737,35 @@ class TrainedNetwork:
     Attributes
     ----------
     net : SigmoidMLP
-    theta : Tensor (P,)
-        Parameters on ``device``.
+    theta : ndarray or Tensor (P,)
+        Parameters: a float64 numpy array when trained without torch (:func:`fit_network`'s compiled path), else a
+        torch tensor on ``device``.
     target_offset, target_scale : float
         ``target = network output * target_scale + target_offset``.
-    device : torch.device
+    device : str or torch.device
+        Where ``theta`` lives ("cpu" for a numpy ``theta``).
     """
 
     net: SigmoidMLP
-    theta: torch.Tensor
+    theta: np.ndarray | torch.Tensor
     target_offset: float
     target_scale: float
-    device: torch.device
+    device: str | torch.device
+
+    @property
+    def on_cpu(self) -> bool:
+        """True when the parameters live on the CPU (numpy, or a CPU torch tensor)."""
+        return str(self.device).split(":")[0] == "cpu"
 
     @property
     def theta_numpy(self) -> np.ndarray:
         """The parameters as a float64 host array (P,) (cached)."""
         cached = self.__dict__.get("_theta_numpy")
         if cached is None:
-            cached = self.theta.detach().cpu().numpy().astype(np.float64, copy=True)
+            if isinstance(self.theta, np.ndarray):
+                cached = self.theta.astype(np.float64, copy=True)
+            else:
+                cached = self.theta.detach().cpu().numpy().astype(np.float64, copy=True)
             self.__dict__["_theta_numpy"] = cached
         return cached
 
@@ -625,13 +774,21 @@ class TrainedNetwork:
         """``(n_inputs, hidden..., 1)``."""
         return (self.net.n_inputs, *self.net.hidden, 1)
 
-    def predict(self, x: np.ndarray, chunk: int = 1 << 18) -> np.ndarray:
-        """Target values (N,) of normalised inputs ``x`` (N, D): chunked, no autograd, float64."""
+    def predict(self, x: np.ndarray, chunk: int = 1 << 16) -> np.ndarray:
+        """Target values (N,) of normalised inputs ``x`` (N, D): chunked, float64; in numpy on the CPU
+        (:meth:`SigmoidMLP.forward_numpy`: no torch needed), by torch on another device."""
+        x = np.asarray(x, dtype=np.float64)
         out = np.empty(x.shape[0])
-        with torch.no_grad():
+        if self.on_cpu:
+            theta = self.theta_numpy
             for s in range(0, x.shape[0], chunk):
-                xs = torch.from_numpy(np.ascontiguousarray(x[s:s + chunk], dtype=np.float64)).to(self.device)
-                out[s:s + chunk] = self.net.forward(self.theta, xs).cpu().numpy()
+                out[s:s + chunk] = self.net.forward_numpy(theta, x[s:s + chunk])
+        else:
+            theta_t = cast("torch.Tensor", self.theta)  # on another device: a torch tensor (the torch trainer's)
+            with torch.no_grad():
+                for s in range(0, x.shape[0], chunk):
+                    xs = torch.from_numpy(np.ascontiguousarray(x[s:s + chunk])).to(self.device)
+                    out[s:s + chunk] = self.net.forward(theta_t, xs).cpu().numpy()
         return out * self.target_scale + self.target_offset
 
 
@@ -652,9 +809,12 @@ def fit_network(
     """Train a sigmoid MLP on normalised inputs ``x`` (N, D) for targets ``y`` (N,).
 
     The targets are scaled to [-1, 1] (min/max); the points are split 70/30 (seeded)
-    into training and validation sets; the initial weights come from a torch generator
+    into training and validation sets; the initial weights are those of a torch generator
     seeded with ``seed``; training is :func:`levenberg_marquardt` in float64, stopping when the
-    training RMSE reaches ``goal_rmse`` (target units; 0: no goal, MATLAB's default).
+    training RMSE reaches ``goal_rmse`` (target units; 0: no goal, MATLAB's default).  One hidden
+    layer on the CPU with numba (:func:`compiled_training_applies`) trains without torch
+    (:class:`TorchUniform` draws, :func:`levenberg_marquardt_compiled`; the returned network's
+    ``theta`` is a numpy array); the rest by torch.
 
     Returns
     -------
@@ -680,14 +840,23 @@ def fit_network(
     if not scale > 1e-300:
         scale = 1.0  # constant target: nothing to scale
     yn = (y - offset) / scale
-    dev = torch.device(device)
     net = SigmoidMLP(x.shape[1], hidden)
-    gen = torch.Generator(device="cpu").manual_seed(int(seed))
-    theta0 = net.init_params(gen)
-    res = levenberg_marquardt(
-        net, theta0.to(dev), x[tr], yn[tr], x[va], yn[va], max_epochs=max_epochs,
-        max_fail=max_fail, device=dev, goal=(float(goal_rmse) / scale) ** 2,
-    )
+    goal = (float(goal_rmse) / scale) ** 2
+    dev: str | torch.device
+    if compiled_training_applies(net, device):
+        dev = "cpu"
+        res = levenberg_marquardt_compiled(
+            net, net.init_params_numpy(TorchUniform(int(seed))), x[tr], yn[tr], x[va], yn[va],
+            max_epochs=max_epochs, max_fail=max_fail, goal=goal,
+        )
+    else:
+        dev = torch.device(device)
+        gen = torch.Generator(device="cpu").manual_seed(int(seed))
+        theta0 = net.init_params(gen)
+        res = levenberg_marquardt(
+            net, theta0.to(dev), x[tr], yn[tr], x[va], yn[va], max_epochs=max_epochs,
+            max_fail=max_fail, device=dev, goal=goal,
+        )
     info = {
         "hidden": list(net.hidden),
         "n_params": net.n_params,

@@ -27,10 +27,10 @@ import numpy as np
 
 from explorer._numba import NUMBA_AVAILABLE, njit
 
-__all__ = ["NUMBA_AVAILABLE", "STOP_REASONS", "lm_one_hidden"]
+__all__ = ["NUMBA_AVAILABLE", "STOP_REASONS", "lm_one_hidden", "train_one_hidden"]
 
 #: The stop reasons of :func:`lm_one_hidden` by code (those of :func:`explorer.methods._lm.lm_minimise`).
-STOP_REASONS = ("max_epochs", "non_finite", "goal", "mu_max", "validation", "plateau")
+STOP_REASONS = ("max_epochs", "non_finite", "goal", "mu_max", "validation", "plateau", "min_grad")
 
 
 @njit(cache=True)
@@ -172,11 +172,137 @@ def _damped_step(product, rhs, damping):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _objective(theta, x, feats, target, n_hidden, tanh, lam, mean):  # pragma: no cover - compiled
+    """The training objective (:func:`_sse`'s sum, or with ``mean`` the mean squared error, plus ``lam |theta|^2``),
+    the errors (N, O) and the hidden activations (N, H)."""
+    if not mean:
+        return _sse(theta, x, feats, target, n_hidden, tanh, lam)
+    s, e, h = _sse(theta, x, feats, target, n_hidden, tanh, 0.0)
+    s = s / e.size if e.size else np.nan  # torch.mean of no element is NaN
+    if lam != 0.0:
+        s += lam * np.dot(theta, theta)
+    return s, e, h
+
+
+@njit(cache=True)
+def _jacobian(theta, x, feats, h, tanh, n_out):  # pragma: no cover - compiled
+    """The full Jacobian ``d outputs / d theta`` (N O, P) at ``theta``, row ``k O + o`` for output ``o`` of point
+    ``k`` (the order of the errors flattened row-major, as the torch trainer flattens them)."""
+    n, n_in = x.shape
+    n_hidden = h.shape[1]
+    n_feat = feats.shape[1]
+    s = n_hidden * n_in + n_hidden
+    w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
+    jac = np.zeros((n * n_out, theta.size))
+    for k in range(n):
+        for o in range(n_out):
+            r = k * n_out + o
+            for j in range(n_hidden):
+                hj = h[k, j]
+                d = theta[w2 + o * n_hidden + j] * ((1.0 - hj * hj) if tanh else hj * (1.0 - hj))
+                for i in range(n_in):
+                    jac[r, j * n_in + i] = d * x[k, i]
+                jac[r, n_hidden * n_in + j] = d
+                jac[r, w2 + o * n_hidden + j] = hj
+            jac[r, b2 + o] = 1.0
+            for f in range(n_feat):
+                jac[r, lin + o * n_feat + f] = feats[k, f]
+    return jac
+
+
+@njit(cache=True)
+def _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu, mu_dec,
+           mu_inc, mu_max, goal, max_fail, window, tol, mean, min_grad, fail_on_tie, count_initial,
+           allow_dual):  # pragma: no cover - compiled
+    """:func:`train_one_hidden` (its documentation), also returning the histories."""
+    validate = x_val.shape[0] > 0
+    theta = theta0.copy()
+    perf, err, hid = _objective(theta, x, feats, target, n_hidden, tanh, lam, mean)
+    n_err = err.size
+    dual = allow_dual and lam == 0.0 and theta.size > n_err  # the N x N form, as the torch trainer
+    best_theta = theta.copy()
+    best_epoch = 0
+    v0 = _objective(theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0, mean)[0] if validate else np.nan
+    best_val = v0 if count_initial else np.inf
+    fails = 0
+    hist = np.empty(max_epochs + 1)
+    hist_val = np.empty(max_epochs + 1)
+    hist_mu = np.empty(max_epochs + 1)
+    hist[0], hist_val[0], hist_mu[0] = perf, v0, mu
+    stop, done, started = 0, 0, 0
+    for epoch in range(1, max_epochs + 1):
+        if not np.isfinite(perf):
+            stop = 1
+            break
+        if perf <= goal:
+            stop = 2
+            break
+        started = epoch
+        if dual:
+            jac = _jacobian(theta, x, feats, hid, tanh, err.shape[1])
+            e_flat = np.ascontiguousarray(err).reshape(-1)
+            grad = np.dot(jac.T, e_flat)
+            product, rhs = np.dot(jac, jac.T), e_flat
+        else:
+            product, rhs = _normal_equations(theta, x, feats, err, hid, tanh, lam)
+            grad = rhs + lam * theta if lam != 0.0 else rhs
+        if min_grad > 0.0 and np.sqrt(np.dot(2.0 * grad, 2.0 * grad)) / n_err < min_grad:
+            stop, started = 6, epoch - 1
+            break
+        improved = False
+        while mu <= mu_max:
+            if dual:
+                cand = theta + np.dot(jac.T, _damped_step(product, rhs, mu))
+            else:
+                cand = theta + _damped_step(product, rhs, mu + lam)
+            cperf, cerr, chid = _objective(cand, x, feats, target, n_hidden, tanh, lam, mean)
+            if np.isfinite(cperf) and cperf < perf:
+                theta, err, perf, hid = cand, cerr, cperf, chid
+                mu = max(mu * mu_dec, 1e-20)
+                improved = True
+                break
+            mu *= mu_inc
+        if not improved:
+            stop = 3
+            break
+        done = epoch
+        hist[epoch] = perf
+        hist_mu[epoch] = mu
+        if not validate:
+            hist_val[epoch] = np.nan
+            best_theta, best_epoch = theta.copy(), epoch
+        else:
+            v = _objective(theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0, mean)[0]
+            hist_val[epoch] = v
+            if v < best_val:
+                best_theta, best_val, best_epoch = theta.copy(), v, epoch
+                fails = 0
+            elif v > best_val or fail_on_tie:
+                fails += 1
+                if fails >= max_fail:
+                    stop = 4
+                    break
+        if window >= 1 and done >= window:  # the objective fell by less than tol over the last window epochs
+            ref = hist[done - window]
+            if ref - perf <= tol * ref:
+                stop = 5
+                break
+    train_best = _objective(best_theta, x, feats, target, n_hidden, tanh, lam, mean)[0]
+    val_best = np.nan
+    if validate:
+        val_best = _objective(best_theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0, mean)[0]
+    return (best_theta, done, best_epoch, stop, max(started, done), train_best, val_best, perf,
+            hist[:done + 1].copy(), hist_val[:done + 1].copy(), hist_mu[:done + 1].copy())
+
+
+@njit(cache=True)
 def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu,
                   mu_dec, mu_inc, mu_max, goal, max_fail, window, tol):  # pragma: no cover - compiled
-    """Train the network (module docstring) by Levenberg-Marquardt: :func:`explorer.methods._lm.lm_minimise` with
-    ``mean=False``, ``weight_decay=lam``, ``min_grad=0``, ``fail_on_tie=True``, ``count_initial_validation=False``
-    and ``plateau=(window, tol)`` (``window < 1``: no plateau rule); no validation when ``x_val`` has no row.
+    """Train the network (module docstring) by Levenberg-Marquardt the way ``bpnn`` / ``nn-rfm`` do:
+    :func:`explorer.methods._lm.lm_minimise` with ``mean=False``, ``weight_decay=lam``, ``min_grad=0``,
+    ``fail_on_tie=True``, ``count_initial_validation=False`` and ``plateau=(window, tol)`` (``window < 1``: no
+    plateau rule), always the ``J^T J`` form (the caller only calls it with at least as many errors as weights); no
+    validation when ``x_val`` has no row (:func:`train_one_hidden` with those options).
 
     Returns
     -------
@@ -189,57 +315,39 @@ def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidd
     history : ndarray (done + 1,)
         The objective at the start and after each epoch.
     """
-    validate = x_val.shape[0] > 0
-    theta = theta0.copy()
-    perf, err, hid = _sse(theta, x, feats, target, n_hidden, tanh, lam)
-    best_theta = theta.copy()
-    best_epoch = 0
-    best_val = np.inf
-    fails = 0
-    hist = np.empty(max_epochs + 1)
-    hist[0] = perf
-    stop, done, started = 0, 0, 0
-    for epoch in range(1, max_epochs + 1):
-        if not np.isfinite(perf):
-            stop = 1
-            break
-        if perf <= goal:
-            stop = 2
-            break
-        started = epoch
-        product, rhs = _normal_equations(theta, x, feats, err, hid, tanh, lam)
-        improved = False
-        while mu <= mu_max:
-            cand = theta + _damped_step(product, rhs, mu + lam)
-            cperf, cerr, chid = _sse(cand, x, feats, target, n_hidden, tanh, lam)
-            if np.isfinite(cperf) and cperf < perf:
-                theta, err, perf, hid = cand, cerr, cperf, chid
-                mu = max(mu * mu_dec, 1e-20)
-                improved = True
-                break
-            mu *= mu_inc
-        if not improved:
-            stop = 3
-            break
-        done = epoch
-        hist[epoch] = perf
-        if not validate:
-            best_theta, best_epoch = theta.copy(), epoch
-        else:
-            v = _sse(theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0)[0]
-            if v < best_val:
-                best_theta, best_val, best_epoch = theta.copy(), v, epoch
-                fails = 0
-            else:  # a tie counts as a failure (fail_on_tie)
-                fails += 1
-                if fails >= max_fail:
-                    stop = 4
-                    break
-        if window >= 1 and done >= window:  # the objective fell by less than tol over the last window epochs
-            ref = hist[done - window]
-            if ref - perf <= tol * ref:
-                stop = 5
-                break
-    train_best = _sse(best_theta, x, feats, target, n_hidden, tanh, lam)[0]
-    val_best = _sse(best_theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0)[0] if validate else np.nan
-    return best_theta, done, best_epoch, stop, max(started, done), train_best, val_best, perf, hist[:done + 1].copy()
+    r = _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu, mu_dec,
+               mu_inc, mu_max, goal, max_fail, window, tol, False, 0.0, True, False, False)
+    return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8]
+
+
+@njit(cache=True)
+def train_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu,
+                     mu_dec, mu_inc, mu_max, goal, max_fail, window, tol, mean, min_grad, fail_on_tie,
+                     count_initial):  # pragma: no cover - compiled
+    """Train the network (module docstring) by Levenberg-Marquardt: :func:`explorer.methods._lm.lm_minimise` with
+    every option it has for these networks.
+
+    ``mean``: the objective (and the validation error, the goal, the gradient test) is the mean of the squared
+    errors, else their sum (the step does not depend on it); ``lam``: weight decay (``lam |theta|^2`` added to the
+    objective and to the normal equations); ``min_grad``: stop when ``|2 J^T e| / n < min_grad`` (``n`` errors; 0:
+    no test); ``fail_on_tie``: a validation error equal to the best counts as a failure; ``count_initial``: the
+    initial parameters' validation error is the first best (else infinity); ``window < 1``: no plateau rule.  With
+    more weights than errors and no weight decay the step is the torch trainer's dual form
+    ``d = J^T (J J^T + mu I)^-1 e`` (an n x n system; :func:`explorer.methods._lm._damped_step`), else
+    ``(J^T J + (mu + lam) I) d = J^T e - lam theta``.  No validation when ``x_val`` has no row.
+
+    Returns
+    -------
+    theta : ndarray (P,)
+        The parameters with the best validation error (the last accepted ones without validation).
+    done, best_epoch, stop, iterations : int
+        Accepted epochs, the epoch of ``theta``, the stop code (:data:`STOP_REASONS`), epochs started.
+    train_best, val_best, final_objective : float
+        Objective and validation error of ``theta``, objective of the last accepted step.
+    history, validation, mu : ndarray (done + 1,)
+        The objective, the validation error (NaN without validation) and the damping at the start and after each
+        epoch.
+    """
+    return _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu,
+                  mu_dec, mu_inc, mu_max, goal, max_fail, window, tol, mean, min_grad, fail_on_tie, count_initial,
+                  True)

@@ -42,13 +42,13 @@ class TorchUniform:
         seed = int(seed)
         if seed < 0 or seed >= 2**64:
             raise ValueError(f"seed must lie in [0, 2**64), got {seed}")
-        key = np.random.RandomState(seed & 0xFFFFFFFF).get_state()[1]  # init_genrand(low 32 bits), as torch
+        key = np.random.RandomState(seed & 0xFFFFFFFF).get_state()[1]  # type: ignore[index]  # init_genrand(low 32 bits), as torch
         self._bits = np.random.MT19937(0)
         self._bits.state = {"bit_generator": "MT19937", "state": {"key": key, "pos": 624}}
 
     def rand(self, shape: int | tuple[int, ...]) -> np.ndarray:
         """The next uniforms in [0, 1), float64 array of ``shape`` (an int: 1-D), drawn in row-major order."""
-        dims = (int(shape),) if np.ndim(shape) == 0 else tuple(int(s) for s in shape)  # type: ignore[arg-type]
+        dims = (int(shape),) if np.ndim(shape) == 0 else tuple(int(s) for s in shape)  # type: ignore[arg-type, union-attr]
         n = int(np.prod(dims, dtype=np.int64))
         raw = self._bits.random_raw(2 * n)  # uint64 holding 32-bit outputs
         words = (raw[0::2] << np.uint64(32)) | raw[1::2]

@@ -150,7 +150,8 @@ class ANNMethod(ThreeStageMethod):
         is small and smooth: on the paper presets it is below 1e-3 px after 30 epochs, and
         each epoch with ~350 training points costs about ten times an ``mlp`` epoch.
     device : str
-        torch device (default "cpu").
+        Device (default "cpu": trained and evaluated without torch where numba is present,
+        :func:`explorer.methods._lm.fit_network`; another value is a torch device).
     max_val_rmse_px : float
         Validation RMSE above which the training missed its accuracy goal (1.0 px): ``fit_info["converged"]``
         False, one log line, the map's title; its best model still answers (as ``mlp``).

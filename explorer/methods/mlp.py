@@ -21,7 +21,7 @@ trend removed; 30 SCOPs 49 px and 0.75 px (also on the CTX ISD and a Pleiades RP
 ``docs/explorer.md``).  The network itself (sigmoid hidden layers, linear output, Nguyen-Widrow
 initial weights, Levenberg-Marquardt with early stopping on 30 % validation SCOPs) is the
 paper's.  The Levenberg-Marquardt trainer and the network are in :mod:`explorer.methods._lm`
-(torch, float64).
+(float64; one hidden layer on the CPU compiled without torch, several layers by torch).
 
 A training that ends above ``max_val_rmse_px`` on the validation SCOPs is reported
 (``fit_info["converged"]`` False, one log line with the validation RMSE and the stop reason), but
@@ -91,7 +91,8 @@ class MLPMethod(BestScanlineMethod):
     use_height : bool or None
         Include Z; default only when the SCOPs' heights span more than 1 m.
     device : str
-        torch device for training and inference (default "cpu").
+        Device for training and inference (default "cpu": one hidden layer trains and predicts without torch;
+        another value is a torch device).
     max_val_rmse_px : float
         A network whose validation RMSE exceeds this is reported as not reaching its goal (1.0):
         ``fit_info["converged"]`` False and a log line; its best model still answers.
@@ -167,7 +168,7 @@ class MLPMethod(BestScanlineMethod):
     def _locate(self, ground: np.ndarray, *, trace: bool) -> ScanlineResult:
         net = self.network
         f, ok_f = self.features(ground)
-        if NUMBA_AVAILABLE and net.device.type == "cpu":  # one compiled pass (same network, float64)
+        if NUMBA_AVAILABLE and net.on_cpu:  # one compiled pass (same network, float64)
             row, ok = mlp_predict(self.features, ground, net.theta_numpy, net.layer_sizes, net.target_scale,
                                   net.target_offset)
         else:  # torch on the network's device
