@@ -12,7 +12,7 @@ This module provides
 
 * :class:`MLPRegressor`: a small fully connected network ``R^d_in -> R^d_out`` (also used by
   :mod:`explorer.methods.nn_rfm`), Jacobians written out by hand for the LM normal equations;
-* :class:`BPNetworkGeometryModel`: the network (torch, float64), inputs and outputs normalised
+* :class:`BPNetworkGeometryModel`: the network (numpy float64 weights), inputs and outputs normalised
   to [-1, 1] by offset/scale like RPC00B, sigmoid (or tanh) hidden layers, a **linear** output
   layer (the paper's Eq. 6 also squashes the output; a linear output is the standard choice for
   regression and needs no target rescaling into (0, 1)), trained by Levenberg-Marquardt (the
@@ -43,7 +43,7 @@ Conventions: ``docs/conventions.md`` (rows/cols 0-based pixel centre, local ENU 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -62,9 +62,15 @@ from explorer.methods._lm import (
     torch_threads,
 )
 from explorer.methods._lm_compiled import NUMBA_AVAILABLE, STOP_REASONS, lm_one_hidden
+from explorer.methods._torch_uniform import TorchUniform
 from explorer.methods.base import BestScanlineMethod, ScanlineResult, register
 from explorer.points import PointSet
 from explorer.scene import Scene
+
+#: :func:`~explorer.methods._lm.dense_layers` and :func:`~explorer.methods._lm.dense_forward`, typed for torch tensors,
+#: are slicing, reshapes and ``@``: they serve numpy arrays unchanged (how these networks evaluate without torch)
+_dense_layers: Callable[..., list[tuple[Any, Any]]] = dense_layers
+_dense_forward: Callable[..., Any] = dense_forward
 
 __all__ = ["BPNetworkGeometryModel", "BPNNMethod", "LineOfSightNetwork", "MLPRegressor", "compare_bpnn_rfm",
            "torch_threads"]
@@ -117,10 +123,17 @@ def too_few_points(name: str, hidden: Sequence[int], n_points: int, n_outputs: i
 
 
 class MLPRegressor:
-    """Small fully connected network ``R^d_in -> R^d_out`` trained by Levenberg-Marquardt (torch, float64).
+    """Small fully connected network ``R^d_in -> R^d_out`` trained by Levenberg-Marquardt (float64).
 
     Inputs and targets are normalised to [-1, 1] per feature (offset = mid-range, scale =
     half-range, like RPC00B); hidden layers use ``activation``, the output layer is linear.
+
+    The weights are a numpy float64 vector; the starts (seeded draws equal to torch's generator's,
+    :class:`~explorer.methods._torch_uniform.TorchUniform`), the output layer's least squares, the predictions and
+    their input derivatives are numpy.  One hidden layer with at least as many errors as weights (bpnn, nn-rfm) is
+    trained by the compiled trainer (:mod:`explorer.methods._lm_compiled`), so fitting and evaluating it never
+    imports torch; other networks (several hidden layers, numba missing, fewer errors than weights) are trained
+    by the torch trainer (:func:`explorer.methods._lm.lm_minimise`), the only place torch is used.
 
     Parameters
     ----------
@@ -197,7 +210,7 @@ class MLPRegressor:
         self.seed = int(seed)
         self._shapes: list[tuple[int, int]] = []
         self.n_parameters = 0
-        self._theta: torch.Tensor | None = None
+        self._theta: np.ndarray | None = None  # the flat weights (P,), float64
         self.degenerate_inputs = np.zeros(0, dtype=bool)
         self.fit_info: dict = {}
 
@@ -211,12 +224,39 @@ class MLPRegressor:
         self.n_parameters = n_parameters(self._shapes)
 
     # ------------------------------------------------------------ network
-    def _act(self, z: torch.Tensor) -> torch.Tensor:
+    def _act(self, z: Any) -> Any:
+        """The hidden layers' transfer function of ``z``: numpy in, numpy out; a torch tensor (the torch trainer's
+        :meth:`_jacobian` and errors) in, torch out."""
+        if isinstance(z, np.ndarray):
+            if self.activation == "tanh":
+                return np.tanh(z)
+            with np.errstate(over="ignore"):  # exp(-z) = inf far below zero: the sigmoid is 0 there, as torch's
+                return 1.0 / (1.0 + np.exp(-z))
         return torch.sigmoid(z) if self.activation == "sigmoid" else torch.tanh(z)
 
-    def _forward(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        """Normalised inputs (N, d_in) -> normalised outputs (N, d_out) for a flat parameter vector."""
+    def _forward(self, theta: Any, u: Any) -> Any:
+        """Normalised inputs (N, d_in) -> normalised outputs (N, d_out) for a flat parameter vector (P,): numpy
+        float64 arrays (the model's weights, its predictions), or torch tensors (the torch trainer)."""
         return dense_forward(theta, self._shapes, u, self._act)
+
+    def _forward_with_input_jacobian(self, theta: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_forward` (N, d_out) and its derivative with respect to the inputs d out / d u (N, d_out, d_in),
+        normalised units, by the chain rule written out: layer by layer ``d h_k / d u = act'(z_k) W_k d h_(k-1) /
+        d u`` (``act' = h (1 - h)`` for the sigmoid, ``1 - h^2`` for tanh), the linear output layer ``W d h / d u``.
+        """
+        h, jac = u, None  # jac: d h / d u of the current layer, (N, width, d_in)
+        last = len(self._shapes) - 1
+        for layer, (w, b) in enumerate(_dense_layers(theta, self._shapes)):
+            z = h @ w.T + b
+            dz = w[None, :, :] if jac is None else np.matmul(w, jac)  # d z / d u, (N or 1, out, d_in)
+            if layer < last:
+                h = self._act(z)
+                deriv = h * (1.0 - h) if self.activation == "sigmoid" else 1.0 - h * h
+                jac = deriv[:, :, None] * dz
+            else:
+                h, jac = z, np.broadcast_to(dz, (u.shape[0], *dz.shape[1:])).copy()
+        assert jac is not None  # the output layer came last
+        return h, jac
 
     def _jacobian(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """d(outputs)/d(theta), shape (2 N, P), rows ordered like ``outputs.reshape(-1)``.
@@ -254,54 +294,68 @@ class MLPRegressor:
             jac[:, out, :] = torch.cat([t for gw, gb in reversed(blocks) for t in (gw, gb)], dim=1)
         return jac.reshape(n * n_out, -1)
 
-    def _init_output_layer(self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    def _init_output_layer(self, theta: np.ndarray, u: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Replace the random output layer by the least-squares one for the random hidden layers.
 
         The output layer is linear, so given the hidden activations its best weights are a
         linear least-squares solution; starting there instead of at random saves most of the
-        early Levenberg-Marquardt iterations.
+        early Levenberg-Marquardt iterations.  Solved by LAPACK's ``gelsd`` (``np.linalg.lstsq``; torch's
+        ``driver="gelsd"`` before, the same to round-off, tests/methods/test_bpnn_numpy.py).
         """
-        h = dense_forward(theta, self._shapes[:-1], u, self._act, linear_output=False)  # hidden activations
+        h = _dense_forward(theta, self._shapes[:-1], u, self._act, linear_output=False)  # hidden activations
         k = n_parameters(self._shapes[:-1])  # where the output layer starts
-        design = torch.cat([h, torch.ones((h.shape[0], 1), dtype=torch.float64)], dim=1)
-        sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1, 2)
+        design = np.concatenate([h, np.ones((h.shape[0], 1))], axis=1)
+        sol = np.linalg.lstsq(design, t, rcond=None)[0]  # (n_h + 1, 2)
         o, i = self._shapes[-1]
-        theta = theta.clone()
+        theta = theta.copy()
         theta[k:k + o * i] = sol[:-1].T.reshape(-1)
         theta[k + o * i:k + o * i + o] = sol[-1]
         return theta
 
-    def _init_theta(self, gen: torch.Generator) -> torch.Tensor:
+    def _init_theta(self, uniform: TorchUniform) -> np.ndarray:
+        """A restart's random weights (P,): uniform Glorot ranges (x4 for sigmoid hidden layers), uniform hidden
+        biases, a zero output bias, drawn in this order from ``uniform`` -- bit for bit the start torch's seeded
+        generator gave (:class:`~explorer.methods._torch_uniform.TorchUniform`)."""
         parts = []
         last = len(self._shapes) - 1
         for layer, (o, i) in enumerate(self._shapes):
             a = np.sqrt(6.0 / (o + i)) * (4.0 if (self.activation == "sigmoid" and layer < last) else 1.0)
-            parts.append((torch.rand(o * i, generator=gen, dtype=torch.float64) * 2 - 1) * a)
+            parts.append((uniform.rand(o * i) * 2 - 1) * a)
             if layer < last:
-                parts.append(torch.rand(o, generator=gen, dtype=torch.float64) * 2 - 1)
+                parts.append(uniform.rand(o) * 2 - 1)
             else:
-                parts.append(torch.zeros(o, dtype=torch.float64))
-        return torch.cat(parts)
+                parts.append(np.zeros(o))
+        return np.concatenate(parts)
 
     # ------------------------------------------------------------ normalisation
-    def _normalise_inputs(self, inputs: np.ndarray) -> torch.Tensor:
-        u = (np.asarray(inputs, dtype=np.float64) - self._in_off) / self._in_scale
-        return torch.as_tensor(u, dtype=torch.float64)
+    def _normalise_inputs(self, inputs: np.ndarray) -> np.ndarray:
+        return (np.asarray(inputs, dtype=np.float64) - self._in_off) / self._in_scale
 
     # ------------------------------------------------------------ training
     def _levenberg_marquardt(
-        self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor,
-        u_val: torch.Tensor | None, t_val: torch.Tensor | None,
-    ) -> tuple[torch.Tensor, dict]:
+        self, theta: np.ndarray, u: np.ndarray, t: np.ndarray, u_val: np.ndarray | None, t_val: np.ndarray | None,
+    ) -> tuple[np.ndarray, dict]:
         """One restart of the package's Levenberg-Marquardt trainer (:func:`explorer.methods._lm.lm_minimise`):
         sum of squared errors plus ``weight_decay |theta|^2``, plateau rule, validation failures
-        counted when the error does not improve (ties included)."""
+        counted when the error does not improve (ties included).  Compiled where it applies
+        (:meth:`_compiled_training_applies`, no torch); otherwise by torch, the weights and inputs converted to
+        tensors here and the trained weights back to numpy."""
 
         if self._compiled_training_applies(u, t):
             return self._levenberg_marquardt_compiled(theta, u, t, u_val, t_val)
+        with torch_threads(1):
+            return self._levenberg_marquardt_torch(theta, u, t, u_val, t_val)
+
+    def _levenberg_marquardt_torch(
+        self, theta_np: np.ndarray, u_np: np.ndarray, t_np: np.ndarray, u_val_np: np.ndarray | None,
+        t_val_np: np.ndarray | None,
+    ) -> tuple[np.ndarray, dict]:
+        """:meth:`_levenberg_marquardt` by the torch trainer (more than one hidden layer, numba missing, fewer
+        errors than weights)."""
+        theta, u, t = (torch.tensor(a, dtype=torch.float64) for a in (theta_np, u_np, t_np))
         validation_error = None
-        if u_val is not None and t_val is not None:
-            uv, tv = u_val, t_val
+        if u_val_np is not None and t_val_np is not None:
+            uv, tv = (torch.tensor(a, dtype=torch.float64) for a in (u_val_np, t_val_np))
 
             def validation_error(th: torch.Tensor) -> float:
                 rv = self._forward(th, uv) - tv
@@ -317,43 +371,42 @@ class MLPRegressor:
         ref = history[max(0, len(history) - 1 - self.window)]
         window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
         stop = "max_iter" if res.stop_reason == "max_epochs" else res.stop_reason
-        return res.theta, {"iterations": res.iterations, "stop": stop, "loss": res.final_objective,
-                           "window_decrease": window_decrease,
-                           "val_loss": res.val_mse if u_val is not None else None}
+        return res.theta.detach().numpy().copy(), {
+            "iterations": res.iterations, "stop": stop, "loss": res.final_objective,
+            "window_decrease": window_decrease, "val_loss": res.val_mse if u_val_np is not None else None}
 
-    def _compiled_training_applies(self, u: torch.Tensor, t: torch.Tensor) -> bool:
+    def _compiled_training_applies(self, u: np.ndarray, t: np.ndarray) -> bool:
         """True where :func:`explorer.methods._lm_compiled.lm_one_hidden` trains this network: numba present, one
         hidden layer, and at least as many errors as weights (the torch trainer's ``J J^T`` form is not in it)."""
         return (self.compiled_training and NUMBA_AVAILABLE and len(self._shapes) == 2
                 and int(u.shape[0]) * int(t.shape[1]) >= self.n_parameters)
 
-    def _compiled_inputs(self, u: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    def _compiled_inputs(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the hidden layer sees (N, I) and the linear features (N, F) of inputs ``u``, as contiguous float64
         arrays (the network of :mod:`explorer.methods._lm_compiled`; no linear term here)."""
-        x = np.ascontiguousarray(u.numpy(), dtype=np.float64)
+        x = np.ascontiguousarray(u, dtype=np.float64)
         return x, np.empty((x.shape[0], 0))
 
     def _levenberg_marquardt_compiled(
-        self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor,
-        u_val: torch.Tensor | None, t_val: torch.Tensor | None,
-    ) -> tuple[torch.Tensor, dict]:
+        self, theta: np.ndarray, u: np.ndarray, t: np.ndarray, u_val: np.ndarray | None, t_val: np.ndarray | None,
+    ) -> tuple[np.ndarray, dict]:
         """:meth:`_levenberg_marquardt` by the compiled trainer (the same algorithm and stopping rules, one call)."""
         x, feats = self._compiled_inputs(u)
-        target = np.ascontiguousarray(t.numpy(), dtype=np.float64)
+        target = np.ascontiguousarray(t, dtype=np.float64)
         if u_val is not None and t_val is not None:
             xv, fv = self._compiled_inputs(u_val)
-            tv = np.ascontiguousarray(t_val.numpy(), dtype=np.float64)
+            tv = np.ascontiguousarray(t_val, dtype=np.float64)
         else:
             xv, fv, tv = np.empty((0, x.shape[1])), np.empty((0, feats.shape[1])), np.empty((0, target.shape[1]))
         with blas_threads(1):  # its small products on OpenBLAS's threads cost 25x on a busy machine
             best, _done, _best_epoch, stop, iterations, _train, val, final, history = lm_one_hidden(
-                np.ascontiguousarray(theta.numpy(), dtype=np.float64), x, feats, target, xv, fv, tv, self.hidden[0],
+                np.ascontiguousarray(theta, dtype=np.float64), x, feats, target, xv, fv, tv, self.hidden[0],
                 self.activation == "tanh", self.weight_decay, self.max_iter, 1e-3, 0.1, 10.0, 1e10, 1e-28,
                 self.max_fail, self.window, self.tol)
         ref = history[max(0, len(history) - 1 - self.window)]
         window_decrease = (ref - history[-1]) / ref if ref > 0 else 0.0
         reason = STOP_REASONS[int(stop)]
-        return torch.from_numpy(best), {
+        return best, {
             "iterations": int(iterations), "stop": "max_iter" if reason == "max_epochs" else reason,
             "loss": float(final), "window_decrease": float(window_decrease),
             "val_loss": float(val) if u_val is not None else None}
@@ -397,7 +450,7 @@ class MLPRegressor:
         self._out_off = np.array([o[0] for o in outs])
         self._out_scale = np.array([o[1] for o in outs])
         u = self._normalise_inputs(x)
-        t = torch.as_tensor((t_np - self._out_off) / self._out_scale, dtype=torch.float64)
+        t = (t_np - self._out_off) / self._out_scale
         rng = np.random.default_rng(self.seed)
         u_val = t_val = None
         if self.validation_fraction > 0:
@@ -411,27 +464,25 @@ class MLPRegressor:
         # step; the network keeps its first start (random hidden layers, least-squares output layer: what a training
         # stopped at its first epoch returns) and every answer is marked not converged
         refusal = too_few_points(self.name, self.hidden, int(u.shape[0]), int(t.shape[1]), self.n_parameters)
-        with torch_threads(1):
-            for k in range(1 if refusal else self.n_restarts):
-                gen = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
-                theta = self._init_output_layer(self._init_theta(gen), u, t)
-                info: dict[str, Any]
-                if refusal:
-                    info = {"iterations": 0, "stop": "too_few_points", "loss": float("nan"), "window_decrease": 0.0,
-                            "val_loss": None}
-                else:
-                    theta, info = self._levenberg_marquardt(theta, u, t, u_val, t_val)
-                score = info["val_loss"] if u_val is not None else info["loss"]
-                if best is None or score < best[0]:
-                    best = (score, theta, info, k)
-            assert best is not None  # n_restarts >= 1
-            _, theta, info, k = best
-            self._theta = theta
-            with torch.no_grad():
-                err = (self._forward(theta, u).numpy() - t.numpy()) * self._out_scale
-                ev = None
-                if u_val is not None and t_val is not None:
-                    ev = (self._forward(theta, u_val).numpy() - t_val.numpy()) * self._out_scale
+        for k in range(1 if refusal else self.n_restarts):
+            # each restart's start: the draws of torch.Generator().manual_seed(seed), without torch
+            theta = self._init_output_layer(self._init_theta(TorchUniform(int(rng.integers(0, 2**62)))), u, t)
+            info: dict[str, Any]
+            if refusal:
+                info = {"iterations": 0, "stop": "too_few_points", "loss": float("nan"), "window_decrease": 0.0,
+                        "val_loss": None}
+            else:
+                theta, info = self._levenberg_marquardt(theta, u, t, u_val, t_val)
+            score = info["val_loss"] if u_val is not None else info["loss"]
+            if best is None or score < best[0]:
+                best = (score, theta, info, k)
+        assert best is not None  # n_restarts >= 1
+        _, theta, info, k = best
+        self._theta = theta
+        err = (self._forward(theta, u) - t) * self._out_scale
+        ev = None
+        if u_val is not None and t_val is not None:
+            ev = (self._forward(theta, u_val) - t_val) * self._out_scale
         # Stopping at max_iter while the error still falls by more than ``fail_tol`` per window
         # means more iterations would change the model materially: flag it.
         converged = (info["stop"] != "max_iter" or info["window_decrease"] < self.fail_tol) and bool(
@@ -461,7 +512,7 @@ class MLPRegressor:
     def fitted(self) -> bool:
         return self._theta is not None
 
-    def _require_fit(self) -> torch.Tensor:
+    def _require_fit(self) -> np.ndarray:
         """The trained parameters; :class:`NotFittedError` before :meth:`fit_arrays`."""
         if self._theta is None:
             raise NotFittedError(f"{type(self).__name__} must be fit before use")
@@ -470,22 +521,19 @@ class MLPRegressor:
     def predict(self, inputs: np.ndarray) -> np.ndarray:
         """Outputs (N, d_out) of inputs (N, d_in), in target units."""
         theta = self._require_fit()
-        with torch.no_grad(), torch_threads(1):
-            out = self._forward(theta, self._normalise_inputs(np.atleast_2d(inputs))).numpy()
+        out = self._forward(theta, self._normalise_inputs(np.atleast_2d(inputs)))
         return out * self._out_scale + self._out_off
 
     def predict_with_jacobian(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Outputs (N, d_out) and their derivatives d out / d in (N, d_out, d_in), physical units."""
+        """Outputs (N, d_out) and their derivatives d out / d in (N, d_out, d_in), physical units.
+
+        The derivative is the network's written out (:meth:`_forward_with_input_jacobian`; equal to torch
+        autograd's to round-off, tests/methods/test_bpnn_numpy.py).
+        """
         theta = self._require_fit()
-        with torch_threads(1):
-            u = self._normalise_inputs(np.atleast_2d(inputs)).requires_grad_(True)
-            out = self._forward(theta, u)
-            n_out = out.shape[1]
-            jac = np.empty((u.shape[0], n_out, u.shape[1]))
-            for k in range(n_out):  # points are independent: grad of the sum is the per-point gradient
-                (gk,) = torch.autograd.grad(out[:, k].sum(), u, retain_graph=(k < n_out - 1))
-                jac[:, k, :] = gk.numpy() * self._out_scale[k] / self._in_scale
-        return out.detach().numpy() * self._out_scale + self._out_off, jac
+        out, jac = self._forward_with_input_jacobian(theta, self._normalise_inputs(np.atleast_2d(inputs)))
+        jac = jac * self._out_scale[None, :, None] / self._in_scale[None, None, :]
+        return out * self._out_scale + self._out_off, jac
 
     def in_domain(self, inputs: np.ndarray, margin: float) -> np.ndarray:
         """True where inputs (N, d_in) lie in the normalised training box widened by ``margin``."""
@@ -660,12 +708,14 @@ class LineOfSightNetwork(BPNetworkGeometryModel):
         self.n_parameters = n_parameters(self._shapes) + n_out * (2 * n_in - 1)
 
     @staticmethod
-    def _linear_features(u: torch.Tensor) -> torch.Tensor:
-        """(row, col, Z, Z row, Z col) of normalised inputs (N, 3): the terms entering linearly."""
+    def _linear_features(u: Any) -> Any:
+        """(row, col, Z, Z row, Z col) of normalised inputs (N, 3): the terms entering linearly (numpy in, numpy out;
+        torch in, torch out)."""
         z = u[:, -1:]
-        return torch.cat([u[:, :-1], z, z * u[:, :-1]], dim=1)
+        parts = [u[:, :-1], z, z * u[:, :-1]]
+        return np.concatenate(parts, axis=1) if isinstance(u, np.ndarray) else torch.cat(parts, dim=1)
 
-    def _input_parts(self, u: torch.Tensor, jacobian: bool = False) -> tuple[torch.Tensor, torch.Tensor, Any]:
+    def _input_parts(self, u: Any, jacobian: bool = False) -> tuple[Any, Any, Any]:
         """``u[:, :-1]`` (what the hidden layers see), :meth:`_linear_features` and (``jacobian``) the linear
         terms' block of the Jacobian for inputs ``u``, kept for the last inputs seen (training and validation): a
         training evaluates the same inputs at every Levenberg-Marquardt step (about 6,000 times), and these do not
@@ -674,7 +724,7 @@ class LineOfSightNetwork(BPNetworkGeometryModel):
         hit = cache.get(id(u))
         if hit is None or hit[0] is not u:  # held in the entry: an id is not reused while it lives
             hit = [u, u[:, :-1], self._linear_features(u), None]
-            if u.requires_grad or u.shape[0] > _PARTS_MAX_POINTS:  # a prediction: used once, not kept
+            if getattr(u, "requires_grad", False) or u.shape[0] > _PARTS_MAX_POINTS:  # a prediction: not kept
                 cache = {}
             elif len(cache) >= 4:
                 cache.clear()
@@ -688,21 +738,34 @@ class LineOfSightNetwork(BPNetworkGeometryModel):
             hit[3] = j_b
         return hit[1], hit[2], hit[3]
 
-    def _compiled_inputs(self, u: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    def _compiled_inputs(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         rc, feats, _ = self._input_parts(u)
-        return (np.ascontiguousarray(rc.numpy(), dtype=np.float64),
-                np.ascontiguousarray(feats.numpy(), dtype=np.float64))
+        return np.ascontiguousarray(rc, dtype=np.float64), np.ascontiguousarray(feats, dtype=np.float64)
 
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state.pop("_parts", None)  # derived from the training inputs: not part of the model
         return state
 
-    def _forward(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    def _forward(self, theta: Any, u: Any) -> Any:
         k = n_parameters(self._shapes)
         rc, feats, _ = self._input_parts(u)
         a = dense_forward(theta[:k], self._shapes, rc, self._act)
         return a + feats @ theta[k:].reshape(self._linear_shape).T
+
+    def _forward_with_input_jacobian(self, theta: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The network A of the image position and its derivative (:meth:`MLPRegressor._forward_with_input_jacobian`)
+        plus the linear terms ``L F(u)`` (:meth:`_linear_features`: ``u_m``, ``Z``, ``Z u_m``) and theirs: d / d u_m =
+        ``L[:, m] + Z L[:, Z u_m]``, d / d Z = ``L[:, Z] + sum_m u_m L[:, Z u_m]``."""
+        k = n_parameters(self._shapes)
+        rc, feats, _ = self._input_parts(u)
+        a, jac_a = super()._forward_with_input_jacobian(theta[:k], rc)
+        lin = theta[k:].reshape(self._linear_shape)  # (d_out, F): columns u_m (m < M), Z, Z u_m
+        m = u.shape[1] - 1
+        jac = np.empty((u.shape[0], lin.shape[0], m + 1))
+        jac[:, :, :m] = jac_a + (lin[:, :m] + u[:, m, None, None] * lin[:, m + 1:])
+        jac[:, :, m] = lin[:, m] + rc @ lin[:, m + 1:].T
+        return a + feats @ lin.T, jac
 
     def _jacobian(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         n, k = u.shape[0], n_parameters(self._shapes)
@@ -711,22 +774,21 @@ class LineOfSightNetwork(BPNetworkGeometryModel):
         j_a = super()._jacobian(theta[:k], rc).reshape(n, n_out, k)  # d A / d (network weights)
         return torch.cat([j_a, j_b], dim=2).reshape(n * n_out, k + n_out * n_feat)
 
-    def _init_theta(self, gen: torch.Generator) -> torch.Tensor:
-        return torch.cat([super()._init_theta(gen), torch.zeros(int(np.prod(self._linear_shape)), dtype=torch.float64)])
+    def _init_theta(self, uniform: TorchUniform) -> np.ndarray:
+        return np.concatenate([super()._init_theta(uniform), np.zeros(int(np.prod(self._linear_shape)))])
 
-    def _init_output_layer(self, theta: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    def _init_output_layer(self, theta: np.ndarray, u: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The least-squares output layer and linear terms for the random hidden layers (all enter linearly): the
         training starts from the best affine-in-(row, col, Z) line-of-sight model plus the network's random
         features, and learns what that trend leaves (as ``mlp`` learns the row minus its linear trend)."""
         k = n_parameters(self._shapes)
-        h = dense_forward(theta[:k], self._shapes[:-1], u[:, :-1], self._act, linear_output=False)
-        one = torch.ones((h.shape[0], 1), dtype=torch.float64)
-        design = torch.cat([h, one, self._linear_features(u)], dim=1)
-        sol = torch.linalg.lstsq(design, t, driver="gelsd").solution  # (n_h + 1 + 5, n_out)
+        h = _dense_forward(theta[:k], self._shapes[:-1], u[:, :-1], self._act, linear_output=False)
+        design = np.concatenate([h, np.ones((h.shape[0], 1)), self._linear_features(u)], axis=1)
+        sol = np.linalg.lstsq(design, t, rcond=None)[0]  # (n_h + 1 + 5, n_out), LAPACK gelsd
         nh = h.shape[1]
         o, i = self._shapes[-1]
         start = n_parameters(self._shapes[:-1])
-        theta = theta.clone()
+        theta = theta.copy()
         theta[start:start + o * i] = sol[:nh].T.reshape(-1)
         theta[start + o * i:k] = sol[nh]
         theta[k:] = sol[nh + 1:].T.reshape(-1)

@@ -55,7 +55,7 @@ def test_compiled_training_equals_the_torch_trainer(data, monkeypatch, case):
     a, b = torch_net.fit_info, numba_net.fit_info
     assert a["iterations"] == b["iterations"] and a["stop"] == b["stop"]
     assert a["iterations"] >= 10
-    np.testing.assert_allclose(numba_net._theta.numpy(), torch_net._theta.numpy(), rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(numba_net._theta, torch_net._theta, rtol=1e-9, atol=1e-11)
     np.testing.assert_allclose(b["train_rms"], a["train_rms"], rtol=1e-8)
     np.testing.assert_allclose(b["window_decrease"], a["window_decrease"], rtol=1e-8, atol=1e-12)
     x = np.column_stack(data[:3])
@@ -71,7 +71,7 @@ def test_the_stopping_rules_stop_at_the_same_epoch(data, monkeypatch, opts, stop
                                  lambda net: net.fit(*data))
     assert torch_net.fit_info["stop"] == numba_net.fit_info["stop"] == stop
     assert torch_net.fit_info["iterations"] == numba_net.fit_info["iterations"] < 400
-    np.testing.assert_allclose(numba_net._theta.numpy(), torch_net._theta.numpy(), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(numba_net._theta, torch_net._theta, rtol=1e-8, atol=1e-10)
 
 
 def test_three_outputs_of_the_surface_network(monkeypatch):
@@ -82,13 +82,13 @@ def test_three_outputs_of_the_surface_network(monkeypatch):
     torch_net, numba_net = _both(monkeypatch, lambda: bpnn.MLPRegressor(5, max_iter=25, seed=2),
                                  lambda net: net.fit_arrays(rc, xyz))
     assert torch_net.fit_info["iterations"] == numba_net.fit_info["iterations"] >= 10
-    np.testing.assert_allclose(numba_net._theta.numpy(), torch_net._theta.numpy(), rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(numba_net._theta, torch_net._theta, rtol=1e-9, atol=1e-11)
 
 
 def test_same_bits_run_to_run_and_several_layers_train_by_torch(data):
     one, two = (bpnn.LineOfSightNetwork(6, max_iter=300, seed=5).fit(*data) for _ in range(2))
     assert one.fit_info["iterations"] == two.fit_info["iterations"] > 100
-    assert np.array_equal(one._theta.numpy(), two._theta.numpy())
+    assert np.array_equal(one._theta, two._theta)
     deep = bpnn.BPNetworkGeometryModel((4, 3), max_iter=40, seed=0)
     deep._levenberg_marquardt_compiled = None  # not the compiled trainer: it serves one hidden layer only
     deep.fit(*data)

@@ -185,8 +185,8 @@ def test_line_of_sight_network_is_affine_in_height_at_an_image_point():
     # and the hand-written Jacobian is the derivative of the forward pass (central differences)
     import torch
 
-    theta = net._theta.clone()
-    u = net._normalise_inputs(np.column_stack([scops.row[:5], scops.col[:5], scops.ground[:5, 2]]))
+    theta = torch.tensor(net._theta)  # the torch trainer's Jacobian, on torch tensors
+    u = torch.tensor(net._normalise_inputs(np.column_stack([scops.row[:5], scops.col[:5], scops.ground[:5, 2]])))
     jac = net._jacobian(theta, u)
     h = 1e-6
     for k in (0, 7, theta.numel() - 1):
