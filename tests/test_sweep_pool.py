@@ -239,3 +239,48 @@ def test_explore_export_of_a_refused_source_leaves_no_worker(tmp_path, monkeypat
     if process is not None:  # a machine with two CPUs: it was started, and is stopped
         assert pool._process is None and not process.is_alive()
     assert not (tmp_path / "out").exists()
+
+
+def test_an_export_with_every_network_imports_torch_in_neither_process(tmp_path):
+    """The command and its sweep worker train and evaluate mlp, ann, bpnn and nn-rfm without torch (issue 24: torch's
+    import and teardown cost each process ~1.6 s of the export's 5 s).  A stand-in ``torch`` package first on
+    the path of both processes (PYTHONPATH is inherited by the spawned worker) records every process that
+    imports it; the export must succeed with every method finite and no record, and the worker must have
+    delivered sweep jobs (so its process was checked too)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    fake = tmp_path / "fake"
+    (fake / "torch").mkdir(parents=True)
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    (fake / "torch" / "__init__.py").write_text(
+        "import os\n"
+        f"open(os.path.join({str(marks)!r}, str(os.getpid())), 'w').close()\n"
+        "raise ImportError('torch imported by an export that should not need it')\n")
+    script = tmp_path / "export.py"
+    script.write_text(
+        "import explorer.app.sweep_pool as sp\n"
+        "collect = sp.SweepPool.collect\n"
+        "def spy(self):\n"
+        "    out = collect(self)\n"
+        "    print('DELIVERED', len(out), self.error, flush=True)\n"
+        "    return out\n"
+        "sp.SweepPool.collect = spy\n"
+        "if __name__ == '__main__':\n"
+        "    from explorer.cli import main\n"  # the command's path: its worker starts early, before the source loads
+        "    raise SystemExit(main(['explore', '--preset', 'WSU', '--methods', 'lrm,mlp,ann,bpnn,nn-rfm',\n"
+        f"                           '--scps', '2000', '--export', {str(tmp_path / 'out')!r}]))\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(fake), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, cwd=tmp_path,
+                         env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert sorted(p.name for p in marks.iterdir()) == [], "processes that imported torch"
+    delivered = [ln.split() for ln in out.stdout.splitlines() if ln.startswith("DELIVERED")]
+    assert len(delivered) == 1 and int(delivered[0][1]) >= 1 and delivered[0][2] == "None", out.stdout
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    for name in ("lrm", "mlp", "ann", "bpnn", "nn-rfm"):
+        assert summary["methods"][name]["error"] is None, (name, summary["methods"][name])
+        assert summary["methods"][name]["rmse_row_px"] is not None, name

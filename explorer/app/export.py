@@ -518,7 +518,7 @@ def run_export(source: Any, out_dir: str | Path, *, methods: list[str] | None = 
 
 def early_sweep_pool(methods: list[str] | None, sweep: bool) -> Any:
     """The accuracy-vs-SCOPs sweep's worker process of ``explore --export``, started before the source is loaded so
-    that it imports the package (and torch for a network) meanwhile (:meth:`SweepPool.early`); None without a
+    that it imports the package meanwhile (:meth:`SweepPool.early`); None without a
     sweep or a second CPU.  ``methods``: the user's, or None for the defaults (:func:`default_file_methods` of a
     file, :data:`~explorer.app.model.DEFAULT_METHODS` of a preset: both are named, the source is not loaded yet).
     Pass it to :func:`run_export`, and close it if the export is not reached."""

@@ -86,18 +86,15 @@ def _leave() -> None:
 
 
 def _import_for(methods: Sequence[str]) -> None:
-    """Import the method modules, and torch when one of ``methods`` trains a network (``long_fit``: torch takes
-    about 1.3 s to import), so that a worker started early has done it before its first job."""
+    """Import the modules of ``methods`` (and the registry's) so that a worker started early has done it before
+    its first job.  torch is not among them: the networks of the export's learned methods train and answer
+    without it (:mod:`explorer.methods._lm_compiled`, :class:`explorer.methods._torch_uniform.TorchUniform`); a
+    method that still needs it (several hidden layers, no numba) imports it on its first fit."""
     if not methods:
         return
     from explorer.methods import registry
 
-    reg = registry()
-    if any(reg[m].long_fit for m in methods if m in reg):
-        import importlib
-
-        with contextlib.suppress(ImportError):  # without torch the training says so itself
-            importlib.import_module("torch")
+    registry()
 
 
 @contextlib.contextmanager
@@ -167,9 +164,9 @@ class SweepPool:
 
     @classmethod
     def early(cls, methods: Sequence[str] = ()) -> SweepPool:
-        """A pool whose worker process starts now, before the sensor is loaded: it imports the package (and torch
-        for a network of ``methods``) while the caller loads, then waits for :meth:`submit` (issue 24: the DIMAP
-        export's worker spent its first 2 s importing after the sensor was loaded)."""
+        """A pool whose worker process starts now, before the sensor is loaded: it imports the package and the
+        modules of ``methods`` while the caller loads, then waits for :meth:`submit` (issue 24: the DIMAP export's
+        worker spent its first 2 s importing after the sensor was loaded)."""
         pool = cls.__new__(cls)
         pool._reset()
         if pool._memory_ok():
