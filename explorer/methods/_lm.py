@@ -706,12 +706,13 @@ def levenberg_marquardt_compiled(
     if len(net.hidden) != 1:
         raise ValueError(f"the compiled trainer serves one hidden layer, not {len(net.hidden)}")
 
-    def arr(a: np.ndarray, ndim: int) -> np.ndarray:
-        a = np.ascontiguousarray(a, dtype=np.float64)
-        return a.reshape(a.shape[0], -1) if ndim == 2 else a
+    def inputs(a: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, net.n_inputs)
 
-    xt, xv = arr(x_train, 2), arr(x_val, 2).reshape(-1, net.n_inputs)
-    yt, yv = arr(y_train, 1).reshape(-1, 1), arr(y_val, 1).reshape(-1, 1)
+    def targets(a: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 1)
+
+    xt, xv, yt, yv = inputs(x_train), inputs(x_val), targets(y_train), targets(y_val)
     no_feats = np.empty((xt.shape[0], 0))
     no_feats_val = np.empty((xv.shape[0], 0))
     with blas_threads(1):  # its small products on OpenBLAS's threads cost 25x on a busy machine (bpnn's measure)

@@ -125,6 +125,15 @@ def test_the_stopping_rules_stop_at_the_same_epoch(options, stop):
     _assert_same(ref, got, rtol=1e-8, atol=1e-10)
 
 
+def test_without_a_validation_set_the_last_weights_are_kept():
+    net = _lm.SigmoidMLP(2, (6,))
+    xt, yt, _, _ = _problem(90, 2, seed=6, kind="noisy")
+    ref, got = _both(net, 5, (xt, yt, np.empty((0, 2)), np.empty(0)), max_epochs=20)
+    assert got.stop_reason == "max_epochs" and got.best_epoch == got.epochs == 20 and np.isnan(got.val_mse)
+    assert np.isnan(got.history["validation"]).all()
+    _assert_same(ref, got)
+
+
 def test_the_initial_validation_error_counts():
     """Validation targets equal to the first weights' outputs: the start's validation error (0) is the best, every
     later one is worse, so training stops after max_fail epochs and keeps the first weights (the torch trainer's
