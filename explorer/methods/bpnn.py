@@ -244,19 +244,23 @@ class MLPRegressor:
         normalised units, by the chain rule written out: layer by layer ``d h_k / d u = act'(z_k) W_k d h_(k-1) /
         d u`` (``act' = h (1 - h)`` for the sigmoid, ``1 - h^2`` for tanh), the linear output layer ``W d h / d u``.
         """
-        h, jac = u, None  # jac: d h / d u of the current layer, (N, width, d_in)
+        n, n_in = u.shape
+        h, jac_t = u, None  # jac_t: d h / d u of the current layer, transposed: (N, d_in, width)
         last = len(self._shapes) - 1
         for layer, (w, b) in enumerate(_dense_layers(theta, self._shapes)):
             z = h @ w.T + b
-            dz = w[None, :, :] if jac is None else np.matmul(w, jac)  # d z / d u, (N or 1, out, d_in)
+            if jac_t is None:  # d z / d u = W
+                dz_t = w.T[None, :, :]
+            else:  # W d h / d u for every point: one (N d_in, width) x (width, out) product
+                dz_t = (jac_t.reshape(n * n_in, -1) @ w.T).reshape(n, n_in, -1)
             if layer < last:
                 h = self._act(z)
                 deriv = h * (1.0 - h) if self.activation == "sigmoid" else 1.0 - h * h
-                jac = deriv[:, :, None] * dz
+                jac_t = deriv[:, None, :] * dz_t
             else:
-                h, jac = z, np.broadcast_to(dz, (u.shape[0], *dz.shape[1:])).copy()
-        assert jac is not None  # the output layer came last
-        return h, jac
+                h, jac_t = z, np.broadcast_to(dz_t, (n, n_in, dz_t.shape[2]))
+        assert jac_t is not None  # the output layer came last
+        return h, np.ascontiguousarray(jac_t.transpose(0, 2, 1))
 
     def _jacobian(self, theta: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """d(outputs)/d(theta), shape (2 N, P), rows ordered like ``outputs.reshape(-1)``.
@@ -519,19 +523,25 @@ class MLPRegressor:
         return self._theta
 
     def predict(self, inputs: np.ndarray) -> np.ndarray:
-        """Outputs (N, d_out) of inputs (N, d_in), in target units."""
+        """Outputs (N, d_out) of inputs (N, d_in), in target units.
+
+        On one OpenBLAS thread (as torch's evaluation was): its products have an inner dimension of a few inputs
+        or hidden nodes, and on OpenBLAS's threads they cost 2-3x the CPU on a busy machine.
+        """
         theta = self._require_fit()
-        out = self._forward(theta, self._normalise_inputs(np.atleast_2d(inputs)))
+        with blas_threads(1):
+            out = self._forward(theta, self._normalise_inputs(np.atleast_2d(inputs)))
         return out * self._out_scale + self._out_off
 
     def predict_with_jacobian(self, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Outputs (N, d_out) and their derivatives d out / d in (N, d_out, d_in), physical units.
 
         The derivative is the network's written out (:meth:`_forward_with_input_jacobian`; equal to torch
-        autograd's to round-off, tests/methods/test_bpnn_numpy.py).
+        autograd's to round-off, tests/methods/test_bpnn_numpy.py); on one OpenBLAS thread, as :meth:`predict`.
         """
         theta = self._require_fit()
-        out, jac = self._forward_with_input_jacobian(theta, self._normalise_inputs(np.atleast_2d(inputs)))
+        with blas_threads(1):
+            out, jac = self._forward_with_input_jacobian(theta, self._normalise_inputs(np.atleast_2d(inputs)))
         jac = jac * self._out_scale[None, :, None] / self._in_scale[None, None, :]
         return out * self._out_scale + self._out_off, jac
 
