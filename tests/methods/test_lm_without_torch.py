@@ -244,3 +244,30 @@ def test_fitting_and_evaluating_mlp_and_ann_does_not_import_torch():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-2000:]
+
+
+@pytest.mark.parametrize("tanh", [False, True])
+def test_the_full_jacobian_of_the_dual_form(tanh):
+    """The dual form's Jacobian (every output, the line-of-sight network's linear terms too) against central
+    differences of the network's outputs, and its J^T J / J^T e against the per-output normal equations bpnn trains
+    with (tests/methods/test_lm_compiled.py checks those against torch)."""
+    rng = np.random.default_rng(3)
+    n, n_in, n_hidden, n_out, n_feat = 9, 3, 4, 2, 2
+    x, feats = rng.uniform(-1, 1, (n, n_in)), rng.uniform(-1, 1, (n, n_feat))
+    theta = rng.normal(size=n_hidden * n_in + n_hidden + n_out * (n_hidden + 1 + n_feat))
+    err = rng.normal(size=(n, n_out))
+    h = _lm_compiled._hidden(theta, x, n_hidden, tanh)
+    jac = _lm_compiled._jacobian(theta, x, feats, h, tanh, n_out)
+    assert jac.shape == (n * n_out, theta.size)
+    step = 1e-6
+    numeric = np.empty_like(jac)
+    for c in range(theta.size):
+        d = np.zeros(theta.size)
+        d[c] = step
+        up = _lm_compiled._outputs(theta + d, _lm_compiled._hidden(theta + d, x, n_hidden, tanh), n_in, feats, n_out)
+        down = _lm_compiled._outputs(theta - d, _lm_compiled._hidden(theta - d, x, n_hidden, tanh), n_in, feats, n_out)
+        numeric[:, c] = ((up - down) / (2 * step)).reshape(-1)  # row k * n_out + o, as the errors are flattened
+    np.testing.assert_allclose(jac, numeric, rtol=1e-7, atol=1e-9)
+    product, rhs = _lm_compiled._normal_equations(theta, x, feats, err, h, tanh, 0.0)
+    np.testing.assert_allclose(jac.T @ jac, product, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(jac.T @ err.reshape(-1), rhs, rtol=1e-12, atol=1e-12)
