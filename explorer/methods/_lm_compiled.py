@@ -306,14 +306,9 @@ def lm_one_hidden(theta0, x, feats, target, x_val, feats_val, target_val, n_hidd
 
     Returns
     -------
-    theta : ndarray (P,)
-        The parameters with the best validation error (the last accepted ones without validation).
-    done, best_epoch, stop, iterations : int
-        Accepted epochs, the epoch of ``theta``, the stop code (:data:`STOP_REASONS`), epochs started.
-    train_best, val_best, final_objective : float
-        Objective and validation error (sum of squares) of ``theta``, objective of the last accepted step.
-    history : ndarray (done + 1,)
-        The objective at the start and after each epoch.
+    tuple
+        The first nine results of :func:`train_one_hidden` (``theta`` ... ``history``: not the validation and
+        damping histories), its errors sums of squares.
     """
     r = _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tanh, lam, max_epochs, mu, mu_dec,
                mu_inc, mu_max, goal, max_fail, window, tol, False, 0.0, True, False, False)
