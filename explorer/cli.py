@@ -197,13 +197,15 @@ def exit_after_command(code: int) -> None:
     """End the process with status ``code`` once the command is done, without Python's teardown.
 
     The exit handlers still run first (``atexit``: logging's flush, multiprocessing's children, temporary
-    directories), then standard output and error are flushed and the process ends (``os._exit``).  While a
-    thread that is not a daemon still runs, a normal exit (which waits for it) is taken instead.
+    directories), then standard output and error are flushed and the process ends (``os._exit``).  A normal exit
+    is taken instead while a thread that is not a daemon still runs (the normal exit waits for it), and under a
+    profiler or tracer (``python -m cProfile -m explorer ...`` writes its statistics after the command returns).
     """
     import atexit
     import threading
 
-    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+    if (any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread())
+            or sys.getprofile() is not None or sys.gettrace() is not None):
         sys.exit(code)
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):

@@ -82,3 +82,17 @@ def test_the_command_line_entry_point_exits_with_the_commands_status(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "explorer", "simulate", "--preset", "NOPE", "--n", "10"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "unknown preset" in bad.stderr
+
+
+def test_a_profiled_command_still_writes_its_statistics(tmp_path):
+    """``python -m cProfile -o F -m explorer ...`` writes F after the command returns: under a profiler the
+    command exits normally (explorer.cli.exit_after_command)."""
+    import pstats
+    import subprocess
+    import sys
+
+    out = tmp_path / "stats.prof"
+    proc = subprocess.run([sys.executable, "-m", "cProfile", "-o", str(out), "-m", "explorer", "presets", "--json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert pstats.Stats(str(out)).total_calls > 0
