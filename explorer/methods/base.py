@@ -107,9 +107,9 @@ class BestScanlineMethod(ABC):
     reference: ClassVar[str] = ""
     family: ClassVar[str] = "search"
     needs_fit: ClassVar[bool] = False
-    # the fit is a long iterative training (a network trained by Levenberg-Marquardt, a genetic search: seconds,
-    # and torch to import): the explorer starts it once the first maps of the other methods are on screen, so it
-    # never delays them (it shows its progress meanwhile)
+    # the fit is a long iterative training (a network trained by Levenberg-Marquardt, a genetic search: up to
+    # seconds): the explorer starts it once the first maps of the other methods are on screen, so it never delays
+    # them (it shows its progress meanwhile)
     long_fit: ClassVar[bool] = False
     exactness: ClassVar[str] = "exact"  # "exact", "pixel" or "approximate"
     # where the column comes from: "collinearity" (the rigorous model at the returned row) or "model"
