@@ -271,3 +271,50 @@ def test_private_names_stay_in_their_package():
             if _package_of(name) != _package_of(owner):
                 offenders.append(f"{name}:{line} imports {dotted}")
     assert offenders == []
+
+
+#: Modules the export's sweep worker (explorer.app.sweep_pool) must not import: the GUI's modules and libraries,
+#: and the heavy libraries the worker never calls (scipy.optimize: resection and the DIMAP calibration, which
+#: run in the command only; torch: the networks train without it).  Each costs the worker's process CPU time
+#: before its first job (issue 24: the export's 5 s).
+NOT_IN_THE_SWEEP_WORKER = ("explorer.app.gui", "explorer.app.controls", "explorer.app.views", "explorer.app.server",
+                           "explorer.app.jobs", "viser", "plotly", "scipy.optimize", "torch")
+
+
+def test_the_sweep_workers_imports_leave_out_the_gui_and_what_it_never_calls():
+    """A fresh interpreter imports what the worker imports before its first job (its module, the model, the
+    method registry, the modules of a real sensor's pickle): the modules present afterwards (``sys.modules``,
+    the interpreter's own record) include none of :data:`NOT_IN_THE_SWEEP_WORKER`."""
+    import json
+    import subprocess
+
+    code = ("import json, sys\n"
+            "import explorer.app.sweep_pool\n"
+            "from explorer.app.model import SWEEP_PURPOSE, ExplorerModel\n"
+            "from explorer.methods import registry\n"
+            "registry()\n"
+            "import explorer.real, explorer.real.linescan, explorer.rpc.model\n"
+            "print(json.dumps(sorted(sys.modules)))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT,
+                         check=True)
+    modules = set(json.loads(out.stdout.splitlines()[-1]))
+    assert "explorer.app.model" in modules and "explorer.methods.bpnn" in modules  # the imports did run
+    assert sorted(modules & set(NOT_IN_THE_SWEEP_WORKER)) == []
+
+
+def test_the_app_packages_names_are_its_submodules_objects():
+    """``explorer.app`` imports its names on first access (so that the worker's ``explorer.app.model`` comes
+    without the GUI): every name of ``__all__`` is the very object of the submodule that defines it."""
+    import importlib
+
+    import explorer.app as app
+
+    for name in app.__all__:
+        source = importlib.import_module(app._SOURCES[name])
+        assert getattr(app, name) is getattr(source, name), name
+    assert set(app.__all__) == set(app._SOURCES) and set(app.__all__) <= set(dir(app))
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        app.no_such_name  # noqa: B018
+    from explorer.app import export  # a submodule is still imported by name
+
+    assert export.__name__ == "explorer.app.export"

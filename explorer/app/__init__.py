@@ -17,30 +17,62 @@ The package splits the explorer in layers (``docs/explorer.md``; architecture:
 
 from __future__ import annotations
 
-from explorer.app.gui import DEBOUNCE_S, ExplorerApp
-from explorer.app.jobs import FitPool
-from explorer.app.model import (
-    COLOUR_LIMITS_PX,
-    COLOUR_MODES,
-    COMPONENTS,
-    DEFAULT_METHODS,
-    PARAM_ALIASES,
-    SCOP_DENSITIES,
-    SCP_COUNTS,
-    STATUS_NAMES,
-    ExplorerModel,
-    FitRecord,
-    MethodRun,
-    Selection,
-    Settings,
-    accepted_params,
-    control_default,
-    gui_params,
-    safe_available,
-    summary_markdown,
-)
-from explorer.app.server import check_listen_address, serve
-from explorer.app.views import Superseded
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from explorer.app.gui import DEBOUNCE_S, ExplorerApp
+    from explorer.app.jobs import FitPool
+    from explorer.app.model import (
+        COLOUR_LIMITS_PX,
+        COLOUR_MODES,
+        COMPONENTS,
+        DEFAULT_METHODS,
+        PARAM_ALIASES,
+        SCOP_DENSITIES,
+        SCP_COUNTS,
+        STATUS_NAMES,
+        ExplorerModel,
+        FitRecord,
+        MethodRun,
+        Selection,
+        Settings,
+        accepted_params,
+        control_default,
+        gui_params,
+        safe_available,
+        summary_markdown,
+    )
+    from explorer.app.server import check_listen_address, serve
+    from explorer.app.views import Superseded
+
+#: public name -> the submodule defining it.  The names are imported on first access (PEP 562), not with the
+#: package: ``import explorer.app.model`` (the export's sweep worker, :mod:`explorer.app.sweep_pool`) then
+#: imports the model alone, not the GUI's modules (gui, controls, views, server, jobs) it never uses.
+_SOURCES = {
+    **dict.fromkeys(("DEBOUNCE_S", "ExplorerApp"), "explorer.app.gui"),
+    "FitPool": "explorer.app.jobs",
+    **dict.fromkeys(("COLOUR_LIMITS_PX", "COLOUR_MODES", "COMPONENTS", "DEFAULT_METHODS", "PARAM_ALIASES",
+                     "SCOP_DENSITIES", "SCP_COUNTS", "STATUS_NAMES", "ExplorerModel", "FitRecord", "MethodRun",
+                     "Selection", "Settings", "accepted_params", "control_default", "gui_params", "safe_available",
+                     "summary_markdown"), "explorer.app.model"),
+    **dict.fromkeys(("check_listen_address", "serve"), "explorer.app.server"),
+    "Superseded": "explorer.app.views",
+}
+
+
+def __getattr__(name: str) -> Any:
+    source = _SOURCES.get(name)
+    if source is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(source), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_SOURCES))
+
 
 __all__ = [
     "COLOUR_LIMITS_PX", "COLOUR_MODES", "COMPONENTS", "DEBOUNCE_S", "DEFAULT_METHODS", "PARAM_ALIASES",

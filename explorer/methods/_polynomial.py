@@ -14,7 +14,6 @@ from __future__ import annotations
 from itertools import product
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from explorer.geometry.kernels import NUMBA_AVAILABLE
 from explorer.methods._compiled import polynomial_predict
@@ -76,6 +75,10 @@ def qr_least_squares(design: np.ndarray, target: np.ndarray, name: str) -> tuple
 
     Raises ``ValueError`` when the design is rank deficient (degenerate SCOP layout).
     """
+    # here, not at the module's top: scipy (its array-API layer) is ~0.2 s of CPU to import, and every process
+    # importing the method registry imported it, also those that never fit a polynomial (the export's sweep worker)
+    from scipy.linalg import solve_triangular
+
     q, r = np.linalg.qr(design, mode="reduced")
     diag = np.abs(np.diag(r))
     if diag.min() <= 1e-12 * diag.max():

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from explorer.errors import InputError, as_points
 from explorer.geometry.bracket import bracket_best_scanline
@@ -521,6 +520,10 @@ class _Run:
 def _minimise(problem: _ResectionProblem, x0: np.ndarray, name: str, *, method: str, max_nfev: int | None,
               restarts: int, polish: int) -> _Run:
     """Levenberg-Marquardt from ``x0`` on the conditioned unknowns, then Gauss-Newton to the end."""
+    # here, not at the module's top: scipy.optimize is ~0.2 s of CPU to import, and a process that only
+    # unpickles a scene of this package (the export's sweep worker) never resects
+    from scipy.optimize import least_squares
+
     calls = [0]
 
     def fun(p: np.ndarray) -> np.ndarray:
