@@ -22,7 +22,7 @@ PACKAGE = ROOT / "explorer"
 #: Lowest first; a module may import only from its own layer or lower ones (docs/dev/architecture.md).
 LAYERS = [
     ["explorer.errors", "explorer._numba", "explorer._threads", "explorer._lazy", "explorer._resources",
-     "explorer._log", "explorer.io_atomic", "explorer.io_input", "explorer.memory"],
+     "explorer._log", "explorer.io_atomic", "explorer.io_input", "explorer.memory", "explorer.float_text"],
     ["explorer.geometry"],
     ["explorer.sensor", "explorer.scene", "explorer.scene_checks"],
     ["explorer.presets", "explorer.points", "explorer.terrain_io", "explorer.rpc"],

@@ -53,8 +53,10 @@ from typing import Any
 
 import numpy as np
 
+from explorer._numba import NUMBA_AVAILABLE, kernel_array
 from explorer.app.model import STATUS_NAMES, SWEEP_PURPOSE, ExplorerModel, FitRecord, Settings, sensor_truth
 from explorer.evaluate import STAND_IN_METHOD, Evaluation, evaluate_stand_in
+from explorer.float_text import MAX_FIELD_BYTES, csv_lines
 from explorer.io_atomic import write_folder_atomic
 from explorer.sensor import StandIn
 from explorer.sources import stand_in_truth, table_coverage_text
@@ -81,13 +83,64 @@ def _finite_or_none(v: float) -> float | None:
 
 def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarray], scps: Any,
                   body_fixed: np.ndarray | None = None, native_pixels: bool = False) -> bytes:
-    """The CSV text (bytes, LF line ends) of every evaluated point of every method (vectorised).
+    """The CSV text (bytes, LF line ends) of every evaluated point of every method.
 
     ``row_px, col_px`` are the sensor's own ground to image of the check point, ``x_m, y_m, z_m`` its
     body-fixed coordinates (``body_fixed``, (N, 3)); with ``native_pixels`` (a USGS CSM camera) also
     ``line, sample`` = ``row + 0.5, col + 0.5`` (usgscsm's convention: the camera's own image position).
     Numbers have 17 significant digits (``%.17g``: an exact round trip); a non-finite number is an empty field.
+    The bytes are written by a compiled kernel (:func:`explorer.float_text.csv_lines`: exact ``%.17g`` digits
+    in integer arithmetic, no Python string per number); without numba by Python's own formatting
+    (:func:`_residuals_csv_python`), the same bytes.
     """
+    if not NUMBA_AVAILABLE:
+        return _residuals_csv_python(evaluations, status, scps, body_fixed, native_pixels)
+    columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
+    header = (",".join(columns) + "\n").encode()
+    row, col = np.asarray(scps.row, dtype=np.float64), np.asarray(scps.col, dtype=np.float64)
+    xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
+    groups = [(name, ev) for name, ev in evaluations.items() if np.asarray(ev.evaluated_index).size]
+    if not groups:
+        return header
+    index = np.concatenate([np.asarray(ev.evaluated_index, dtype=np.int64) for _, ev in groups])
+    used = np.unique(index)  # the columns every method shares are formatted once per check point
+    shared = [row[used], col[used], xyz[used, 0], xyz[used, 1], xyz[used, 2]]
+    if native_pixels:
+        shared += [row[used] + 0.5, col[used] + 0.5]
+    at = np.full(len(row), -1, dtype=np.int64)  # check point index -> position in ``used``
+    at[used] = np.arange(used.size)
+    sizes = [np.asarray(ev.evaluated_index).size for _, ev in groups]
+    parts: dict[str, list[np.ndarray]] = {"row residuals": [], "column residuals": [], "statuses": []}
+    for (name, ev), n in zip(groups, sizes, strict=True):
+        for what, values in zip(parts, (ev.residual_row, ev.residual_col, status[name]), strict=True):
+            values = np.asarray(values).ravel()
+            if values.size != n:
+                raise ValueError(f"residuals_csv: method {name!r} has {n} evaluated points but {values.size} "
+                                 f"{what}")
+            parts[what].append(values)
+    label = np.concatenate(parts["statuses"]).astype(np.int64)
+    if label.size and (label.min() < -len(STATUS_NAMES) or label.max() >= len(STATUS_NAMES)):
+        raise IndexError(f"residuals_csv: a status outside 0..{len(STATUS_NAMES) - 1}")
+    label %= len(STATUS_NAMES)
+    prefixes = [(name + ",").encode() for name, _ in groups]
+    labels = [("," + name + ",").encode() for name in STATUS_NAMES]
+    per_line = 24 + 2 * MAX_FIELD_BYTES + max(len(t) for t in labels) + len(shared) * (MAX_FIELD_BYTES + 1)
+    bound = len(header) + sum(n * (len(p) + per_line) for p, n in zip(prefixes, sizes, strict=True))
+    out = np.empty(bound, dtype=np.uint8)
+    out[:len(header)] = np.frombuffer(header, dtype=np.uint8)
+    end = csv_lines(out, len(header), kernel_array(np.stack(shared, axis=1)), 2,
+                    np.frombuffer(b"".join(prefixes), dtype=np.uint8).copy(),
+                    np.cumsum([len(p) for p in prefixes]).astype(np.int64), np.cumsum(sizes).astype(np.int64),
+                    index, at[index], kernel_array(np.concatenate(parts["row residuals"])),
+                    kernel_array(np.concatenate(parts["column residuals"])), label,
+                    np.frombuffer(b"".join(labels), dtype=np.uint8).copy(),
+                    np.cumsum([len(t) for t in labels]).astype(np.int64))
+    return out[:end].tobytes()
+
+
+def _residuals_csv_python(evaluations: dict[str, Evaluation], status: dict[str, np.ndarray], scps: Any,
+                          body_fixed: np.ndarray | None = None, native_pixels: bool = False) -> bytes:
+    """:func:`residuals_csv` in Python (without numba): the same bytes, about 3x the CPU time."""
     columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
     xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
     row, col = np.asarray(scps.row, dtype=np.float64), np.asarray(scps.col, dtype=np.float64)
