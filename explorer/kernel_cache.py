@@ -127,6 +127,8 @@ def needed_units(command: str, *, source: str = "preset", methods: Sequence[str]
         units.append(f"method:{m}")
         if relief:
             units.append(f"method:{m}:relief")
+    if command == "explore":
+        units.append("csv")  # the export's residuals.csv (--export, the GUI's Export button)
     return units
 
 

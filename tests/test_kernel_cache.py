@@ -118,12 +118,12 @@ def test_manifest_names_existing_kernels_with_their_arity():
 
 
 def test_needed_units_of_the_commands():
-    assert needed_units("explore", methods=["lrm", "nr"]) == ["scene", "method:lrm", "method:nr"]
+    assert needed_units("explore", methods=["lrm", "nr"]) == ["scene", "method:lrm", "method:nr", "csv"]
     assert needed_units("bench", source="rpc", methods=["exact"], dem=True) == [
         "scene:relief", "rpc", "method:exact", "method:exact:relief"]
     assert needed_units("ortho", source="rpc", dem=True) == ["ortho", "rpc"]
     assert needed_units("ortho", methods=["exact"]) == ["ortho", "scene", "method:exact"]
-    assert needed_units("explore", source="isd", methods=["nr"]) == ["scene", "isd", "method:nr"]
+    assert needed_units("explore", source="isd", methods=["nr"]) == ["scene", "isd", "method:nr", "csv"]
 
 
 def test_command_units_from_parsed_arguments():
