@@ -339,7 +339,8 @@ def g17_texts(values: np.ndarray) -> list[str]:
         One text per number.
     """
     if not NUMBA_AVAILABLE:
-        return ["%.17g" % v if np.isfinite(v) else "" for v in np.asarray(values, dtype=np.float64).tolist()]
+        return [("%.17g" % v) if np.isfinite(v) else ""  # noqa: UP031 - the format this module reproduces
+                for v in np.asarray(values, dtype=np.float64).tolist()]
     v = np.ascontiguousarray(values, dtype=np.float64).ravel()
     out = np.empty(v.size * MAX_FIELD_BYTES, np.uint8)
     ends = np.empty(v.size, np.int64)

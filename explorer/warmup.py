@@ -56,16 +56,24 @@ def _rpc_for_warmup():
 
 def _warm_csv() -> None:
     """The export's ``residuals.csv`` kernel (:func:`explorer.float_text.csv_lines`, with the argument types
-    ``explorer.app.export.residuals_csv`` passes) and :func:`explorer.float_text.g17_texts`."""
+    ``explorer.app.export.residuals_csv`` passes)."""
     import numpy as np
 
-    from explorer.float_text import csv_lines, g17_texts
+    from explorer.float_text import csv_lines
 
     out = np.zeros(1024, dtype=np.uint8)
-    csv_lines(out, 0, np.full((2, 5), 0.5), 2, np.frombuffer(b"nr,", np.uint8).copy(), np.array([3], dtype=np.int64),
-              np.array([2], dtype=np.int64), np.array([0, 1], dtype=np.int64), np.array([0, 1], dtype=np.int64), np.array([0.1, np.nan]),
-              np.array([-2.0, 1e300]), np.array([0, 0], dtype=np.int64), np.frombuffer(b",ok,", np.uint8).copy(),
-              np.array([4], dtype=np.int64))
+    i64 = np.array([0, 1], dtype=np.int64)
+    csv_lines(out, 0, np.full((2, 5), 0.5), 2, np.frombuffer(b"nr,", np.uint8).copy(), i64[1:] * 3, i64[1:] * 2,
+              i64.copy(), i64.copy(), np.array([0.1, np.nan]), np.array([-2.0, 1e300]), i64 * 0,
+              np.frombuffer(b",ok,", np.uint8).copy(), i64[1:] * 4)
+
+
+def _warm_float_text() -> None:
+    """:func:`explorer.float_text.g17_texts` (the Python API's exact ``%.17g`` of an array; no command uses it)."""
+    import numpy as np
+
+    from explorer.float_text import g17_texts
+
     g17_texts(np.array([0.1, -5e-324]))
 
 
@@ -394,8 +402,9 @@ def kernel_units() -> dict[str, Callable[[], None]]:
     a kernel's argument types can differ between presets) or on the paper preset (the others);
     ``method:NAME:relief``: the same on ``agile`` with relief (``exact`` with its safeguarded solver); ``rpc``;
     ``ortho`` (at a height and on a DEM); ``stereo`` (an RPC pair, a generic pair, both kernel variants);
-    ``api`` (kernels only the Python API calls); ``csv`` (the export's ``residuals.csv``); ``isd`` (a USGS CSM ISD: the camera's kernels; only in a
-    checkout, which has the test ISDs).  A command needs the union of some
+    ``api`` (kernels only the Python API calls); ``csv`` (the export's ``residuals.csv``);
+    ``float_text`` (``g17_texts``); ``isd`` (a USGS CSM ISD: the camera's kernels; only in a checkout, which has
+    the test ISDs).  A command needs the union of some
     units (:func:`explorer.kernel_cache.needed_units`).
     """
     from explorer.methods import available
@@ -421,6 +430,7 @@ def kernel_units() -> dict[str, Callable[[], None]]:
         "stereo": _warm_stereo,
         "linescan": _warm_linescan,
         "csv": _warm_csv,
+        "float_text": _warm_float_text,
     }
     isd = _checkout_isd()
     if isd is not None:  # a checkout: recorded here, compiled by signature (_warm_manifest) where there is no ISD
