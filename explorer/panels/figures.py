@@ -59,6 +59,68 @@ LOG_FLOOR_PX = 1e-7
 """Values below this (an exact method's ~1e-10 px, or 0) are drawn at it on log axes; hover tells the truth."""
 
 
+VALIDATE_FIGURES = False
+"""Whether :func:`_figure` lets plotly validate every property of the figures built here (``True``: plotly's own
+checks and coercions, the reference the tests compare with).  The values laid out here are valid by construction,
+and validation was most of the cost of building a figure (property setters, copies); without it the figure's
+JSON is the same (tests/panels/test_figures_fast.py)."""
+
+
+_DATA_VALUED = frozenset({"meta"})
+"""Properties whose value is data (plotly stores a dict given there as it is, in its own key order)."""
+
+
+def _in_plotly_order(value: Any, key: str = "") -> Any:
+    """``value`` with the keys of every nested property object in the order plotly's validated objects store them
+    (alphabetical: each generated class sets its properties in that order), leaving data-valued properties
+    (:data:`_DATA_VALUED`), arrays and strings as they are."""
+    if isinstance(value, dict) and key not in _DATA_VALUED:
+        return {k: _in_plotly_order(value[k], k) for k in sorted(value)}
+    if isinstance(value, list) and any(isinstance(v, dict) for v in value):
+        return [_in_plotly_order(v) for v in value]
+    return value
+
+
+def _figure(data: list[dict], layout: dict) -> go.Figure:
+    """``go.Figure(data=data, layout=layout)`` built without plotly's per-property validation unless
+    :data:`VALIDATE_FIGURES`: the same figure (the same ``to_dict`` / JSON) at a fraction of the cost.  Unvalidated,
+    plotly keeps a nested dict as given, so each is put in the order its validated object has (the layout's own
+    keys stay in the caller's order: plotly takes subplot axes such as ``xaxis2`` in that order either way)."""
+    if VALIDATE_FIGURES:
+        return go.Figure(data=data, layout=layout)
+    data = [{k: _in_plotly_order(v, k) for k, v in trace.items()} for trace in data]
+    layout = {k: _in_plotly_order(v, k) for k, v in layout.items()}
+    fig = go.Figure(data=data, layout=layout, _validate=False)
+    fig._in_plotly_order = True  # render_figure may write it without a validated copy
+    return fig
+
+
+def _layout_as_copied(layout: dict) -> dict:
+    """The layout dict of a figure from :func:`_figure` with its keys in the order a copy (``go.Figure(fig)``) has
+    them: plotly's layout class sets its own properties in alphabetical order, then the numbered subplots
+    (``xaxis2``, ``coloraxis2``, ...) in the order given."""
+    props = go.Layout._valid_props
+    out = {**{k: layout[k] for k in sorted(layout) if k in props}, **{k: v for k, v in layout.items() if k not in props}}
+    if isinstance(out.get("template"), dict):
+        out["template"] = _template_as_copied(out["template"])
+    return out
+
+
+_TEMPLATES_COPIED: dict[str, dict] = {}
+
+
+def _template_as_copied(template: dict) -> dict:
+    """A layout template as a copy of its figure holds it: validated again, which puts its keys in another order
+    than plotly's template files (made once per template and process: the default one serves every figure)."""
+    import copy
+    import json
+
+    key = json.dumps(template, sort_keys=True, default=str)
+    if key not in _TEMPLATES_COPIED:
+        _TEMPLATES_COPIED[key] = go.Figure(layout={"template": template}).to_dict()["layout"]["template"]
+    return copy.deepcopy(_TEMPLATES_COPIED[key])
+
+
 def method_colors(names: Sequence[str]) -> dict[str, str]:
     """A stable colour per method name (position in ``names``)."""
     return {n: METHOD_PALETTE[i % len(METHOD_PALETTE)] for i, n in enumerate(names)}
@@ -350,7 +412,8 @@ def residual_maps(
         else 1)
     # the figure's cell budget: many maps get fewer cells each (the same grid for every map)
     cells = cell_grid(image_shape, len(check), grid_rc, max(1, min(max_cells, MAX_FIGURE_CELLS // n)))
-    all_points = occupied(cells, check.row, check.col)
+    check_cell = cells.cell_of(check.row, check.col)  # once for every map: they share the check points and cells
+    all_points = occupied(cells, None, None, cell=check_cell)
     empty_cells = int((all_points == 0).sum())
     value_word = "mean residual" if aggregate == "mean" else "max |residual| (signed)"
     data: list[dict] = []
@@ -364,7 +427,7 @@ def residual_maps(
                 and np.array_equal(hit[3], cells.col_edges):
             field = hit[4]
         else:
-            field = aggregate_cells(cells, check.row[p.index], check.col[p.index], p.values, p.index, aggregate)
+            field = aggregate_cells(cells, None, None, p.values, p.index, aggregate, cell=check_cell[p.index])
             if cache is not None and key is not None:
                 cache[key] = (p.source[0], check, cells.row_edges, cells.col_edges, field)
         axis = f"coloraxis{k + 1 if k else ''}" if per_map else "coloraxis"
@@ -383,7 +446,7 @@ def residual_maps(
         total = len(p.values) + sum(len(v) for v in p.missing.values())
         for what, where in p.missing.items():
             colour_s, _, text = STATUS_STYLE[what]
-            cnt = occupied(cells, check.row[where], check.col[where])
+            cnt = occupied(cells, None, None, cell=check_cell[where])
             only = (cnt > 0) & ~valid_cells  # cells with points, none of them with a residual
             group = f"{p.method}: {what}"  # one legend entry per method and status (its row and column maps)
             data.append({  # 1 byte per cell: 0 transparent, 1 the status colour
@@ -477,7 +540,7 @@ def residual_maps(
         layout["margin"]["b"] = bottom + extra
         layout["legend"]["y"] = -(bottom - 6) / (height_px - top - bottom)
         layout["meta"]["height_over_width"] = (height_px + extra) / _REF_WIDTH_PX
-    return go.Figure(data=data, layout=layout)
+    return _figure(data, layout)
 
 
 _FAILED_NOTE_CHARS = 140
@@ -612,8 +675,7 @@ def timing_bars(
         layout[ax].update(type="log", exponentformat="power")
     layout.update(height=300, margin={"l": 50, "r": 10, "t": 40, "b": 40},
                   meta={"height_over_width": 0.6, "methods": names, "deferred": bool(deferred)})
-    fig = go.Figure(data=data, layout=layout)
-    return fig
+    return _figure(data, layout)
 
 
 TIMING_NOT_LOADED = "timing.js not loaded"
@@ -687,12 +749,20 @@ def render_figure(fig: Any, position: int, post_script: str | None = None) -> Re
     ``figures``: one validated copy (the caller's figure is not changed), 1000 px wide at the height its
     ``layout.meta.height_over_width`` asks, its div ``panel-<position>``, ``post_script`` run once it is drawn.
     The export makes its maps' part while it waits for the sweep's last results."""
-    copy = go.Figure(fig)
-    types = frozenset(t.type or "scatter" for t in copy.data)
-    aspect = float((copy.layout.meta or {}).get("height_over_width", 0.6))
-    copy.update_layout(width=1000, height=int(1000 * aspect))
-    text = _unescape_base64(copy.to_html(full_html=False, include_plotlyjs=False, div_id=f"panel-{position}",
-                                         config=PLOTLY_CONFIG, post_script=post_script))
+    import plotly.io as pio
+
+    if getattr(fig, "_in_plotly_order", False):  # from _figure: valid, its dicts in order; to_dict is a copy already
+        spec = fig.to_dict()
+        spec["layout"] = _layout_as_copied(spec["layout"])
+    else:  # anything else is written from a validated copy, checked by plotly once
+        spec = go.Figure(fig).to_dict()
+    types = frozenset(t.get("type") or "scatter" for t in spec["data"])
+    layout = spec["layout"]
+    aspect = float((layout.get("meta") or {}).get("height_over_width", 0.6))
+    layout["width"] = 1000  # as update_layout(width=..., height=...) sets them (new keys last, in that order)
+    layout["height"] = int(1000 * aspect)
+    text = _unescape_base64(pio.to_html(spec, full_html=False, include_plotlyjs=False, div_id=f"panel-{position}",
+                                        config=PLOTLY_CONFIG, post_script=post_script, validate=False))
     return RenderedFigure(int(position), text, types)
 
 

@@ -122,8 +122,8 @@ class CellField:
     worst_index: np.ndarray
 
 
-def aggregate(grid: CellGrid, row: np.ndarray, col: np.ndarray, values: np.ndarray, index: np.ndarray,
-              how: str = "mean") -> CellField:
+def aggregate(grid: CellGrid, row: np.ndarray | None, col: np.ndarray | None, values: np.ndarray,
+              index: np.ndarray, how: str = "mean", cell: np.ndarray | None = None) -> CellField:
     """Aggregate residuals at image points per cell (vectorised; NaN values are ignored).
 
     Parameters
@@ -136,6 +136,9 @@ def aggregate(grid: CellGrid, row: np.ndarray, col: np.ndarray, values: np.ndarr
     index : ndarray of int (N,)
         Each point's index to report as the cell's worst point.
     how : {"mean", "max |residual|"}
+    cell : ndarray of int (N,), optional
+        ``grid.cell_of(row, col)`` when the caller has it already (``row`` and ``col`` are then not used): the
+        maps of one figure share their check points and cells.
 
     Returns
     -------
@@ -146,16 +149,13 @@ def aggregate(grid: CellGrid, row: np.ndarray, col: np.ndarray, values: np.ndarr
     nr, nc = grid.shape
     v = np.asarray(values, dtype=np.float64)
     ok = np.isfinite(v)
-    cell = grid.cell_of(np.asarray(row)[ok], np.asarray(col)[ok])
+    cell = grid.cell_of(np.asarray(row)[ok], np.asarray(col)[ok]) if cell is None else np.asarray(cell)[ok]
     v, idx = v[ok], np.asarray(index)[ok]
     count = np.bincount(cell, minlength=nr * nc)
     value = np.full(nr * nc, np.nan)
     worst = np.full(nr * nc, -1, dtype=np.int64)
     if v.size:
-        # the worst point of each cell: sort by (cell, |value|, index) and take the last of each cell
-        order = np.lexsort((idx, np.abs(v), cell))
-        last = np.r_[cell[order][1:] != cell[order][:-1], True]
-        pick = order[last]
+        pick = _worst_points(cell, np.abs(v), idx, nr * nc)
         worst[cell[pick]] = idx[pick]
         if how == "mean":
             # shifted by the cell's worst value: exact for a constant field (every v - ref is 0) and
@@ -170,10 +170,31 @@ def aggregate(grid: CellGrid, row: np.ndarray, col: np.ndarray, values: np.ndarr
     return CellField(grid, value.reshape(nr, nc), count.reshape(nr, nc), worst.reshape(nr, nc))
 
 
-def occupied(grid: CellGrid, row: np.ndarray, col: np.ndarray) -> np.ndarray:
-    """Points per cell (R, C) of image points (any status)."""
+def _worst_points(cell: np.ndarray, magnitude: np.ndarray, index: np.ndarray, n_cells: int) -> np.ndarray:
+    """Position (into the point arrays, (K,) for the K occupied cells in ascending cell order) of each cell's worst
+    point: the largest ``magnitude``, among equals the largest ``index``, among those the last point given.
+
+    The ordering of a lexicographic sort by (cell, magnitude, index), taking each cell's last, done with one stable
+    sort of the cell numbers (a radix sort of 16-bit numbers below 65,536 cells) and per-cell maxima: a third of the
+    cost of that sort of 50,000 points."""
+    small = np.uint16 if n_cells <= 1 << 16 else np.int64
+    order = np.argsort(cell.astype(small), kind="stable")  # grouped by cell, each cell's points in the given order
+    sorted_cell = cell[order]
+    starts = np.flatnonzero(np.r_[True, sorted_cell[1:] != sorted_cell[:-1]])
+    group = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, sorted_cell.size]))
+    mag, idx = magnitude[order], index[order]
+    top = mag == np.maximum.reduceat(mag, starts)[group]
+    top_index = np.maximum.reduceat(np.where(top, idx, idx.min()), starts)[group]
+    return np.maximum.reduceat(np.where(top & (idx == top_index), order, -1), starts)
+
+
+def occupied(grid: CellGrid, row: np.ndarray | None, col: np.ndarray | None,
+             cell: np.ndarray | None = None) -> np.ndarray:
+    """Points per cell (R, C) of image points (any status); ``cell``: their ``grid.cell_of(row, col)`` if known."""
     nr, nc = grid.shape
-    return np.bincount(grid.cell_of(np.asarray(row), np.asarray(col)), minlength=nr * nc).reshape(nr, nc)
+    if cell is None:
+        cell = grid.cell_of(np.asarray(row), np.asarray(col))
+    return np.bincount(cell, minlength=nr * nc).reshape(nr, nc)
 
 
 __all__ = ["AGGREGATES", "MAX_CELLS", "MAX_FIGURE_CELLS", "CellField", "CellGrid", "aggregate", "cell_grid", "occupied"]
