@@ -100,7 +100,8 @@ def _layout_as_copied(layout: dict) -> dict:
     them: plotly's layout class sets its own properties in alphabetical order, then the numbered subplots
     (``xaxis2``, ``coloraxis2``, ...) in the order given."""
     props = go.Layout._valid_props
-    out = {**{k: layout[k] for k in sorted(layout) if k in props}, **{k: v for k, v in layout.items() if k not in props}}
+    out = {k: layout[k] for k in sorted(layout) if k in props}
+    out.update((k, v) for k, v in layout.items() if k not in props)
     if isinstance(out.get("template"), dict):
         out["template"] = _template_as_copied(out["template"])
     return out
