@@ -115,9 +115,7 @@ def _digits17(m: np.uint64, e: int, k: int, a: np.ndarray) -> tuple[np.uint64, i
     """The 17 significant digits (an integer in [10^16, 10^17)) of ``m 2^e`` > 0, correctly rounded (half to
     even), and its decimal exponent; ``k`` is a guess of the exponent (off by at most a few), ``a`` scratch
     limbs."""
-    while True:
-        for i in range(a.size):
-            a[i] = np.uint64(0)
+    while True:  # no clearing: every operation reads only the limbs below its count, which it has written
         a[0] = m & np.uint64(0xFFFFFFFF)
         a[1] = m >> np.uint64(32)
         n = 2 if a[1] != np.uint64(0) else 1
@@ -181,9 +179,14 @@ def write_g17(out: np.ndarray, pos: int, v: float, a: np.ndarray, d: np.ndarray)
     m = np.uint64(math.ldexp(mant, 53))
     e = ex - 53
     q, k = _digits17(m, e, int(math.floor(math.log10(v))), a)
-    for i in range(16, -1, -1):
-        d[i] = np.uint8(q % np.uint64(10))
-        q //= np.uint64(10)
+    hi, lo = q // np.uint64(100000000), q % np.uint64(100000000)  # 9 and 8 digits: 32-bit divisions
+    lo32, hi32 = np.uint32(lo), np.uint32(hi)
+    for i in range(16, 8, -1):
+        d[i] = np.uint8(lo32 % np.uint32(10))
+        lo32 //= np.uint32(10)
+    for i in range(8, -1, -1):
+        d[i] = np.uint8(hi32 % np.uint32(10))
+        hi32 //= np.uint32(10)
     nd = 17
     while nd > 1 and d[nd - 1] == 0:
         nd -= 1
