@@ -6,6 +6,7 @@ per-cell maxima) against a brute-force loop over the cells, ties included."""
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import plotly.graph_objects as go
@@ -131,3 +132,21 @@ def test_worst_point_per_cell_with_ties_is_the_brute_force_one(seed):
             counts = np.bincount(cell[ok], minlength=n_cells)
             with np.errstate(invalid="ignore"):
                 np.testing.assert_allclose(field.value.ravel(), sums / counts, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", ["plotly", "plotly_dark", "ggplot2", "seaborn", "simple_white", "presentation",
+                                  "none"])
+def test_templates_are_written_in_a_copys_order(name, monkeypatch):
+    """The page writes a figure's template in the order a validated copy holds it: the same JSON as plotly's own
+    validation of the template, for plotly's templates; with one of them as the default, a figure's page part is the
+    validated copy's."""
+    import plotly.io as pio
+
+    template = pio.templates[name].to_plotly_json()
+    truth = go.Figure(layout={"template": template}).to_dict()["layout"]["template"]
+    assert json.dumps(F._template_as_copied(template)) == json.dumps(truth)
+    monkeypatch.setattr(pio.templates, "default", name)
+    monkeypatch.setattr(F, "VALIDATE_FIGURES", True)
+    slow = F.timing_bars({})
+    monkeypatch.setattr(F, "VALIDATE_FIGURES", False)
+    assert F.render_figure(F.timing_bars({}), 1) == F.render_figure(slow, 1)
