@@ -92,3 +92,19 @@ def kernel_array(a: Any, dtype: Any = None) -> Any:
 
 
 __all__ += ["kernel_array"]
+
+
+def prepare_kernel_loads() -> None:
+    """Do now the one-off work of a process's first cached-kernel load (nothing without numba).
+
+    Loading a kernel from numba's on-disk cache first refreshes numba's CPU target context; the first refresh in a
+    process imports numba's lowering implementations and starts its runtime: 0.1-0.3 s of CPU that
+    ``_focal_plane_loop_serial`` (or whichever kernel comes first) seemed to cost, later loads 4-50 ms each.  A
+    process that waits for its work (the export's sweep worker waits ~0.7 s for the sensor) does it in that wait
+    rather than in its first job.  Nothing else changes: the same refresh, made earlier.
+    """
+    if not NUMBA_AVAILABLE:
+        return
+    from numba.core.registry import cpu_target
+
+    cpu_target.target_context.refresh()

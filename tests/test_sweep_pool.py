@@ -284,3 +284,32 @@ def test_an_export_with_every_network_imports_torch_in_neither_process(tmp_path)
     for name in ("lrm", "mlp", "ann", "bpnn", "nn-rfm"):
         assert summary["methods"][name]["error"] is None, (name, summary["methods"][name])
         assert summary["methods"][name]["rmse_row_px"] is not None, name
+
+
+def test_an_early_worker_does_its_first_kernel_loads_work_and_scipy_linalg_while_it_waits():
+    """The worker waits for the sensor while the caller loads it: ``_import_for`` does there what its first job
+    would do first (scipy.linalg for the polynomial fits; numba's first cached-kernel load, which refreshes the CPU
+    target and imports numba's lowering modules).  In a fresh interpreter (``sys.modules``, the interpreter's own
+    record): those modules are absent after the worker's module imports, present after ``_import_for``, and a
+    later refresh -- the one every cached-kernel load makes -- imports no further numba module."""
+    import subprocess
+    import sys
+
+    watch = ("scipy.linalg", "numba.np.arraymath", "numba.np.npyimpl", "numba.cpython.unicode")
+    code = ("import json, sys\n"
+            "import explorer.app.sweep_pool as sp\n"
+            "from explorer.app.model import SWEEP_PURPOSE, ExplorerModel\n"
+            f"watch = {watch!r}\n"
+            "before = [m in sys.modules for m in watch]\n"
+            "sp._import_for(('lrm', 'mlp'))\n"
+            "after = [m in sys.modules for m in watch]\n"
+            "numba_modules = {m for m in sys.modules if m.startswith('numba')}\n"
+            "from numba.core.registry import cpu_target\n"
+            "cpu_target.target_context.refresh()\n"
+            "new = sorted({m for m in sys.modules if m.startswith('numba')} - numba_modules)\n"
+            "print(json.dumps([before, after, new]))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    before, after, new = json.loads(out.stdout.splitlines()[-1])
+    assert before == [False] * len(watch)
+    assert after == [True] * len(watch)
+    assert new == []

@@ -89,12 +89,18 @@ def _import_for(methods: Sequence[str]) -> None:
     """Import the modules of ``methods`` (and the registry's) so that a worker started early has done it before
     its first job.  torch is not among them: the networks of the export's learned methods train and answer
     without it (:mod:`explorer.methods._lm_compiled`, :class:`explorer.methods._torch_uniform.TorchUniform`); a
-    method that still needs it (several hidden layers, no numba) imports it on its first fit."""
+    method that still needs it (several hidden layers, no numba) imports it on its first fit.  The worker waits
+    for the sensor while the caller loads it (~0.7 s on the DIMAP export): scipy.linalg and numba's first-load
+    work (:func:`explorer._numba.prepare_kernel_loads`) are done in that wait, not in the first job."""
     if not methods:
         return
+    import scipy.linalg  # noqa: F401  -- every fit's polynomial least squares (methods._polynomial), 0.1 s
+
+    from explorer._numba import prepare_kernel_loads
     from explorer.methods import registry
 
     registry()
+    prepare_kernel_loads()
 
 
 @contextlib.contextmanager
