@@ -21,7 +21,8 @@ from explorer.app.export import CSV_COLUMNS, NATIVE_PIXEL_COLUMNS, residuals_csv
 from explorer.app.model import STATUS_NAMES
 from explorer.float_text import MAX_FIELD_BYTES, g17_texts
 
-pytestmark = pytest.mark.skipif(not NUMBA_AVAILABLE, reason="the kernel needs numba (without it: Python's own)")
+#: without numba ``g17_texts`` is Python's own formatting: nothing to compare (the CSV tests run either way)
+needs_kernel = pytest.mark.skipif(not NUMBA_AVAILABLE, reason="the kernel needs numba (without it: Python's own)")
 
 
 def _python(values: np.ndarray) -> list[str]:
@@ -37,6 +38,7 @@ def _assert_as_python(values) -> None:
     assert max(map(len, got), default=0) <= MAX_FIELD_BYTES
 
 
+@needs_kernel
 def test_random_bit_patterns_over_the_whole_exponent_range():
     """Two million doubles from uniformly random 64-bit patterns: every exponent, sign, subnormals, inf, NaN."""
     bits = np.random.default_rng(20261126).integers(0, 2**64, 2_000_000, dtype=np.uint64, endpoint=False)
@@ -45,12 +47,14 @@ def test_random_bit_patterns_over_the_whole_exponent_range():
     _assert_as_python(values)
 
 
+@needs_kernel
 def test_values_near_the_residual_scales():
     rng = np.random.default_rng(5)
     n = 500_000
     _assert_as_python(rng.normal(0, 1, n) * 10.0 ** rng.uniform(-14, 8, n))
 
 
+@needs_kernel
 def test_powers_of_ten_and_two_with_their_neighbours():
     values = []
     for k in range(-324, 309):
@@ -64,6 +68,7 @@ def test_powers_of_ten_and_two_with_their_neighbours():
     _assert_as_python(np.concatenate([v, -v]))
 
 
+@needs_kernel
 def test_exact_ties_round_half_to_even():
     """Numbers whose exact decimal value has 18 significant digits ending in 5: a tie at 17 digits, rounded to
     the even 17th digit (both directions occur)."""
@@ -82,6 +87,7 @@ def test_exact_ties_round_half_to_even():
     _assert_as_python(np.concatenate([ties_arr, -ties_arr]))
 
 
+@needs_kernel
 def test_special_values_boundaries_and_short_numbers():
     tiny, big = 5e-324, 1.7976931348623157e308
     values = [0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, tiny, -tiny, big, -big, 2.2250738585072014e-308,

@@ -93,8 +93,6 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     in integer arithmetic, no Python string per number); without numba by Python's own formatting
     (:func:`_residuals_csv_python`), the same bytes.
     """
-    if not NUMBA_AVAILABLE:
-        return _residuals_csv_python(evaluations, status, scps, body_fixed, native_pixels)
     columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
     header = (",".join(columns) + "\n").encode()
     row, col = np.asarray(scps.row, dtype=np.float64), np.asarray(scps.col, dtype=np.float64)
@@ -123,6 +121,8 @@ def residuals_csv(evaluations: dict[str, Evaluation], status: dict[str, np.ndarr
     label = np.concatenate(parts["statuses"]).astype(np.int64)
     if label.size and (label.min() < -len(STATUS_NAMES) or label.max() >= len(STATUS_NAMES)):
         raise IndexError(f"residuals_csv: a status outside 0..{len(STATUS_NAMES) - 1}")
+    if not NUMBA_AVAILABLE:  # the same bytes by Python's formatting (checked above: the same errors)
+        return _residuals_csv_python(evaluations, status, scps, body_fixed, native_pixels)
     label %= len(STATUS_NAMES)
     prefixes = [(name + ",").encode() for name, _ in groups]
     labels = [("," + name + ",").encode() for name in STATUS_NAMES]
