@@ -603,7 +603,7 @@ def accuracy_vs_density(
         dotted line at 1 px.
     """
     colors = dict(colors or method_colors(list(sweep)))
-    fig = go.Figure()
+    data: list[dict] = []
     lo, hi = min(marks), max(marks)
     for n, evs in sweep.items():
         evs = [e for e in evs if e is not None]
@@ -614,38 +614,44 @@ def accuracy_vs_density(
         if fitted:
             fitted.sort(key=lambda e: e.n_scops)
             x = np.array([e.n_scops for e in fitted], dtype=float)
-            rm = np.array([e.rmse_px for e in fitted])
-            dm = np.array([e.dr_max_px for e in fitted])
+            rm = np.array([e.rmse_px for e in fitted], dtype=float)
+            dm = np.array([e.dr_max_px for e in fitted], dtype=float)
             mode = "lines+markers"
         else:
             x = np.array([lo, hi], dtype=float)
-            rm = np.full(2, evs[-1].rmse_px)
-            dm = np.full(2, evs[-1].dr_max_px)
+            rm = np.full(2, evs[-1].rmse_px, dtype=float)
+            dm = np.full(2, evs[-1].dr_max_px, dtype=float)
             mode = "lines"
         suffix = "" if fitted else " (no SCOPs needed)"
         for vals, kind, dash in ((rm, "RMSE", "solid"), (dm, "dr_max", "dash")):
-            fig.add_trace(go.Scatter(
-                x=x, y=np.maximum(vals, LOG_FLOOR_PX), customdata=vals,
-                mode=mode, line={"color": col, "dash": dash}, legendgroup=n,
-                name=f"{_label(n, labels)} {kind}{suffix}", meta=kind,
-                hovertemplate=f"{_label(n, labels)}<br>%{{x:.0f}} SCOPs<br>%{{meta}} %{{customdata:.3g}} px"
-                              "<extra></extra>",
-            ))
-    fig.add_hline(y=1.0, line={"dash": "dot", "color": "black"},
-                  annotation_text="1 px (sub-pixel below)", annotation_position="top left")
+            data.append({
+                "type": "scatter", "x": x, "y": np.maximum(vals, LOG_FLOOR_PX), "customdata": vals,
+                "mode": mode, "line": {"color": col, "dash": dash}, "legendgroup": n,
+                "name": f"{_label(n, labels)} {kind}{suffix}", "meta": kind,
+                "hovertemplate": f"{_label(n, labels)}<br>%{{x:.0f}} SCOPs<br>%{{meta}} %{{customdata:.3g}} px"
+                                 "<extra></extra>",
+            })
+    # the 1-pixel line and its label, as plotly's add_hline(y=1, annotation_position="top left") makes them
+    annotations: list[dict] = [{"showarrow": False, "text": "1 px (sub-pixel below)", "x": 0, "xanchor": "left",
+                                "xref": "x domain", "y": 1.0, "yanchor": "bottom", "yref": "y"}]
     notes = [f"{_label(n, labels)}: no point at {', '.join(f'{d:,}' for d in sorted(by))} SCOPs "
              f"({by[min(by)][:_FAILED_NOTE_CHARS]})" for n, by in (failed or {}).items() if by]
     if notes:
-        fig.add_annotation(text="<br>".join(notes), xref="paper", yref="paper", x=0.0, y=0.0, yshift=-42,
-                           xanchor="left", yanchor="top", showarrow=False, align="left", font={"size": 10})
-    fig.update_xaxes(type="log", title_text="number of SCOPs", tickvals=list(marks))
-    fig.update_yaxes(type="log", title_text="scanline error, px", exponentformat="power")
+        annotations.append({"text": "<br>".join(notes), "xref": "paper", "yref": "paper", "x": 0.0, "y": 0.0,
+                            "yshift": -42, "xanchor": "left", "yanchor": "top", "showarrow": False, "align": "left",
+                            "font": {"size": 10}})
     below = 14 * len(notes) + 10 if notes else 0  # the notes' lines under the axis title
-    fig.update_layout(height=380 + below, margin={"l": 60, "r": 10, "t": 30, "b": 40 + below},
-                      legend={"font": {"size": 10}}, meta={"height_over_width": 0.8},
-                      title={"text": "accuracy vs SCOP density (solid RMSE, dashed dr_max)",
-                             "font": {"size": 12}})
-    return fig
+    layout = {
+        "shapes": [{"line": {"color": "black", "dash": "dot"}, "type": "line", "x0": 0, "x1": 1, "xref": "x domain",
+                    "y0": 1.0, "y1": 1.0, "yref": "y"}],
+        "annotations": annotations,
+        "xaxis": {"title": {"text": "number of SCOPs"}, "type": "log", "tickvals": list(marks)},
+        "yaxis": {"title": {"text": "scanline error, px"}, "type": "log", "exponentformat": "power"},
+        "margin": {"l": 60, "r": 10, "t": 30, "b": 40 + below}, "legend": {"font": {"size": 10}},
+        "title": {"text": "accuracy vs SCOP density (solid RMSE, dashed dr_max)", "font": {"size": 12}},
+        "height": 380 + below, "meta": {"height_over_width": 0.8},
+    }
+    return _figure(data, layout)
 
 
 def timing_bars(

@@ -150,3 +150,66 @@ def test_templates_are_written_in_a_copys_order(name, monkeypatch):
     slow = F.timing_bars({})
     monkeypatch.setattr(F, "VALIDATE_FIGURES", False)
     assert F.render_figure(F.timing_bars({}), 1) == F.render_figure(slow, 1)
+
+
+def _accuracy_by_plotlys_helpers(sweep, *, labels=None, marks=F.SCOP_MARKS, colors=None, failed=None):
+    """The accuracy figure as it was built before (to 6adf1ef): validated traces and plotly's own helpers
+    (add_hline with its annotation, add_annotation, update_xaxes / update_yaxes / update_layout)."""
+    colors = dict(colors or F.method_colors(list(sweep)))
+    fig = go.Figure()
+    lo, hi = min(marks), max(marks)
+    for n, evs in sweep.items():
+        evs = [e for e in evs if e is not None]
+        if not evs:
+            continue
+        col = colors.get(n, F.METHOD_PALETTE[0])
+        fitted = sorted((e for e in evs if e.n_scops > 0), key=lambda e: e.n_scops)
+        if fitted:
+            x = np.array([e.n_scops for e in fitted], dtype=float)
+            rm, dm = np.array([e.rmse_px for e in fitted]), np.array([e.dr_max_px for e in fitted])
+            mode = "lines+markers"
+        else:
+            x = np.array([lo, hi], dtype=float)
+            rm, dm = np.full(2, evs[-1].rmse_px), np.full(2, evs[-1].dr_max_px)
+            mode = "lines"
+        suffix = "" if fitted else " (no SCOPs needed)"
+        for vals, kind, dash in ((rm, "RMSE", "solid"), (dm, "dr_max", "dash")):
+            name = labels.get(n, n) if labels else n
+            fig.add_trace(go.Scatter(
+                x=x, y=np.maximum(vals, F.LOG_FLOOR_PX), customdata=vals, mode=mode, line={"color": col, "dash": dash},
+                legendgroup=n, name=f"{name} {kind}{suffix}", meta=kind,
+                hovertemplate=f"{name}<br>%{{x:.0f}} SCOPs<br>%{{meta}} %{{customdata:.3g}} px<extra></extra>"))
+    fig.add_hline(y=1.0, line={"dash": "dot", "color": "black"},
+                  annotation_text="1 px (sub-pixel below)", annotation_position="top left")
+    notes = [f"{labels.get(n, n) if labels else n}: no point at {', '.join(f'{d:,}' for d in sorted(by))} SCOPs "
+             f"({by[min(by)][:F._FAILED_NOTE_CHARS]})" for n, by in (failed or {}).items() if by]
+    if notes:
+        fig.add_annotation(text="<br>".join(notes), xref="paper", yref="paper", x=0.0, y=0.0, yshift=-42,
+                           xanchor="left", yanchor="top", showarrow=False, align="left", font={"size": 10})
+    fig.update_xaxes(type="log", title_text="number of SCOPs", tickvals=list(marks))
+    fig.update_yaxes(type="log", title_text="scanline error, px", exponentformat="power")
+    below = 14 * len(notes) + 10 if notes else 0
+    fig.update_layout(height=380 + below, margin={"l": 60, "r": 10, "t": 30, "b": 40 + below},
+                      legend={"font": {"size": 10}}, meta={"height_over_width": 0.8},
+                      title={"text": "accuracy vs SCOP density (solid RMSE, dashed dr_max)", "font": {"size": 12}})
+    return fig
+
+
+def test_accuracy_figure_is_the_one_plotlys_helpers_built(results):  # noqa: F811
+    """The accuracy-vs-SCOPs figure laid out as dicts is the figure plotly's helpers made (the same properties and
+    values, the 1-pixel line and label of add_hline included), and its page part is the same bytes: with fitted
+    methods, a method needing no SCOPs, an empty method, failures' notes, labels and other marks."""
+    scene, _, scps, evs = results
+    poly = [dataclasses.replace(evs["toy_poly"], n_scops=n, rmse_px=0.5 / n, dr_max_px=3.0 / n) for n in (30, 10, 100)]
+    cases = [
+        ({"toy_poly": poly, "toy_bisect": [evs["toy_bisect"]]}, {}),
+        ({"toy_poly": poly, "none": [None], "empty": []}, {"labels": {"toy_poly": "poly"}, "marks": (10, 100),
+                                                        "failed": {"toy_poly": {20: "too few points " * 20},
+                                                                   "other": {}, "x": {5: "a", 7: "b"}}}),
+        ({}, {}),
+    ]
+    for sweep, kw in cases:
+        truth = _accuracy_by_plotlys_helpers(sweep, **kw)
+        fast = F.accuracy_vs_density(sweep, **kw)
+        assert json.loads(fast.to_json()) == json.loads(truth.to_json())
+        assert F.render_figure(fast, 2) == F.render_figure(truth, 2)
