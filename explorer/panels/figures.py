@@ -778,9 +778,11 @@ class RenderedFigure:
 
 def render_figure(fig: Any, position: int, post_script: str | None = None) -> RenderedFigure:
     """The page part of ``fig`` (a ``go.Figure`` or its dict) at ``position`` in :func:`figures_html`'s
-    ``figures``: one validated copy (the caller's figure is not changed), 1000 px wide at the height its
-    ``layout.meta.height_over_width`` asks, its div ``panel-<position>``, ``post_script`` run once it is drawn.
-    The export makes its maps' part while it waits for the sweep's last results."""
+    ``figures``, written as a validated copy of it would be (the caller's figure is not changed), 1000 px wide at
+    the height its ``layout.meta.height_over_width`` asks, its div ``panel-<position>``, ``post_script`` run once it
+    is drawn.  A figure of this module (:func:`_figure`) is written from its own dict in a copy's key order, the
+    same bytes without a second validation; any other figure or dict goes through one validated copy.  The export
+    makes its maps' part while it waits for the sweep's last results."""
     import plotly.io as pio
 
     if getattr(fig, "_in_plotly_order", False):  # from _figure: valid, its dicts in order; to_dict is a copy already
