@@ -86,8 +86,16 @@ def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - co
 @njit(cache=True)
 def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover - compiled
     """``J^T J`` (P, P) and ``J^T e - lam theta`` (P,) of the errors ``err`` (N, O) and hidden activations ``h``
-    (N, H) at ``theta``, built output by output on the columns the output depends on (the hidden layer's, then its
-    own)."""
+    (N, H) at ``theta``, from ONE product of the columns every output shares.
+
+    Output ``o``'s derivative by a hidden-layer weight of node ``j`` is ``W2[o, j]`` times a column ``a_j x_i``
+    (``a_j`` the activation's derivative, ``x_i`` an input or 1 for the bias) that does not depend on ``o``, and its
+    derivatives by its own weights are the columns ``h_j``, 1 and ``F_f``, the same for every output.  So with
+    ``M`` the N x (S + H + 1 + F) matrix of those columns (S hidden-layer weights) and ``G = M^T M``, ``J^T J`` is
+    ``sum_o W2[o, j] W2[o, j'] G`` on the hidden layer's block, ``W2[o, j] G`` between it and output ``o``'s own
+    weights and ``G`` on each output's own block (zero between two outputs' own weights); ``J^T e`` likewise from
+    ``M^T e``.  The products are those of the per-output Jacobians ``J_o`` up to the order of the factors (round-off),
+    at one product of M's columns instead of one per output."""
     n, n_in = x.shape
     n_hidden = h.shape[1]
     n_out, n_feat = err.shape[1], feats.shape[1]
@@ -95,36 +103,56 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover -
     s = n_hidden * n_in + n_hidden
     w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
     own = n_hidden + 1 + n_feat  # an output's own columns
-    cols = np.empty(s + own, np.int64)
-    for c in range(s):
-        cols[c] = c
-    jt = np.empty((s + own, n))  # J_o transposed: one row per column of the parameters, contiguous over points
-    product = np.zeros((p, p))
-    rhs = np.zeros(p)
-    for o in range(n_out):
-        for j in range(n_hidden):
-            cols[s + j] = w2 + o * n_hidden + j
-        cols[s + n_hidden] = b2 + o
-        for f in range(n_feat):
-            cols[s + n_hidden + 1 + f] = lin + o * n_feat + f
+    m = s + own
+    mt = np.empty((m, n))  # M transposed: one row per column, contiguous over points
+    deriv = n_hidden * n_in  # the rows of a_j (the hidden biases' columns)
+    for j in range(n_hidden):
         for k in range(n):
-            for j in range(n_hidden):
-                hj = h[k, j]
-                d = theta[w2 + o * n_hidden + j] * ((1.0 - hj * hj) if tanh else hj * (1.0 - hj))  # d y_o / d z_j
-                for i in range(n_in):
-                    jt[j * n_in + i, k] = d * x[k, i]
-                jt[n_hidden * n_in + j, k] = d
-                jt[s + j, k] = hj
-            jt[s + n_hidden, k] = 1.0
-            for f in range(n_feat):
-                jt[s + n_hidden + 1 + f, k] = feats[k, f]
-        g = np.dot(jt, jt.T)
-        r = np.dot(jt, np.ascontiguousarray(err[:, o]))
-        for a in range(s + own):
-            ca = cols[a]
-            rhs[ca] += r[a]
-            for b in range(s + own):
-                product[ca, cols[b]] += g[a, b]
+            hj = h[k, j]
+            mt[deriv + j, k] = (1.0 - hj * hj) if tanh else hj * (1.0 - hj)
+            mt[s + j, k] = hj
+        for i in range(n_in):
+            for k in range(n):
+                mt[j * n_in + i, k] = mt[deriv + j, k] * x[k, i]
+    for k in range(n):
+        mt[s + n_hidden, k] = 1.0
+    for f in range(n_feat):
+        for k in range(n):
+            mt[s + n_hidden + 1 + f, k] = feats[k, f]
+    g = np.dot(mt, mt.T)
+    r = np.dot(mt, err)  # (m, O)
+    node = np.empty(s, np.int64)  # the hidden node of each hidden-layer column
+    for c in range(s):
+        node[c] = c // n_in if c < deriv else c - deriv
+    product = np.zeros((p, p))
+    rhs = np.empty(p)
+    for a in range(s):
+        ja = node[a]
+        for b in range(a, s):
+            jb = node[b]
+            w = 0.0
+            for o in range(n_out):
+                w += theta[w2 + o * n_hidden + ja] * theta[w2 + o * n_hidden + jb]
+            v = w * g[a, b]
+            product[a, b] = v
+            product[b, a] = v
+        t = 0.0
+        for o in range(n_out):
+            t += theta[w2 + o * n_hidden + ja] * r[a, o]
+        rhs[a] = t
+    for o in range(n_out):
+        for q in range(own):
+            cq = w2 + o * n_hidden + q if q < n_hidden else (b2 + o if q == n_hidden else lin + o * n_feat + q - n_hidden - 1)
+            for a in range(s):
+                v = theta[w2 + o * n_hidden + node[a]] * g[a, s + q]
+                product[a, cq] = v
+                product[cq, a] = v
+            for q2 in range(q, own):
+                cq2 = (w2 + o * n_hidden + q2 if q2 < n_hidden
+                       else (b2 + o if q2 == n_hidden else lin + o * n_feat + q2 - n_hidden - 1))
+                product[cq, cq2] = g[s + q, s + q2]
+                product[cq2, cq] = g[s + q, s + q2]
+            rhs[cq] = r[s + q, o]
     if lam != 0.0:
         for c in range(p):
             rhs[c] -= lam * theta[c]
