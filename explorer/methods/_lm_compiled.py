@@ -71,13 +71,31 @@ def _outputs(theta, h, n_in, feats, n_out):  # pragma: no cover - compiled
 @njit(cache=True)
 def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - compiled
     """Sum of squared errors ``target - outputs`` plus ``lam |theta|^2``, the errors (N, O) and the hidden
-    activations (N, H)."""
-    h = _hidden(theta, x, n_hidden, tanh)
-    e = target - _outputs(theta, h, x.shape[1], feats, target.shape[1])
+    activations (N, H): :func:`_hidden` and :func:`_outputs` in one pass over the points (the same operations in the
+    same order, so the same bits)."""
+    n, n_in = x.shape
+    n_out, n_feat = target.shape[1], feats.shape[1]
+    b0 = n_hidden * n_in
+    s0 = b0 + n_hidden  # where the output layer starts
+    w2, b2, lin = s0, s0 + n_out * n_hidden, s0 + n_out * n_hidden + n_out
+    h = np.empty((n, n_hidden))
+    e = np.empty((n, n_out))
     s = 0.0
-    for k in range(e.shape[0]):
-        for o in range(e.shape[1]):
-            s += e[k, o] * e[k, o]
+    for k in range(n):
+        for j in range(n_hidden):
+            z = theta[b0 + j]
+            for i in range(n_in):
+                z += theta[j * n_in + i] * x[k, i]
+            h[k, j] = np.tanh(z) if tanh else 1.0 / (1.0 + np.exp(-z))
+        for o in range(n_out):
+            v = theta[b2 + o]
+            for j in range(n_hidden):
+                v += theta[w2 + o * n_hidden + j] * h[k, j]
+            for f in range(n_feat):
+                v += theta[lin + o * n_feat + f] * feats[k, f]
+            d = target[k, o] - v
+            e[k, o] = d
+            s += d * d
     if lam != 0.0:
         s += lam * np.dot(theta, theta)
     return s, e, h
