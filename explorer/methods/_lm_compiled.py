@@ -102,7 +102,15 @@ def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - co
 
 
 @njit(cache=True)
-def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover - compiled
+def _normal_work(x, feats, n_hidden, n_out):  # pragma: no cover - compiled
+    """The scratch (S + H + 1 + F + O, N) :func:`_normal_equations` builds ``[M, e]`` transposed in, allocated once
+    per training."""
+    n, n_in = x.shape
+    return np.empty((n_hidden * n_in + 2 * n_hidden + 1 + feats.shape[1] + n_out, n))
+
+
+@njit(cache=True)
+def _normal_equations(theta, x, feats, err, h, tanh, lam, work):  # pragma: no cover - compiled
     """``J^T J`` (P, P) and ``J^T e - lam theta`` (P,) of the errors ``err`` (N, O) and hidden activations ``h``
     (N, H) at ``theta``, from ONE product of the columns every output shares.
 
@@ -112,8 +120,9 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover -
     ``M`` the N x (S + H + 1 + F) matrix of those columns (S hidden-layer weights) and ``G = M^T M``, ``J^T J`` is
     ``sum_o W2[o, j] W2[o, j'] G`` on the hidden layer's block, ``W2[o, j] G`` between it and output ``o``'s own
     weights and ``G`` on each output's own block (zero between two outputs' own weights); ``J^T e`` likewise from
-    ``M^T e``.  The products are those of the per-output Jacobians ``J_o`` up to the order of the factors (round-off),
-    at one product of M's columns instead of one per output."""
+    ``M^T e``, both from one product of ``[M, e]`` with itself.  The products are those of the per-output Jacobians
+    ``J_o`` up to the order of the factors (round-off), at one product of M's columns instead of one per output.
+    ``work``: (S + H + 1 + F + O, N) scratch for ``[M, e]`` transposed (:func:`_normal_work`), overwritten."""
     n, n_in = x.shape
     n_hidden = h.shape[1]
     n_out, n_feat = err.shape[1], feats.shape[1]
@@ -122,7 +131,7 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover -
     w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
     own = n_hidden + 1 + n_feat  # an output's own columns
     m = s + own
-    mt = np.empty((m, n))  # M transposed: one row per column, contiguous over points
+    mt = work  # [M, e] transposed: one row per column, contiguous over points
     deriv = n_hidden * n_in  # the rows of a_j (the hidden biases' columns)
     for j in range(n_hidden):
         for k in range(n):
@@ -137,8 +146,12 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam):  # pragma: no cover -
     for f in range(n_feat):
         for k in range(n):
             mt[s + n_hidden + 1 + f, k] = feats[k, f]
-    g = np.dot(mt, mt.T)
-    r = np.dot(mt, err)  # (m, O)
+    for o in range(n_out):
+        for k in range(n):
+            mt[m + o, k] = err[k, o]
+    gr = np.dot(mt, mt.T)
+    g = gr[:m, :m]
+    r = gr[:m, m:]  # M^T e (m, O)
     node = np.empty(s, np.int64)  # the hidden node of each hidden-layer column
     for c in range(s):
         node[c] = c // n_in if c < deriv else c - deriv
@@ -268,6 +281,7 @@ def _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tan
     dual = allow_dual and lam == 0.0 and theta.size > n_err  # the N x N form, as the torch trainer
     best_theta = theta.copy()
     best_epoch = 0
+    work = _normal_work(x, feats, n_hidden, err.shape[1])
     v0 = _objective(theta, x_val, feats_val, target_val, n_hidden, tanh, 0.0, mean)[0] if validate else np.nan
     best_val = v0 if count_initial else np.inf
     fails = 0
@@ -290,7 +304,7 @@ def _train(theta0, x, feats, target, x_val, feats_val, target_val, n_hidden, tan
             grad = np.dot(jac.T, e_flat)
             product, rhs = np.dot(jac, jac.T), e_flat
         else:
-            product, rhs = _normal_equations(theta, x, feats, err, hid, tanh, lam)
+            product, rhs = _normal_equations(theta, x, feats, err, hid, tanh, lam, work)
             grad = rhs + lam * theta if lam != 0.0 else rhs
         if min_grad > 0.0 and np.sqrt(np.dot(2.0 * grad, 2.0 * grad)) / n_err < min_grad:
             stop, started = 6, epoch - 1

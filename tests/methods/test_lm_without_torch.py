@@ -246,13 +246,16 @@ def test_fitting_and_evaluating_mlp_and_ann_does_not_import_torch():
     assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-2000:]
 
 
+@pytest.mark.parametrize(("n_out", "n_feat", "lam"), [(2, 2, 0.0), (1, 0, 0.0), (3, 1, 0.25)])
 @pytest.mark.parametrize("tanh", [False, True])
-def test_the_full_jacobian_of_the_dual_form(tanh):
+def test_the_full_jacobian_of_the_dual_form(tanh, n_out, n_feat, lam):
     """The dual form's Jacobian (every output, the line-of-sight network's linear terms too) against central
-    differences of the network's outputs, and its J^T J / J^T e against the per-output normal equations bpnn trains
-    with (tests/methods/test_lm_compiled.py checks those against torch)."""
+    differences of the network's outputs, and its J^T J / J^T e - lam theta against the normal equations bpnn, mlp
+    and ann train with (built from one product of the columns the outputs share; tests/methods/test_lm_compiled.py
+    checks the trainings against torch): one, two and three outputs, with and without linear terms and weight
+    decay."""
     rng = np.random.default_rng(3)
-    n, n_in, n_hidden, n_out, n_feat = 9, 3, 4, 2, 2
+    n, n_in, n_hidden = 9, 3, 4
     x, feats = rng.uniform(-1, 1, (n, n_in)), rng.uniform(-1, 1, (n, n_feat))
     theta = rng.normal(size=n_hidden * n_in + n_hidden + n_out * (n_hidden + 1 + n_feat))
     err = rng.normal(size=(n, n_out))
@@ -268,6 +271,8 @@ def test_the_full_jacobian_of_the_dual_form(tanh):
         down = _lm_compiled._outputs(theta - d, _lm_compiled._hidden(theta - d, x, n_hidden, tanh), n_in, feats, n_out)
         numeric[:, c] = ((up - down) / (2 * step)).reshape(-1)  # row k * n_out + o, as the errors are flattened
     np.testing.assert_allclose(jac, numeric, rtol=1e-7, atol=1e-9)
-    product, rhs = _lm_compiled._normal_equations(theta, x, feats, err, h, tanh, 0.0)
+    work = _lm_compiled._normal_work(x, feats, n_hidden, n_out)
+    work[:] = np.nan  # scratch: nothing of it may be read before it is written
+    product, rhs = _lm_compiled._normal_equations(theta, x, feats, err, h, tanh, lam, work)
     np.testing.assert_allclose(jac.T @ jac, product, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(jac.T @ err.reshape(-1), rhs, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(jac.T @ err.reshape(-1) - lam * theta, rhs, rtol=1e-12, atol=1e-12)
