@@ -103,10 +103,10 @@ def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - co
 
 @njit(cache=True)
 def _normal_work(x, feats, n_hidden, n_out):  # pragma: no cover - compiled
-    """The scratch (S + H + 1 + F + O, N) :func:`_normal_equations` builds ``[M, e]`` transposed in, allocated once
-    per training."""
+    """The scratch (S + H + 1 + F, N) :func:`_normal_equations` builds ``M`` transposed in, allocated once per
+    training."""
     n, n_in = x.shape
-    return np.empty((n_hidden * n_in + 2 * n_hidden + 1 + feats.shape[1] + n_out, n))
+    return np.empty((n_hidden * n_in + 2 * n_hidden + 1 + feats.shape[1], n))
 
 
 @njit(cache=True)
@@ -120,9 +120,10 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam, work):  # pragma: no c
     ``M`` the N x (S + H + 1 + F) matrix of those columns (S hidden-layer weights) and ``G = M^T M``, ``J^T J`` is
     ``sum_o W2[o, j] W2[o, j'] G`` on the hidden layer's block, ``W2[o, j] G`` between it and output ``o``'s own
     weights and ``G`` on each output's own block (zero between two outputs' own weights); ``J^T e`` likewise from
-    ``M^T e``, both from one product of ``[M, e]`` with itself.  The products are those of the per-output Jacobians
-    ``J_o`` up to the order of the factors (round-off), at one product of M's columns instead of one per output.
-    ``work``: (S + H + 1 + F + O, N) scratch for ``[M, e]`` transposed (:func:`_normal_work`), overwritten."""
+    ``M^T e``.  The products are those of the per-output Jacobians ``J_o`` up to the order of the factors
+    (round-off), at one product of M's columns instead of one per output.  With one output its weights are kept in
+    M's columns (M's block is ``J`` itself, the per-output products exactly).  ``work``: (S + H + 1 + F, N) scratch
+    for ``M`` transposed (:func:`_normal_work`), overwritten."""
     n, n_in = x.shape
     n_hidden = h.shape[1]
     n_out, n_feat = err.shape[1], feats.shape[1]
@@ -130,13 +131,13 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam, work):  # pragma: no c
     s = n_hidden * n_in + n_hidden
     w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
     own = n_hidden + 1 + n_feat  # an output's own columns
-    m = s + own
-    mt = work  # [M, e] transposed: one row per column, contiguous over points
+    mt = work  # M transposed: one row per column, contiguous over points
     deriv = n_hidden * n_in  # the rows of a_j (the hidden biases' columns)
     for j in range(n_hidden):
+        w = theta[w2 + j] if n_out == 1 else 1.0  # one output: its weight in the column, M's block is J's
         for k in range(n):
             hj = h[k, j]
-            mt[deriv + j, k] = (1.0 - hj * hj) if tanh else hj * (1.0 - hj)
+            mt[deriv + j, k] = w * ((1.0 - hj * hj) if tanh else hj * (1.0 - hj))
             mt[s + j, k] = hj
         for i in range(n_in):
             for k in range(n):
@@ -146,43 +147,47 @@ def _normal_equations(theta, x, feats, err, h, tanh, lam, work):  # pragma: no c
     for f in range(n_feat):
         for k in range(n):
             mt[s + n_hidden + 1 + f, k] = feats[k, f]
+    g = np.dot(mt, mt.T)
+    r = np.empty((mt.shape[0], n_out))  # M^T e
     for o in range(n_out):
-        for k in range(n):
-            mt[m + o, k] = err[k, o]
-    gr = np.dot(mt, mt.T)
-    g = gr[:m, :m]
-    r = gr[:m, m:]  # M^T e (m, O)
+        r[:, o] = np.dot(mt, np.ascontiguousarray(err[:, o]))
     node = np.empty(s, np.int64)  # the hidden node of each hidden-layer column
     for c in range(s):
         node[c] = c // n_in if c < deriv else c - deriv
+    wt = np.ones((n_out, n_hidden))  # the output weights still to apply (one output: already in M)
+    if n_out > 1:
+        for o in range(n_out):
+            for j in range(n_hidden):
+                wt[o, j] = theta[w2 + o * n_hidden + j]
     product = np.zeros((p, p))
     rhs = np.empty(p)
     for a in range(s):
         ja = node[a]
-        for b in range(a, s):
+        for b in range(a + 1):  # G's lower triangle, as the Cholesky factorisation reads the product's
             jb = node[b]
             w = 0.0
             for o in range(n_out):
-                w += theta[w2 + o * n_hidden + ja] * theta[w2 + o * n_hidden + jb]
+                w += wt[o, ja] * wt[o, jb]
             v = w * g[a, b]
             product[a, b] = v
             product[b, a] = v
         t = 0.0
         for o in range(n_out):
-            t += theta[w2 + o * n_hidden + ja] * r[a, o]
+            t += wt[o, ja] * r[a, o]
         rhs[a] = t
     for o in range(n_out):
         for q in range(own):
-            cq = w2 + o * n_hidden + q if q < n_hidden else (b2 + o if q == n_hidden else lin + o * n_feat + q - n_hidden - 1)
+            cq = (w2 + o * n_hidden + q if q < n_hidden
+                  else (b2 + o if q == n_hidden else lin + o * n_feat + q - n_hidden - 1))
             for a in range(s):
-                v = theta[w2 + o * n_hidden + node[a]] * g[a, s + q]
+                v = wt[o, node[a]] * g[s + q, a]
                 product[a, cq] = v
                 product[cq, a] = v
             for q2 in range(q, own):
                 cq2 = (w2 + o * n_hidden + q2 if q2 < n_hidden
                        else (b2 + o if q2 == n_hidden else lin + o * n_feat + q2 - n_hidden - 1))
-                product[cq, cq2] = g[s + q, s + q2]
-                product[cq2, cq] = g[s + q, s + q2]
+                product[cq, cq2] = g[s + q2, s + q]
+                product[cq2, cq] = g[s + q2, s + q]
             rhs[cq] = r[s + q, o]
     if lam != 0.0:
         for c in range(p):
