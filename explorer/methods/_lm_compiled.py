@@ -6,9 +6,13 @@ The same algorithm, stopping rules and results as :func:`explorer.methods._lm.lm
 ``lambda |theta|^2``, MATLAB's ``trainlm`` damping, validation failures counted on ties, the plateau rule), but
 one compiled call for the whole training instead of some thirty torch operations per epoch: at 42 weights and 200
 errors an epoch cost 0.27 ms of per-operation overhead in torch for some 0.04 ms of arithmetic.  The normal
-equations are built per output: an output's errors depend only on the hidden layer's weights (shared) and on that
-output's own weights (its row of the output layer, its bias and its linear terms), so ``J^T J`` is the sum over the
-outputs of ``J_o^T J_o`` on those columns alone (half the products of the full ``J^T J`` with two outputs).
+equations come from ONE product of the columns every output shares (:func:`_normal_equations`): an output's errors
+depend only on the hidden layer's weights (shared, through that output's weights ``W2[o, :]``) and on that output's
+own weights (its row of the output layer, its bias and its linear terms, whose columns are the same for every
+output), so ``J^T J`` is a product ``M^T M`` of N x (S + H + 1 + F) columns scaled by the output weights -- half the
+products of one ``J_o^T J_o`` per output with two outputs (bpnn, nn-rfm: 29-32 % less CPU per epoch at 300-1000
+points), and exactly that product with one output (mlp, ann).  The hidden layer and the errors are one pass over the
+points, the product's scratch is allocated once per training.
 The damped system is solved by Cholesky (least squares if it is not positive definite), as in
 :func:`explorer.methods._lm._damped_step`.  The sums are in another order than torch's: the trained weights
 agree with the torch trainer's to round-off over a few epochs and then drift as any two LM trainings started
