@@ -18,7 +18,7 @@ The damped system is solved by Cholesky (least squares if it is not positive def
 agree with the torch trainer's to round-off over a few epochs and then drift as any two LM trainings started
 from round-off-different points do (tests/methods/test_lm_compiled.py); same inputs, same bits, run to run.
 
-The network (:func:`_outputs` of :func:`_hidden`): ``y_o = sum_j W2[o, j] h_j + b2[o] + sum_f L[o, f] F_f`` with ``h_j =
+The network: ``y_o = sum_j W2[o, j] h_j + b2[o] + sum_f L[o, f] F_f`` with ``h_j =
 act(sum_i W1[j, i] X_i + b1[j])`` (``act`` the logistic sigmoid or tanh), parameters laid out as ``W1`` (H, I)
 row-major, ``b1`` (H), ``W2`` (O, H) row-major, ``b2`` (O), ``L`` (O, F) row-major -- the flat layout of
 :func:`explorer.methods._lm.dense_layers` followed by the line-of-sight network's linear terms (F = 0: none).
@@ -38,45 +38,9 @@ STOP_REASONS = ("max_epochs", "non_finite", "goal", "mu_max", "validation", "pla
 
 
 @njit(cache=True)
-def _hidden(theta, x, n_hidden, tanh):  # pragma: no cover - compiled
-    """Hidden activations (N, H) of inputs ``x`` (N, I)."""
-    n, n_in = x.shape
-    h = np.empty((n, n_hidden))
-    b0 = n_hidden * n_in
-    for k in range(n):
-        for j in range(n_hidden):
-            z = theta[b0 + j]
-            for i in range(n_in):
-                z += theta[j * n_in + i] * x[k, i]
-            h[k, j] = np.tanh(z) if tanh else 1.0 / (1.0 + np.exp(-z))
-    return h
-
-
-@njit(cache=True)
-def _outputs(theta, h, n_in, feats, n_out):  # pragma: no cover - compiled
-    """Outputs (N, O) of the network (module docstring) from the hidden activations ``h`` (N, H) of inputs of
-    ``n_in`` columns and the linear features ``feats`` (N, F; F may be 0)."""
-    n, n_hidden = h.shape
-    n_feat = feats.shape[1]
-    s = n_hidden * n_in + n_hidden  # where the output layer starts
-    w2, b2, lin = s, s + n_out * n_hidden, s + n_out * n_hidden + n_out
-    y = np.empty((n, n_out))
-    for k in range(n):
-        for o in range(n_out):
-            v = theta[b2 + o]
-            for j in range(n_hidden):
-                v += theta[w2 + o * n_hidden + j] * h[k, j]
-            for f in range(n_feat):
-                v += theta[lin + o * n_feat + f] * feats[k, f]
-            y[k, o] = v
-    return y
-
-
-@njit(cache=True)
 def _sse(theta, x, feats, target, n_hidden, tanh, lam):  # pragma: no cover - compiled
     """Sum of squared errors ``target - outputs`` plus ``lam |theta|^2``, the errors (N, O) and the hidden
-    activations (N, H): :func:`_hidden` and :func:`_outputs` in one pass over the points (the same operations in the
-    same order, so the same bits)."""
+    activations (N, H) of the network (module docstring), computed in one pass over the points."""
     n, n_in = x.shape
     n_out, n_feat = target.shape[1], feats.shape[1]
     b0 = n_hidden * n_in

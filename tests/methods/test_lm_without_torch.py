@@ -246,6 +246,20 @@ def test_fitting_and_evaluating_mlp_and_ann_does_not_import_torch():
     assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-2000:]
 
 
+def _network(theta, x, feats, n_hidden, n_out, tanh):
+    """The hidden activations (N, H) and outputs (N, O) of the compiled trainer's network (explorer/methods/
+    _lm_compiled.py's module docstring: its parameter layout) in numpy."""
+    n_in, n_feat = x.shape[1], feats.shape[1]
+    s = n_hidden * n_in + n_hidden
+    w1, b1 = theta[:n_hidden * n_in].reshape(n_hidden, n_in), theta[n_hidden * n_in:s]
+    w2 = theta[s:s + n_out * n_hidden].reshape(n_out, n_hidden)
+    b2 = theta[s + n_out * n_hidden:s + n_out * n_hidden + n_out]
+    lin = theta[s + n_out * n_hidden + n_out:].reshape(n_out, n_feat)
+    z = x @ w1.T + b1
+    h = np.tanh(z) if tanh else 1.0 / (1.0 + np.exp(-z))
+    return h, h @ w2.T + b2 + feats @ lin.T
+
+
 @pytest.mark.parametrize(("n_out", "n_feat", "lam"), [(2, 2, 0.0), (1, 0, 0.0), (3, 1, 0.25)])
 @pytest.mark.parametrize("tanh", [False, True])
 def test_the_full_jacobian_of_the_dual_form(tanh, n_out, n_feat, lam):
@@ -259,7 +273,7 @@ def test_the_full_jacobian_of_the_dual_form(tanh, n_out, n_feat, lam):
     x, feats = rng.uniform(-1, 1, (n, n_in)), rng.uniform(-1, 1, (n, n_feat))
     theta = rng.normal(size=n_hidden * n_in + n_hidden + n_out * (n_hidden + 1 + n_feat))
     err = rng.normal(size=(n, n_out))
-    h = _lm_compiled._hidden(theta, x, n_hidden, tanh)
+    h = _network(theta, x, feats, n_hidden, n_out, tanh)[0]
     jac = _lm_compiled._jacobian(theta, x, feats, h, tanh, n_out)
     assert jac.shape == (n * n_out, theta.size)
     step = 1e-6
@@ -267,8 +281,8 @@ def test_the_full_jacobian_of_the_dual_form(tanh, n_out, n_feat, lam):
     for c in range(theta.size):
         d = np.zeros(theta.size)
         d[c] = step
-        up = _lm_compiled._outputs(theta + d, _lm_compiled._hidden(theta + d, x, n_hidden, tanh), n_in, feats, n_out)
-        down = _lm_compiled._outputs(theta - d, _lm_compiled._hidden(theta - d, x, n_hidden, tanh), n_in, feats, n_out)
+        up = _network(theta + d, x, feats, n_hidden, n_out, tanh)[1]
+        down = _network(theta - d, x, feats, n_hidden, n_out, tanh)[1]
         numeric[:, c] = ((up - down) / (2 * step)).reshape(-1)  # row k * n_out + o, as the errors are flattened
     np.testing.assert_allclose(jac, numeric, rtol=1e-7, atol=1e-9)
     work = _lm_compiled._normal_work(x, feats, n_hidden, n_out)
