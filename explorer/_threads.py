@@ -100,7 +100,17 @@ _blas_state: dict = {"apis": None, "modules": -1, "depth": 0, "saved": None}
 
 
 def _openblas_libraries() -> list[str]:
-    """Paths of the OpenBLAS libraries this process has loaded (Linux: /proc/self/maps), else numpy's bundled one."""
+    """Paths of the OpenBLAS libraries this process has loaded (Linux: /proc/self/maps), then numpy's and scipy's
+    bundled ones even when not loaded yet.
+
+    scipy's is loaded late: numba's compiled ``np.dot`` takes its BLAS from ``scipy.linalg.cython_blas`` at its first
+    call, which can come inside a :func:`blas_threads` block (a network's training).  Missed there, that library
+    kept its threads for the block: the same training gave other bits in a process where scipy.linalg had been
+    imported before it (the export's sweep worker) than in one where the training loaded it -- the mlp sweep at
+    1,000 SCOPs differed in its 12th digit between a serial export and one shared with the worker.  Opened here by
+    path (the loader keeps one copy of a library), it is set before anything uses it."""
+    import importlib.util
+
     import numpy as np
 
     paths: list[str] = []
@@ -112,8 +122,12 @@ def _openblas_libraries() -> list[str]:
                     paths.append(path)
     except OSError:
         pass
-    libs_dir = os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs")
-    paths += [p for p in sorted(glob.glob(os.path.join(libs_dir, "*openblas*"))) if p not in paths]
+    bundled = [os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs")]
+    scipy_spec = importlib.util.find_spec("scipy")  # located, not imported
+    if scipy_spec is not None and scipy_spec.submodule_search_locations:
+        bundled.append(os.path.join(list(scipy_spec.submodule_search_locations)[0], os.pardir, "scipy.libs"))
+    for libs_dir in bundled:
+        paths += [p for p in sorted(glob.glob(os.path.join(libs_dir, "*openblas*"))) if p not in paths]
     return paths
 
 

@@ -130,3 +130,46 @@ def test_blas_threads_sets_numpys_and_scipys_openblas_when_scipy_was_imported_fi
     if "scipy" in inside:
         assert inside["scipy"] == 1
     assert after == before
+
+
+_SCIPY_LOADED_INSIDE = r"""
+import ctypes, glob, os, sys
+import numpy as np
+from explorer import _threads
+assert "scipy.linalg" not in sys.modules
+
+def scipy_count():
+    import importlib.util
+    base = list(importlib.util.find_spec("scipy").submodule_search_locations)[0]
+    for path in glob.glob(os.path.join(base, os.pardir, "scipy.libs", "*openblas*")):
+        lib = ctypes.CDLL(path)
+        get = getattr(lib, "scipy_openblas_get_num_threads", None)
+        if get is not None:
+            get.restype = ctypes.c_int
+            return get()
+    return None
+
+with _threads.blas_threads(1):
+    import scipy.linalg.cython_blas  # what numba's np.dot does at its first call: scipy's OpenBLAS loaded now
+    inside = scipy_count()
+print(inside, scipy_count(), os.cpu_count())
+"""
+
+
+def test_blas_threads_also_sets_scipys_openblas_loaded_inside_the_block():
+    """numba's compiled np.dot loads scipy's OpenBLAS (scipy.linalg.cython_blas) at its first call, which may come
+    inside a blas_threads block (a network's training): it must run on the block's threads too.  Missed, the mlp
+    sweep at 1,000 SCOPs gave other last bits in the export's worker (scipy imported first) than in the command
+    (the training loaded it): a shared export differed from a serial one."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _SCIPY_LOADED_INSIDE], capture_output=True, text=True, timeout=120,
+                         check=True).stdout.split()
+    inside, after, cpus = (None if v == "None" else int(v) for v in out)
+    if inside is None:
+        pytest.skip("scipy's bundled OpenBLAS not found")
+    if after is None or after < 2:
+        pytest.skip(f"scipy's OpenBLAS runs on {after} thread(s) here (one CPU?): nothing to limit")
+    assert inside == 1
+    assert after >= 2  # restored after the block
