@@ -23,9 +23,7 @@ errors                 :class:`InputError`, :class:`SceneFileError`, :class:`Con
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from explorer._lazy import lazy_names
 from explorer.errors import ConvergenceError, InputError, SceneFileError
 
 __version__ = "0.1.0"
@@ -59,18 +57,7 @@ _LAZY: dict[str, str] = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name's module on first access and cache the name here."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'explorer' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names(globals(), _LAZY)
 
 
 __all__ = ["ConvergenceError", "InputError", "SceneFileError", "__version__", *sorted(_LAZY)]

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import importlib
 import types
+from collections.abc import Callable
+from typing import Any
 
 
 class LazyModule(types.ModuleType):
@@ -43,3 +45,26 @@ def import_rasterio() -> types.ModuleType:
     finally:
         if sys.modules.get("boto3", 0) is None:
             del sys.modules["boto3"]
+
+
+def lazy_names(namespace: dict, sources: dict[str, str]) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """The module ``__getattr__`` and ``__dir__`` (PEP 562) of a package whose public names are imported on first
+    access: ``sources`` maps each name to the module defining it; a name read once is cached in ``namespace``
+    (the package's ``globals()``), so later lookups skip ``__getattr__``.
+
+    Use: ``__getattr__, __dir__ = lazy_names(globals(), _LAZY)``.
+    """
+    package = namespace["__name__"]
+
+    def __getattr__(name: str) -> Any:  # noqa: N807 - the module hook's own name
+        source = sources.get(name)
+        if source is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(source), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:  # noqa: N807
+        return sorted(set(namespace) | set(sources))
+
+    return __getattr__, __dir__

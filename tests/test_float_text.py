@@ -2,14 +2,13 @@
 written by it (explorer.app.export.residuals_csv).
 
 Independent truth: CPython's own ``"%.17g" % v`` (David Gay's correctly rounded dtoa) for every number, and for
-the CSV the export's previous pure-Python implementation, kept verbatim below as :func:`_reference_csv` (it is
-also the module's numba-less fallback, but the copy here cannot change with it).
+the CSV the export's previous pure-Python implementation, kept in the module as its numba-less fallback
+(:func:`_reference_csv`; its numbers are CPython's own ``"%.17g" %``, as the tests above take them).
 """
 
 from __future__ import annotations
 
 from decimal import Decimal
-from operator import itemgetter
 from types import SimpleNamespace
 
 import numpy as np
@@ -17,7 +16,7 @@ import pytest
 
 from explorer._numba import NUMBA_AVAILABLE
 from explorer.app import export
-from explorer.app.export import CSV_COLUMNS, NATIVE_PIXEL_COLUMNS, residuals_csv
+from explorer.app.export import residuals_csv
 from explorer.app.model import STATUS_NAMES
 from explorer.float_text import MAX_FIELD_BYTES, g17_texts
 
@@ -106,59 +105,9 @@ def test_special_values_boundaries_and_short_numbers():
 
 # ------------------------------------------------------------------------------------- residuals.csv
 def _reference_csv(evaluations, status, scps, body_fixed=None, native_pixels=False) -> bytes:
-    """``residuals_csv`` as it was before the kernel (commit 6c4bba2), verbatim apart from names."""
-    columns = CSV_COLUMNS + (NATIVE_PIXEL_COLUMNS if native_pixels else ())
-    xyz = np.full((len(scps), 3), np.nan) if body_fixed is None else np.asarray(body_fixed, dtype=np.float64)
-    row, col = np.asarray(scps.row, dtype=np.float64), np.asarray(scps.col, dtype=np.float64)
-    used = np.unique(np.concatenate([np.asarray(ev.evaluated_index, dtype=np.int64) for ev in evaluations.values()]
-                                    or [np.zeros(0, np.int64)]))
-    shared = [row[used], col[used], xyz[used, 0], xyz[used, 1], xyz[used, 2]]
-    if native_pixels:
-        shared += [row[used] + 0.5, col[used] + 0.5]
-    heads = _joined([_formatted(shared[0]), _formatted(shared[1])], ",")
-    tails = [t + "\n" for t in _joined([_formatted(c) for c in shared[2:]], ",")]
-    at = np.full(len(row), -1, dtype=np.int64)
-    at[used] = np.arange(used.size)
-    labels = ["," + name + "," for name in STATUS_NAMES]
-    chunks = [",".join(columns) + "\n"]
-    for name, ev in evaluations.items():
-        idx = np.asarray(ev.evaluated_index)
-        n = int(idx.size)
-        if not n:
-            continue
-        pick = _picker(at[idx].tolist())
-        pieces: list[str] = [""] * (10 * n)
-        pieces[0::10] = [name + ","] * n
-        pieces[1::10] = ("%d\n" * n % tuple(idx.tolist())).split("\n")[:n]
-        pieces[2::10] = [","] * n
-        pieces[3::10] = pick(heads)
-        pieces[4::10] = [","] * n
-        pieces[5::10] = _formatted(np.asarray(ev.residual_row, dtype=np.float64))
-        pieces[6::10] = [","] * n
-        pieces[7::10] = _formatted(np.asarray(ev.residual_col, dtype=np.float64))
-        pieces[8::10] = _picker(np.asarray(status[name]).tolist())(labels)
-        pieces[9::10] = pick(tails)
-        chunks.append("".join(pieces))
-    return "".join(chunks).encode()
-
-
-def _formatted(values):
-    n = int(values.size)
-    out = ("%.17g\n" * n % tuple(values.tolist())).split("\n")[:n]
-    for i in np.flatnonzero(~np.isfinite(values)).tolist():
-        out[i] = ""
-    return out
-
-
-def _picker(index):
-    if len(index) == 1:
-        return lambda values: [values[index[0]]]
-    get = itemgetter(*index)
-    return lambda values: list(get(values))
-
-
-def _joined(columns, sep):
-    return [sep.join(t) for t in zip(*columns, strict=True)]
+    """``residuals_csv`` as it was before the kernel (commit 6c4bba2): the module's numba-less fallback, which is
+    that code (Python's own ``%.17g`` / ``%d`` per field; the fallback's checks of its inputs come first)."""
+    return export._residuals_csv_python(evaluations, status, scps, body_fixed, native_pixels)
 
 
 class _Points(SimpleNamespace):

@@ -116,6 +116,15 @@ def test_no_worker_when_memory_is_short(scene, monkeypatch):
     _sweeps_equal(sweeps, _serial(scene, s))
 
 
+#: lines of a script that print ``DELIVERED <results> <error>`` when the sweep pool collects its worker's results
+_SPY_COLLECT = ("collect = sp.SweepPool.collect\n"
+                "def spy(self):\n"
+                "    out = collect(self)\n"
+                "    print('DELIVERED', len(out), self.error, flush=True)\n"
+                "    return out\n"
+                "sp.SweepPool.collect = spy\n")
+
+
 def test_a_script_without_a_main_guard_is_not_run_again_by_the_worker(tmp_path):
     """A spawned child imports the parent's main script first; a user's script calling ``run_export`` without an
     ``if __name__ == "__main__":`` guard was run again, whole, in the worker (the export computed twice, the
@@ -130,12 +139,7 @@ def test_a_script_without_a_main_guard_is_not_run_again_by_the_worker(tmp_path):
         "import explorer.app.sweep_pool as sp\n"
         "from explorer.app.export import run_export\n"
         "from explorer.sources import load_source\n"
-        "collect = sp.SweepPool.collect\n"
-        "def spy(self):\n"
-        "    out = collect(self)\n"
-        "    print('DELIVERED', len(out), self.error, flush=True)\n"
-        "    return out\n"
-        "sp.SweepPool.collect = spy\n"
+        + _SPY_COLLECT +
         "print('TOP LEVEL', os.getpid(), flush=True)\n"
         f"run_export(load_source('preset', 'WSU'), {str(tmp_path / 'out')!r}, methods=['lrm', 'ann'], scps=2000,\n"
         "           workers=2, log=lambda line: None)\n")
@@ -263,12 +267,7 @@ def test_an_export_with_every_network_imports_torch_in_neither_process(tmp_path)
     script = tmp_path / "export.py"
     script.write_text(
         "import explorer.app.sweep_pool as sp\n"
-        "collect = sp.SweepPool.collect\n"
-        "def spy(self):\n"
-        "    out = collect(self)\n"
-        "    print('DELIVERED', len(out), self.error, flush=True)\n"
-        "    return out\n"
-        "sp.SweepPool.collect = spy\n"
+        + _SPY_COLLECT +
         "if __name__ == '__main__':\n"
         "    from explorer.cli import main\n"  # the command's path: its worker starts early, before the source loads
         "    raise SystemExit(main(['explore', '--preset', 'WSU', '--methods', 'lrm,mlp,ann,bpnn,nn-rfm',\n"

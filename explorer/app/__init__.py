@@ -17,8 +17,9 @@ The package splits the explorer in layers (``docs/explorer.md``; architecture:
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from explorer._lazy import lazy_names
 
 if TYPE_CHECKING:
     from explorer.app.gui import DEBOUNCE_S, ExplorerApp
@@ -61,17 +62,7 @@ _SOURCES = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    source = _SOURCES.get(name)
-    if source is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(source), name)
-    globals()[name] = value  # later lookups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_SOURCES))
+__getattr__, __dir__ = lazy_names(globals(), _SOURCES)
 
 
 __all__ = [
