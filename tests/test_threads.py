@@ -161,11 +161,15 @@ def test_blas_threads_also_sets_scipys_openblas_loaded_inside_the_block():
     inside a blas_threads block (a network's training): it must run on the block's threads too.  Missed, the mlp
     sweep at 1,000 SCOPs gave other last bits in the export's worker (scipy imported first) than in the command
     (the training loaded it): a shared export differed from a serial one."""
+    import os
     import subprocess
     import sys
 
+    # OpenBLAS starts on the threads OPENBLAS_NUM_THREADS names (else on what it finds: one thread in a CI run,
+    # where the test then proved nothing): two, so that one thread inside the block is the block's doing
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="2")
     out = subprocess.run([sys.executable, "-c", _SCIPY_LOADED_INSIDE], capture_output=True, text=True, timeout=120,
-                         check=True).stdout.split()
+                         check=True, env=env).stdout.split()
     inside, after, cpus = (None if v == "None" else int(v) for v in out)
     if inside is None:
         pytest.skip("scipy's bundled OpenBLAS not found")
