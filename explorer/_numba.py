@@ -102,9 +102,16 @@ def prepare_kernel_loads() -> None:
     ``_focal_plane_loop_serial`` (or whichever kernel comes first) seemed to cost, later loads 4-50 ms each.  A
     process that waits for its work (the export's sweep worker waits ~0.7 s for the sensor) does it in that wait
     rather than in its first job.  Nothing else changes: the same refresh, made earlier.
+
+    The refresh is numba's own internal (``numba.core.registry.cpu_target``, numba pinned in requirements/lock.txt):
+    where another numba lacks it, nothing is done here and the first kernel load does that work as before.
     """
     if not NUMBA_AVAILABLE:
         return
-    from numba.core.registry import cpu_target
+    try:
+        from numba.core.registry import cpu_target
 
-    cpu_target.target_context.refresh()
+        refresh = cpu_target.target_context.refresh
+    except (ImportError, AttributeError):  # another numba's internals: an optimisation only, left out
+        return
+    refresh()

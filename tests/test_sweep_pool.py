@@ -312,3 +312,15 @@ def test_an_early_worker_does_its_first_kernel_loads_work_and_scipy_linalg_while
     assert before == [False] * len(watch)
     assert after == [True] * len(watch)
     assert new == []
+
+
+def test_the_workers_early_kernel_start_up_is_skipped_on_a_numba_without_its_internal(monkeypatch):
+    """explorer._numba.prepare_kernel_loads uses numba's internal ``cpu_target``; a numba without it must not stop
+    the worker (it is an optimisation: the first kernel load does the same work)."""
+    pytest.importorskip("numba")
+    import numba.core.registry as registry_module
+
+    from explorer._numba import prepare_kernel_loads
+
+    monkeypatch.delattr(registry_module, "cpu_target")
+    prepare_kernel_loads()  # no error
